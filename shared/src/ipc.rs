@@ -1,0 +1,329 @@
+//! The loop's transport: iceoryx2 publish-subscribe services, each with an event service of
+//! the same name that wakes the next stage.
+//!
+//! Every run has its own id. It is in every service name (`looplab/<run>/<topic>`) and in the
+//! iceoryx2 file prefix (`looplab_<run>_`), so two runs on one machine never see each other and
+//! the launcher can check that nothing of a run is left in shared memory when it ends.
+//!
+//! Quality of service, identical for every process of a run:
+//! - real-time mode: safe overflow. A slow reader loses its oldest samples; no publisher ever
+//!   waits. The loop's stages read with a one-sample buffer (the newest wins), the monitor with
+//!   [`MONITOR_BUFFER`] samples and counts what it lost.
+//! - lockstep mode: no overflow. A full reader makes the publisher wait (so the monitor records
+//!   every loop of a deterministic run), for at most [`LOCKSTEP_BACKPRESSURE_LIMIT`], after which
+//!   the sample is dropped for that reader and counted.
+
+use std::fmt::Debug;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, anyhow};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::{BackpressureAction, BackpressureInfo};
+use iceoryx2::prelude::*;
+
+use crate::launch::Mode;
+
+/// Samples the monitor can fall behind by before it loses any (real-time mode); at 1 kHz that
+/// is a second of slack.
+pub const MONITOR_BUFFER: usize = 1024;
+/// Longest a lockstep publisher waits for a full reader before dropping the sample for it.
+pub const LOCKSTEP_BACKPRESSURE_LIMIT: Duration = Duration::from_secs(5);
+/// Readers per topic: the next stage, the monitor, and room for a restarted one.
+const MAX_SUBSCRIBERS: usize = 4;
+/// Openers per service; a little room for restarts.
+const MAX_NODES: usize = 10;
+/// How long to keep retrying a service open while other processes are creating it.
+const OPEN_RETRY: Duration = Duration::from_secs(3);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Topic {
+    /// plant → sensors, monitor
+    State,
+    /// sensors → estimator, monitor
+    Measurements,
+    /// estimator → controller, monitor
+    Estimate,
+    /// controller → plant, monitor
+    Command,
+    /// plant → monitor: finished loop records
+    Loop,
+}
+
+impl Topic {
+    pub fn name(self) -> &'static str {
+        match self {
+            Topic::State => "state",
+            Topic::Measurements => "measurements",
+            Topic::Estimate => "estimate",
+            Topic::Command => "command",
+            Topic::Loop => "loop",
+        }
+    }
+}
+
+/// The iceoryx2 file prefix of a run: every file the run creates starts with it.
+pub fn file_prefix(run_id: &str) -> String {
+    format!("looplab_{run_id}_")
+}
+
+/// The iceoryx2 configuration every process of a run uses.
+pub fn run_config(run_id: &str) -> Result<Config> {
+    let mut config = Config::default();
+    config.global.prefix = FileName::new(file_prefix(run_id).as_bytes())
+        .map_err(|e| anyhow!("run id {run_id:?} does not make a valid file prefix: {e:?}"))?;
+    Ok(config)
+}
+
+pub fn service_name(run_id: &str, topic: Topic) -> Result<ServiceName> {
+    let name = format!("looplab/{run_id}/{}", topic.name());
+    ServiceName::new(&name).map_err(|e| anyhow!("invalid service name {name}: {e:?}"))
+}
+
+/// Retries an open-or-create while other processes of the run create the same service.
+fn retry<T, E: Debug>(what: &str, mut attempt: impl FnMut() -> Result<T, E>) -> Result<T> {
+    let start = Instant::now();
+    loop {
+        match attempt() {
+            Ok(v) => return Ok(v),
+            Err(e) if start.elapsed() > OPEN_RETRY => return Err(anyhow!("cannot open {what}: {e:?}")),
+            Err(_) => std::thread::sleep(Duration::from_millis(5)),
+        }
+    }
+}
+
+/// One process's connection to the run's services.
+pub struct Ipc {
+    node: Node<ipc::Service>,
+    run_id: String,
+    mode: Mode,
+}
+
+impl Ipc {
+    pub fn new(process: &str, run_id: &str, mode: Mode) -> Result<Self> {
+        set_log_level_from_env_or(LogLevel::Error);
+        let config = run_config(run_id)?;
+        let node = NodeBuilder::new()
+            .name(&NodeName::new(process).map_err(|e| anyhow!("invalid node name {process}: {e:?}"))?)
+            .config(&config)
+            // Each process handles SIGTERM/SIGINT itself (`crate::signals`), so that iceoryx2
+            // never swallows them and a stop request is seen at any point of the run.
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| anyhow!("cannot create the iceoryx2 node for {process}: {e:?}"))?;
+        Ok(Self { node, run_id: run_id.to_owned(), mode })
+    }
+
+    pub fn node(&self) -> &Node<ipc::Service> {
+        &self.node
+    }
+
+    fn pubsub<T: Debug + ZeroCopySend + 'static>(
+        &self,
+        topic: Topic,
+    ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>> {
+        let name = service_name(&self.run_id, topic)?;
+        let safe_overflow = self.mode == Mode::Realtime;
+        retry(&format!("service {name}"), || {
+            self.node
+                .service_builder(&name)
+                .publish_subscribe::<T>()
+                .history_size(0)
+                .subscriber_max_buffer_size(MONITOR_BUFFER)
+                .subscriber_max_borrowed_samples(2)
+                .enable_safe_overflow(safe_overflow)
+                .max_publishers(2)
+                .max_subscribers(MAX_SUBSCRIBERS)
+                .max_nodes(MAX_NODES)
+                .open_or_create()
+        })
+    }
+
+    fn event(&self, topic: Topic) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>> {
+        let name = service_name(&self.run_id, topic)?;
+        retry(&format!("event service {name}"), || {
+            self.node
+                .service_builder(&name)
+                .event()
+                .max_notifiers(MAX_SUBSCRIBERS)
+                .max_listeners(MAX_SUBSCRIBERS)
+                .max_nodes(MAX_NODES)
+                .open_or_create()
+        })
+    }
+
+    /// A publisher that, if `wake` is set, also wakes the topic's readers after each sample.
+    pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic, wake: bool) -> Result<TopicPublisher<T>> {
+        let dropped = Arc::new(AtomicU64::new(0));
+        let counter = dropped.clone();
+        let publisher = self
+            .pubsub::<T>(topic)?
+            .publisher_builder()
+            .max_loaned_samples(1)
+            .set_backpressure_handler(move |info: &BackpressureInfo| {
+                if info.elapsed_time < LOCKSTEP_BACKPRESSURE_LIMIT {
+                    BackpressureAction::Retry
+                } else {
+                    counter.fetch_add(1, Ordering::Relaxed);
+                    BackpressureAction::DiscardData
+                }
+            })
+            .create()
+            .map_err(|e| anyhow!("cannot create the {} publisher: {e:?}", topic.name()))?;
+        let notifier = if wake {
+            Some(
+                self.event(topic)?
+                    .notifier_builder()
+                    .create()
+                    .map_err(|e| anyhow!("cannot create the {} notifier: {e:?}", topic.name()))?,
+            )
+        } else {
+            None
+        };
+        Ok(TopicPublisher { topic, publisher, notifier, dropped })
+    }
+
+    /// A reader for the next stage: a one-sample buffer (the newest wins in real-time mode)
+    /// and a listener that wakes it.
+    pub fn stage_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic) -> Result<TopicSubscriber<T>> {
+        let subscriber = self.subscriber_with_buffer::<T>(topic, 1)?;
+        let listener = self
+            .event(topic)?
+            .listener_builder()
+            .create()
+            .map_err(|e| anyhow!("cannot create the {} listener: {e:?}", topic.name()))?;
+        Ok(TopicSubscriber { subscriber, listener: Some(listener) })
+    }
+
+    /// A passive reader for the monitor: a deep buffer and no listener, so publishing never
+    /// wakes the monitor and the monitor never slows the loop.
+    pub fn passive_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic) -> Result<TopicSubscriber<T>> {
+        let subscriber = self.subscriber_with_buffer::<T>(topic, MONITOR_BUFFER)?;
+        Ok(TopicSubscriber { subscriber, listener: None })
+    }
+
+    fn subscriber_with_buffer<T: Debug + ZeroCopySend + Copy + 'static>(
+        &self,
+        topic: Topic,
+        buffer: usize,
+    ) -> Result<Subscriber<ipc::Service, T, ()>> {
+        self.pubsub::<T>(topic)?
+            .subscriber_builder()
+            .buffer_size(buffer)
+            .create()
+            .map_err(|e| anyhow!("cannot create the {} subscriber: {e:?}", topic.name()))
+    }
+}
+
+pub struct TopicPublisher<T: Debug + ZeroCopySend + 'static> {
+    topic: Topic,
+    publisher: Publisher<ipc::Service, T, ()>,
+    notifier: Option<Notifier<ipc::Service>>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> TopicPublisher<T> {
+    /// Writes `value` into shared memory, delivers it, and wakes the readers.
+    pub fn send(&self, value: &T) -> Result<()> {
+        let sample = self.publisher.loan_uninit().with_context(|| format!("loan on {}", self.topic.name()))?;
+        sample.write_payload(*value).send().with_context(|| format!("send on {}", self.topic.name()))?;
+        if let Some(notifier) = &self.notifier {
+            notifier.notify().with_context(|| format!("notify on {}", self.topic.name()))?;
+        }
+        Ok(())
+    }
+
+    /// Samples dropped for a reader that stayed full past the lockstep limit.
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+pub struct TopicSubscriber<T: Debug + ZeroCopySend + 'static> {
+    subscriber: Subscriber<ipc::Service, T, ()>,
+    listener: Option<Listener<ipc::Service>>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
+    /// The next queued sample, copied out of shared memory (the chunk goes back at once).
+    pub fn receive(&self) -> Result<Option<T>> {
+        Ok(self.subscriber.receive().context("receive")?.map(|sample| *sample))
+    }
+
+    pub fn listener(&self) -> Option<&Listener<ipc::Service>> {
+        self.listener.as_ref()
+    }
+
+    /// Consumes pending wake-ups, so that the next wait blocks until new data.
+    pub fn clear_wakeups(&self) -> Result<()> {
+        if let Some(listener) = &self.listener {
+            listener.try_wait(|_| {}).map_err(|e| anyhow!("listener: {e:?}"))?;
+        }
+        Ok(())
+    }
+}
+
+/// Where iceoryx2 keeps a run's files on Linux: shared memory, and its root folder for nodes,
+/// services and event sockets.
+const SHM_DIR: &str = "/dev/shm";
+
+/// After a run: removes the resources of the run's dead nodes (processes that were killed) and
+/// the run's own node registry, then lists every file of the run still there.
+pub struct Cleanup {
+    pub removed_dead_nodes: u64,
+    pub leftover: Vec<String>,
+}
+
+pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
+    let config = run_config(run_id)?;
+    let mut removed_dead_nodes = 0;
+    Node::<ipc::Service>::list(&config, |state| {
+        if let NodeState::Dead(view) = state
+            && view.try_remove_stale_resources().is_ok()
+        {
+            removed_dead_nodes += 1;
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("cannot list the run's iceoryx2 nodes: {e:?}"))?;
+
+    let mut leftover = paths_of_run(run_id, &config);
+    // iceoryx2 keeps one registry file per prefix for good; the prefix is this run's alone and
+    // every node of the run is gone, so it goes too.
+    leftover.retain(|path| {
+        let registry = path.starts_with(SHM_DIR) && path.to_string_lossy().ends_with(".global_mgmt");
+        !(registry && std::fs::remove_file(path).is_ok())
+    });
+    Ok(Cleanup { removed_dead_nodes, leftover: leftover.iter().map(|p| p.display().to_string()).collect() })
+}
+
+/// Every file under `dir` (recursively) whose name starts with `prefix`.
+fn collect_with_prefix(dir: &std::path::Path, prefix: &str, out: &mut Vec<std::path::PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        if entry.file_name().to_string_lossy().starts_with(prefix) {
+            out.push(path);
+        } else if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            collect_with_prefix(&path, prefix, out);
+        }
+    }
+}
+
+fn paths_of_run(run_id: &str, config: &Config) -> Vec<std::path::PathBuf> {
+    let root = String::from_utf8_lossy(config.global.root_path().as_bytes()).into_owned();
+    let mut found = Vec::new();
+    for dir in [SHM_DIR, root.as_str()] {
+        collect_with_prefix(std::path::Path::new(dir), &file_prefix(run_id), &mut found);
+    }
+    found
+}
+
+/// Every file of a run still present; removes nothing (for checks from outside a run).
+pub fn files_of_run(run_id: &str) -> Result<Vec<String>> {
+    Ok(paths_of_run(run_id, &run_config(run_id)?).iter().map(|p| p.display().to_string()).collect())
+}

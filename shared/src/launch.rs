@@ -1,0 +1,610 @@
+//! Launch files: load, merge over the scenario's defaults, apply `--set KEY=VALUE`, check.
+//!
+//! A launch file is TOML. Its keys override the scenario's built-in defaults
+//! (`launch/<scenario>.toml`) key by key, and `--set` overrides both. Every problem is
+//! reported as a [`LaunchError`] that names where the value came from (a file or a `--set`),
+//! the dotted key, and what is allowed.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+use std::path::Path;
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use crate::msg::{MAX_SENSOR_DIM, MAX_SENSORS};
+use crate::scenarios::{self, Scenario, ScenarioEntry, Signal};
+
+/// The top-level keys every launch file shares; the rest belong to the scenario.
+const COMMON_KEYS: [&str; 6] = ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors"];
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LaunchError {
+    /// The file (or `--set KEY=VALUE`) the bad value came from.
+    pub origin: String,
+    /// The dotted key, when one is to blame.
+    pub key: Option<String>,
+    pub message: String,
+}
+
+impl LaunchError {
+    pub fn new(origin: impl Into<String>, key: Option<&str>, message: impl Into<String>) -> Self {
+        Self { origin: origin.into(), key: key.map(str::to_owned), message: message.into() }
+    }
+}
+
+impl fmt::Display for LaunchError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.key {
+            Some(key) => write!(f, "{}: key `{}`: {}", self.origin, key, self.message),
+            None => write!(f, "{}: {}", self.origin, self.message),
+        }
+    }
+}
+
+impl std::error::Error for LaunchError {}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// The plant ticks on an absolute-deadline timer and applies the newest command it has.
+    Realtime,
+    /// The plant waits for command k before integrating tick k→k+1: deterministic, as fast
+    /// as the loop allows.
+    Lockstep,
+}
+
+impl Mode {
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Realtime => "realtime",
+            Mode::Lockstep => "lockstep",
+        }
+    }
+}
+
+/// A value given either as one number (for every component) or one number per component.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum PerComponent {
+    All(f64),
+    Each(Vec<f64>),
+}
+
+impl Default for PerComponent {
+    fn default() -> Self {
+        PerComponent::All(0.0)
+    }
+}
+
+impl PerComponent {
+    /// The value for each of `dim` components (the length was checked in [`LaunchConfig`]).
+    pub fn expand(&self, dim: usize) -> Vec<f64> {
+        match self {
+            PerComponent::All(v) => vec![*v; dim],
+            PerComponent::Each(v) => v.clone(),
+        }
+    }
+}
+
+/// One emulated sensor, as written in the launch file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorSpec {
+    /// Which of the scenario's signals it measures (for example `theta`).
+    pub signal: String,
+    /// Sample period in seconds: a whole multiple of the loop period.
+    pub period_s: f64,
+    /// Standard deviation of the Gaussian noise added at each sample.
+    #[serde(default)]
+    pub noise_std: PerComponent,
+    /// Constant offset added to the true value.
+    #[serde(default)]
+    pub bias: PerComponent,
+    /// Quantisation step (0: none). Values are rounded to the nearest multiple.
+    #[serde(default)]
+    pub quantum: f64,
+    /// Transport delay, in loop ticks, between sampling and delivery.
+    #[serde(default)]
+    pub delay_ticks: u32,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CommonKeys {
+    scenario: String,
+    mode: Mode,
+    rate_hz: f64,
+    duration_s: f64,
+    seed: u64,
+    #[serde(default)]
+    sensors: BTreeMap<String, SensorSpec>,
+}
+
+/// A checked launch configuration: the keys every scenario shares, plus the scenario's own
+/// sections, still as TOML, for the scenario to read with [`LaunchConfig::section`].
+#[derive(Debug, Clone)]
+pub struct LaunchConfig {
+    pub scenario: String,
+    pub mode: Mode,
+    pub rate_hz: f64,
+    pub duration_s: f64,
+    pub seed: u64,
+    /// Sorted by name: this order is the order of readings in every `Measurements` message.
+    pub sensors: BTreeMap<String, SensorSpec>,
+    /// The whole resolved document, as written to the run folder.
+    pub document: toml::Table,
+    entry: &'static ScenarioEntry,
+    /// Where the values came from, for error messages.
+    origins: Origins,
+}
+
+/// Which `--set` overrides were applied, so that an error in one names it instead of the file.
+#[derive(Debug, Clone, Default)]
+struct Origins {
+    file: String,
+    set_keys: BTreeMap<String, String>,
+}
+
+impl Origins {
+    fn of(&self, key: &str) -> String {
+        for (set_key, set_text) in &self.set_keys {
+            let within = |a: &str, b: &str| a == b || a.starts_with(&format!("{b}."));
+            if within(key, set_key) || within(set_key, key) {
+                return format!("--set {set_text}");
+            }
+        }
+        self.file.clone()
+    }
+
+    fn error(&self, key: &str, message: impl Into<String>) -> LaunchError {
+        LaunchError::new(self.of(key), Some(key), message)
+    }
+}
+
+impl LaunchConfig {
+    /// Loop period in seconds.
+    pub fn dt(&self) -> f64 {
+        1.0 / self.rate_hz
+    }
+
+    /// Number of loops the run has: duration × rate, rounded to the nearest tick.
+    pub fn loops(&self) -> u64 {
+        (self.duration_s * self.rate_hz).round() as u64
+    }
+
+    /// What a sensor measures (checked to exist when the launch file loads).
+    pub fn signal_of(&self, sensor: &SensorSpec) -> &'static Signal {
+        self.entry.signals.iter().find(|s| s.name == sensor.signal).expect("sensor signals are checked at load")
+    }
+
+    /// A sensor's period in loop ticks (checked to be a whole number at load).
+    pub fn period_ticks(&self, sensor: &SensorSpec) -> u64 {
+        (sensor.period_s * self.rate_hz).round() as u64
+    }
+
+    /// Reads one scenario section (`model`, `estimator`, ...) into its typed form; an unknown
+    /// key or a bad value is an error naming the dotted key and what is allowed.
+    pub fn section<T: DeserializeOwned>(&self, name: &str) -> Result<T, LaunchError> {
+        let value = self.document.get(name).cloned().unwrap_or(toml::Value::Table(toml::Table::new()));
+        deserialize_at(&self.origins, name, value)
+    }
+
+    /// An error about one key of this configuration, naming where that key's value came from.
+    pub fn error(&self, key: &str, message: impl Into<String>) -> LaunchError {
+        self.origins.error(key, message)
+    }
+
+    /// The index of the one sensor measuring `signal`, for estimators that need it.
+    pub fn sensor_for(&self, signal: &str) -> Result<(usize, &str, &SensorSpec), LaunchError> {
+        let found: Vec<_> = self
+            .sensors
+            .iter()
+            .enumerate()
+            .filter(|(_, (_, spec))| spec.signal == signal)
+            .map(|(i, (name, spec))| (i, name.as_str(), spec))
+            .collect();
+        match found.as_slice() {
+            [one] => Ok(*one),
+            [] => Err(LaunchError::new(
+                &self.origins.file,
+                Some("sensors"),
+                format!("the {} scenario needs a sensor with signal = \"{signal}\", and none has it", self.scenario),
+            )),
+            many => Err(LaunchError::new(
+                &self.origins.file,
+                Some("sensors"),
+                format!(
+                    "the {} scenario needs exactly one sensor with signal = \"{signal}\"; found {}",
+                    self.scenario,
+                    many.iter().map(|(_, name, _)| *name).collect::<Vec<_>>().join(", ")
+                ),
+            )),
+        }
+    }
+
+    /// The resolved document as TOML text, for the run folder.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(&self.document).expect("a TOML table always serialises")
+    }
+}
+
+/// One `--set KEY=VALUE` from the command line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Override {
+    pub key: String,
+    pub value: toml::Value,
+    /// As the user typed it, for error messages.
+    pub text: String,
+}
+
+impl Override {
+    /// Parses `KEY=VALUE`. The value is read as TOML (`0.05`, `true`, `[1, 2]`, `"x"`);
+    /// anything that is not valid TOML is taken as a plain string (`no-bias`).
+    pub fn parse(text: &str) -> Result<Self, LaunchError> {
+        let origin = format!("--set {text}");
+        let Some((key, raw)) = text.split_once('=') else {
+            return Err(LaunchError::new(origin, None, "expected KEY=VALUE, for example sensors.encoder.bias=0.05"));
+        };
+        let key = key.trim();
+        if key.is_empty() || key.split('.').any(str::is_empty) {
+            return Err(LaunchError::new(origin, None, "the key must be a dotted path such as estimator.kind"));
+        }
+        let raw = raw.trim();
+        let value = toml::from_str::<toml::Table>(&format!("v = {raw}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(raw.to_owned()));
+        Ok(Self { key: key.to_owned(), value, text: text.to_owned() })
+    }
+}
+
+/// The launch files compiled into the binary: one per scenario, the scenario's defaults.
+pub fn builtin(name: &str) -> Option<&'static scenarios::ScenarioEntry> {
+    scenarios::ALL.iter().find(|s| s.name == name)
+}
+
+fn scenario_names() -> String {
+    scenarios::ALL.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+}
+
+/// Resolves what the user asked to run, a scenario name or a launch-file path, with overrides,
+/// into a checked configuration and the scenario it describes.
+pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
+    let looks_like_path = target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file();
+    let (origin, document) = if looks_like_path {
+        let text = std::fs::read_to_string(target)
+            .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;
+        let user: toml::Table = toml::from_str(&text).map_err(|e| toml_error(target, &text, &e))?;
+        let name = match user.get("scenario") {
+            Some(toml::Value::String(name)) => name.clone(),
+            Some(_) => return Err(LaunchError::new(target, Some("scenario"), format!("must be a string; allowed: {}", scenario_names()))),
+            None => return Err(LaunchError::new(target, Some("scenario"), format!("missing; allowed: {}", scenario_names()))),
+        };
+        let entry = builtin(&name).ok_or_else(|| {
+            LaunchError::new(target, Some("scenario"), format!("unknown scenario \"{name}\"; allowed: {}", scenario_names()))
+        })?;
+        let mut document = entry.defaults();
+        merge(&mut document, user);
+        (target.to_owned(), document)
+    } else {
+        let entry = builtin(target).ok_or_else(|| {
+            LaunchError::new(
+                "command line",
+                None,
+                format!("unknown scenario \"{target}\"; allowed: {} (or a path to a .toml launch file)", scenario_names()),
+            )
+        })?;
+        (entry.file.to_owned(), entry.defaults())
+    };
+    from_document(document, &origin, overrides)
+}
+
+/// Reads a resolved launch file written by the launcher (what each loop process does).
+pub fn load_resolved(path: &Path) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
+    let origin = path.display().to_string();
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| LaunchError::new(&origin, None, format!("cannot read the launch file: {e}")))?;
+    let document: toml::Table = toml::from_str(&text).map_err(|e| toml_error(&origin, &text, &e))?;
+    from_document(document, &origin, &[])
+}
+
+fn from_document(
+    mut document: toml::Table,
+    origin: &str,
+    overrides: &[Override],
+) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
+    let mut origins = Origins { file: origin.to_owned(), set_keys: BTreeMap::new() };
+    for o in overrides {
+        set_dotted(&mut document, o).map_err(|message| LaunchError::new(format!("--set {}", o.text), Some(&o.key), message))?;
+        origins.set_keys.insert(o.key.clone(), o.text.clone());
+    }
+
+    let scenario_name = match document.get("scenario") {
+        Some(toml::Value::String(s)) => s.clone(),
+        _ => return Err(origins.error("scenario", format!("missing or not a string; allowed: {}", scenario_names()))),
+    };
+    let entry = builtin(&scenario_name).ok_or_else(|| {
+        origins.error("scenario", format!("unknown scenario \"{scenario_name}\"; allowed: {}", scenario_names()))
+    })?;
+
+    // Top-level keys: the shared ones, then the scenario's sections; anything else is a typo.
+    let allowed: BTreeSet<&str> = COMMON_KEYS.iter().chain(entry.sections).copied().collect();
+    for key in document.keys() {
+        if !allowed.contains(key.as_str()) {
+            return Err(origins.error(
+                key,
+                format!("unknown key; allowed at the top level: {}", allowed.iter().copied().collect::<Vec<_>>().join(", ")),
+            ));
+        }
+    }
+    let mut common_table = toml::Table::new();
+    for key in COMMON_KEYS {
+        if let Some(v) = document.get(key) {
+            common_table.insert(key.to_owned(), v.clone());
+        }
+    }
+    let common: CommonKeys = deserialize_at(&origins, "", toml::Value::Table(common_table))?;
+
+    let config = LaunchConfig {
+        scenario: common.scenario,
+        mode: common.mode,
+        rate_hz: common.rate_hz,
+        duration_s: common.duration_s,
+        seed: common.seed,
+        sensors: common.sensors,
+        document,
+        entry,
+        origins,
+    };
+    check_common(&config)?;
+    check_sensors(&config)?;
+    let scenario = (entry.build)(&config)?;
+    Ok((config, scenario))
+}
+
+fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
+    if !(c.rate_hz.is_finite() && c.rate_hz > 0.0) {
+        return Err(c.error("rate_hz", format!("must be a positive number of loops per second, got {}", c.rate_hz)));
+    }
+    if c.rate_hz > 100_000.0 {
+        return Err(c.error("rate_hz", format!("must be at most 100000 Hz, got {}", c.rate_hz)));
+    }
+    if !(c.duration_s.is_finite() && c.duration_s > 0.0) {
+        return Err(c.error("duration_s", format!("must be a positive number of seconds, got {}", c.duration_s)));
+    }
+    if c.loops() == 0 {
+        return Err(c.error("duration_s", format!("{} s at {} Hz is less than one loop", c.duration_s, c.rate_hz)));
+    }
+    if c.sensors.len() > MAX_SENSORS {
+        return Err(c.error("sensors", format!("at most {MAX_SENSORS} sensors are supported, got {}", c.sensors.len())));
+    }
+    let dt = c.dt();
+    for (name, s) in &c.sensors {
+        let key = |field: &str| format!("sensors.{name}.{field}");
+        let ticks = s.period_s * c.rate_hz;
+        if !(s.period_s.is_finite() && s.period_s > 0.0) || ticks.round() < 1.0 || (ticks - ticks.round()).abs() > 1e-6 {
+            return Err(c.error(
+                &key("period_s"),
+                format!(
+                    "{} s is not a whole multiple of the loop period {dt} s (rate_hz = {}); allowed: {dt}, {}, {}, ...",
+                    s.period_s,
+                    c.rate_hz,
+                    2.0 * dt,
+                    3.0 * dt
+                ),
+            ));
+        }
+        if !(s.quantum.is_finite() && s.quantum >= 0.0) {
+            return Err(c.error(&key("quantum"), format!("must be 0 (none) or a positive step, got {}", s.quantum)));
+        }
+        for (field, value) in [("noise_std", &s.noise_std), ("bias", &s.bias)] {
+            let values = match value {
+                PerComponent::All(v) => vec![*v],
+                PerComponent::Each(v) => v.clone(),
+            };
+            if values.iter().any(|v| !v.is_finite()) || (field == "noise_std" && values.iter().any(|v| *v < 0.0)) {
+                return Err(c.error(&key(field), "must be finite (and not negative for noise_std)"));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn check_sensors(c: &LaunchConfig) -> Result<(), LaunchError> {
+    for (name, s) in &c.sensors {
+        let Some(signal) = c.entry.signals.iter().find(|sig| sig.name == s.signal) else {
+            let names: Vec<_> = c.entry.signals.iter().map(|sig| sig.name).collect();
+            return Err(c.error(
+                &format!("sensors.{name}.signal"),
+                format!("unknown signal \"{}\"; allowed: {}", s.signal, names.join(", ")),
+            ));
+        };
+        let dim = signal.components.len();
+        debug_assert!(dim <= MAX_SENSOR_DIM);
+        for (field, value) in [("noise_std", &s.noise_std), ("bias", &s.bias)] {
+            if let PerComponent::Each(v) = value
+                && v.len() != dim
+            {
+                return Err(c.error(
+                    &format!("sensors.{name}.{field}"),
+                    format!("signal \"{}\" has {dim} components, so give one number or {dim}; got {}", s.signal, v.len()),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A TOML syntax error on one line: where, and what.
+fn toml_error(origin: &str, text: &str, e: &toml::de::Error) -> LaunchError {
+    let message = e.message().lines().collect::<Vec<_>>().join(", ");
+    let place = e.span().map(|span| {
+        let before = &text[..span.start.min(text.len())];
+        let line = before.matches('\n').count() + 1;
+        let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+        format!("line {line}, column {column}: ")
+    });
+    LaunchError::new(origin, None, format!("not valid TOML: {}{message}", place.unwrap_or_default()))
+}
+
+/// Deserialises `value` (found at dotted `key`) and turns a failure into an error that names
+/// the full dotted path of the offending key.
+fn deserialize_at<T: DeserializeOwned>(origins: &Origins, key: &str, value: toml::Value) -> Result<T, LaunchError> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let inner = e.path().to_string();
+        let path = match (key.is_empty(), inner.as_str()) {
+            (true, _) => inner.clone(),
+            (false, ".") => key.to_owned(),
+            (false, _) => format!("{key}.{inner}"),
+        };
+        // The TOML deserialiser appends "in `key`" lines; the key is already named.
+        let message = e.inner().to_string().lines().next().unwrap_or_default().to_owned();
+        origins.error(&path, message)
+    })
+}
+
+/// Deep-merges `over` into `base`: tables merge key by key, anything else replaces.
+pub fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
+
+/// Sets a dotted key. An integer written where the defaults hold a float is taken as that float,
+/// so `--set duration_s=30` works.
+fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<(), String> {
+    let parts: Vec<&str> = o.key.split('.').collect();
+    let (last, parents) = parts.split_last().expect("keys are checked to be non-empty");
+    let mut table = document;
+    for (i, part) in parents.iter().enumerate() {
+        let entry = table.entry(part.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        table = match entry {
+            toml::Value::Table(t) => t,
+            _ => return Err(format!("`{}` is a value, not a table, so it has no key `{}`", parts[..=i].join("."), parts[i + 1])),
+        };
+    }
+    let value = match (table.get(*last), &o.value) {
+        (Some(toml::Value::Float(_)), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
+        (Some(toml::Value::Table(_)), v) if !v.is_table() => {
+            return Err(format!("`{}` is a table; set one of its keys instead", o.key));
+        }
+        (_, v) => v.clone(),
+    };
+    table.insert(last.to_string(), value);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(overrides: &[&str]) -> Result<LaunchConfig, LaunchError> {
+        let overrides: Vec<Override> = overrides.iter().map(|s| Override::parse(s).unwrap()).collect();
+        resolve("pendulum", &overrides).map(|(c, _)| c)
+    }
+
+    #[test]
+    fn builtin_defaults_load() {
+        let c = run(&[]).unwrap();
+        assert_eq!(c.scenario, "pendulum");
+        assert_eq!(c.mode, Mode::Realtime);
+        assert_eq!(c.rate_hz, 1000.0);
+        assert_eq!(c.loops(), 10_000);
+        assert_eq!(c.sensors.keys().collect::<Vec<_>>(), ["encoder", "wheel_speed"]);
+        assert_eq!(c.period_ticks(&c.sensors["wheel_speed"]), 10);
+    }
+
+    #[test]
+    fn set_overrides_values_and_coerces_integers() {
+        let c = run(&["sensors.encoder.bias=0.05", "duration_s=30", "mode=lockstep", "estimator.kind=no-bias"]).unwrap();
+        assert_eq!(c.sensors["encoder"].bias, PerComponent::All(0.05));
+        assert_eq!(c.duration_s, 30.0);
+        assert_eq!(c.mode, Mode::Lockstep);
+        assert_eq!(c.document["estimator"]["kind"].as_str(), Some("no-bias"));
+    }
+
+    #[test]
+    fn unknown_key_names_the_key_and_the_allowed_ones() {
+        let e = run(&["sensors.encoder.biass=0.05"]).unwrap_err();
+        assert_eq!(e.origin, "--set sensors.encoder.biass=0.05");
+        assert_eq!(e.key.as_deref(), Some("sensors.encoder.biass"));
+        assert!(e.message.contains("expected one of") && e.message.contains("`bias`"), "{e}");
+
+        let e = run(&["durationn_s=3"]).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("durationn_s"));
+        assert!(e.message.contains("duration_s"), "{e}");
+
+        let e = run(&["estimator.kindd=x"]).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("estimator.kindd"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_name_the_key_and_what_is_allowed() {
+        let e = run(&["mode=fast"]).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("mode"));
+        assert!(e.message.contains("realtime") && e.message.contains("lockstep"), "{e}");
+
+        let e = run(&["estimator.kind=kalman"]).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("estimator.kind"));
+        assert!(e.message.contains("bias-observer") && e.message.contains("no-bias"), "{e}");
+
+        let e = run(&["rate_hz=-5"]).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("rate_hz"));
+
+        let e = run(&["sensors.wheel_speed.period_s=0.0015"]).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("sensors.wheel_speed.period_s"));
+        assert!(e.message.contains("multiple of the loop period"), "{e}");
+
+        let e = run(&["sensors.encoder.signal=height"]).unwrap_err();
+        assert!(e.message.contains("theta") && e.message.contains("wheel_speed"), "{e}");
+
+        let e = run(&["duration_s=fast"]).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("duration_s"));
+        assert!(e.message.contains("invalid type"), "{e}");
+    }
+
+    #[test]
+    fn unknown_scenario_lists_the_known_ones() {
+        let e = resolve("pendulm", &[]).map(|_| ()).unwrap_err();
+        assert!(e.message.contains("unknown scenario \"pendulm\"") && e.message.contains("pendulum"), "{e}");
+    }
+
+    #[test]
+    fn a_file_overrides_the_defaults_and_errors_name_the_file() {
+        let dir = std::env::temp_dir().join(format!("looplab-launch-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("good.toml");
+        std::fs::write(&good, "scenario = \"pendulum\"\nmode = \"lockstep\"\n[sensors.encoder]\nbias = -0.02\n").unwrap();
+        let (c, _) = resolve(good.to_str().unwrap(), &[]).unwrap();
+        assert_eq!(c.mode, Mode::Lockstep);
+        assert_eq!(c.sensors["encoder"].bias, PerComponent::All(-0.02));
+        assert_eq!(c.sensors["encoder"].signal, "theta", "keys the file leaves out keep their defaults");
+
+        let bad = dir.join("bad.toml");
+        std::fs::write(&bad, "scenario = \"pendulum\"\n[sensors.encoder]\nnoise = 1\n").unwrap();
+        let e = resolve(bad.to_str().unwrap(), &[]).map(|_| ()).unwrap_err();
+        assert_eq!(e.origin, bad.to_str().unwrap());
+        assert_eq!(e.key.as_deref(), Some("sensors.encoder.noise"));
+
+        let broken = dir.join("broken.toml");
+        std::fs::write(&broken, "scenario = \"pendulum\"\nrate_hz = \n").unwrap();
+        let e = resolve(broken.to_str().unwrap(), &[]).map(|_| ()).unwrap_err();
+        assert!(e.message.starts_with("not valid TOML"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn override_parsing() {
+        assert_eq!(Override::parse("a.b=1.5").unwrap().value, toml::Value::Float(1.5));
+        assert_eq!(Override::parse("a=no-bias").unwrap().value, toml::Value::String("no-bias".into()));
+        assert_eq!(Override::parse("a=[1, 2]").unwrap().value.as_array().unwrap().len(), 2);
+        assert!(Override::parse("novalue").is_err());
+        assert!(Override::parse("a..b=1").is_err());
+    }
+}

@@ -1,0 +1,538 @@
+//! The monitor: a passive reader of every topic that records latency, jitter and the trajectory
+//! without slowing the loop.
+//!
+//! Its readers have no listeners, so publishing never wakes it; it polls every few milliseconds
+//! with deep buffers (real-time mode: safe overflow, so a slow monitor loses samples, counted,
+//! and never blocks a stage). The receive loop only copies samples out of shared memory and
+//! passes them over a channel to a writer thread, which joins the five messages of each loop
+//! by k, feeds the histograms and the scenario's metrics, and writes `trajectory.csv`,
+//! `loops.csv` and `latency.hlog`.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant, SystemTime};
+
+use anyhow::{Context as _, Result, anyhow};
+use crossbeam_channel::{Receiver, RecvTimeoutError};
+use hdrhistogram::Histogram;
+use hdrhistogram::serialization::V2DeflateSerializer;
+use hdrhistogram::serialization::interval_log::{IntervalLogWriterBuilder, Tag};
+use serde::{Deserialize, Serialize};
+
+use crate::clock::now_ns;
+use crate::ipc::{MONITOR_BUFFER, Topic, TopicSubscriber};
+use crate::launch::Mode;
+use crate::msg::*;
+use crate::protocol::{ChildEvent, MonitorStatus, emit};
+use crate::scenarios::{Metrics, Row};
+use crate::stages::Context;
+
+/// Sleep between drains when the queues were nearly empty.
+const POLL_PERIOD: Duration = Duration::from_millis(5);
+/// How often the live status goes to the launcher.
+const STATUS_PERIOD: Duration = Duration::from_millis(250);
+/// Length of one interval histogram in `latency.hlog`, in wall-clock time.
+const HLOG_INTERVAL_NS: u64 = 1_000_000_000;
+/// A loop still missing parts once this many newer loops have arrived is written as it is.
+const JOIN_WINDOW: u64 = 2 * MONITOR_BUFFER as u64;
+/// Most missing ranges listed in the report.
+const MAX_MISSING_RANGES: usize = 100;
+/// Histogram range: 1 ns to 60 s at 3 significant digits.
+const HISTOGRAM_MAX_NS: u64 = 60_000_000_000;
+
+/// The hops of one loop, as (name, index of the start stamp, index of the end stamp) in
+/// `LoopTrace::stamps()`.
+pub const HOPS: [(&str, usize, usize); 7] = [
+    ("plant_to_sensors", 0, 1),
+    ("sensors_compute", 1, 2),
+    ("sensors_to_estimator", 2, 3),
+    ("estimator_compute", 3, 4),
+    ("estimator_to_controller", 4, 5),
+    ("controller_compute", 5, 6),
+    ("controller_to_plant", 6, 7),
+];
+
+/// A latency distribution as the summary reports it, in nanoseconds. Percentiles come from the
+/// HDR histogram (within 0.1%); count, min, max and mean are exact. All `None` when empty.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct Stats {
+    pub count: u64,
+    pub min: Option<u64>,
+    pub p50: Option<u64>,
+    pub p90: Option<u64>,
+    pub p99: Option<u64>,
+    pub p999: Option<u64>,
+    pub max: Option<u64>,
+    pub mean: Option<f64>,
+}
+
+/// An HDR histogram with exact extremes, plus the current interval for the interval log.
+struct Recorder {
+    total: Histogram<u64>,
+    interval: Histogram<u64>,
+    min: u64,
+    max: u64,
+    sum: u128,
+}
+
+impl Recorder {
+    fn new() -> Self {
+        let h = Histogram::new_with_bounds(1, HISTOGRAM_MAX_NS, 3).expect("valid histogram bounds");
+        Self { total: h.clone(), interval: h, min: u64::MAX, max: 0, sum: 0 }
+    }
+
+    fn record(&mut self, ns: u64) {
+        self.total.saturating_record(ns);
+        self.interval.saturating_record(ns);
+        self.min = self.min.min(ns);
+        self.max = self.max.max(ns);
+        self.sum += u128::from(ns);
+    }
+
+    fn stats(&self) -> Stats {
+        let count = self.total.len();
+        if count == 0 {
+            return Stats::default();
+        }
+        // HDR reports a bucket's highest equivalent value; keep it inside the exact extremes.
+        let q = |q: f64| Some(self.total.value_at_quantile(q).clamp(self.min, self.max));
+        Stats {
+            count,
+            min: Some(self.min),
+            p50: q(0.50),
+            p90: q(0.90),
+            p99: q(0.99),
+            p999: q(0.999),
+            max: Some(self.max),
+            mean: Some(self.sum as f64 / count as f64),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MonitorReport {
+    /// Loop records (whole loops, plant to plant) received.
+    pub records: u64,
+    /// Loops the monitor saw any message of: 0 up to the newest k, plus one.
+    pub loops_seen: u64,
+    /// Samples received per topic.
+    pub received: BTreeMap<String, u64>,
+    /// Loops without a record, as inclusive [first, last] ranges (at most 100 listed), within
+    /// the loops the monitor saw anything of.
+    pub missing_records: Vec<[u64; 2]>,
+    pub end_to_end: Stats,
+    pub hops: BTreeMap<String, Stats>,
+    /// |actual tick period − dt| (real-time mode).
+    pub plant_tick_jitter: Stats,
+    /// Wake-up time − scheduled tick time (real-time mode).
+    pub plant_wake_latency: Stats,
+    /// Per sensor: age of the sample command k used, when command k took effect.
+    pub data_age: BTreeMap<String, Stats>,
+    /// Loop records flagged as deadline misses.
+    pub late_records: u64,
+    /// Trajectory rows written with some part missing.
+    pub partial_rows: u64,
+    pub metrics: BTreeMap<String, f64>,
+}
+
+/// A message from the receive loop to the writer. Samples are moved, not boxed: one copy per
+/// sample, no allocation on the receive path.
+#[allow(clippy::large_enum_variant)]
+enum Sample {
+    State(PlantState),
+    Measurements(Measurements),
+    Estimate(Estimate),
+    Command(Command),
+    Record(LoopRecord),
+}
+
+/// The parts of one loop that have arrived.
+#[derive(Default)]
+struct Partial {
+    state: Option<PlantState>,
+    measurements: Option<Measurements>,
+    estimate: Option<Estimate>,
+    command: Option<Command>,
+    record: Option<LoopRecord>,
+}
+
+impl Partial {
+    fn complete(&self) -> bool {
+        self.state.is_some()
+            && self.measurements.is_some()
+            && self.estimate.is_some()
+            && self.command.is_some()
+            && self.record.is_some()
+    }
+}
+
+pub fn run(context: &Context) -> Result<ChildEvent> {
+    let ipc = &context.ipc;
+    let states: TopicSubscriber<PlantState> = ipc.passive_subscriber(Topic::State)?;
+    let measurements: TopicSubscriber<Measurements> = ipc.passive_subscriber(Topic::Measurements)?;
+    let estimates: TopicSubscriber<Estimate> = ipc.passive_subscriber(Topic::Estimate)?;
+    let commands: TopicSubscriber<Command> = ipc.passive_subscriber(Topic::Command)?;
+    let records: TopicSubscriber<LoopRecord> = ipc.passive_subscriber(Topic::Loop)?;
+    let writer = Writer::new(context)?;
+    emit(&ChildEvent::Ready)?;
+
+    let (tx, rx) = crossbeam_channel::unbounded();
+    let writer = std::thread::Builder::new().name("monitor-writer".into()).spawn(move || writer.run(rx))?;
+
+    let drain = || -> Result<usize> {
+        let mut n = 0;
+        macro_rules! take {
+            ($sub:expr, $variant:ident) => {
+                while let Some(s) = $sub.receive()? {
+                    n += 1;
+                    tx.send(Sample::$variant(s)).map_err(|_| anyhow!("the monitor's writer stopped"))?;
+                }
+            };
+        }
+        // In the order data flows, so a loop's parts tend to arrive together.
+        take!(states, State);
+        take!(measurements, Measurements);
+        take!(estimates, Estimate);
+        take!(commands, Command);
+        take!(records, Record);
+        Ok(n)
+    };
+    while !context.stop.requested() {
+        if drain()? < MONITOR_BUFFER / 8 {
+            std::thread::sleep(POLL_PERIOD);
+        }
+    }
+    // The launcher stops the monitor last: everything the loop sent is queued by now.
+    while drain()? > 0 {}
+    drop(tx);
+    let report = writer.join().map_err(|_| anyhow!("the monitor's writer panicked"))??;
+    Ok(ChildEvent::MonitorReport(Box::new(report)))
+}
+
+struct Writer {
+    mode: Mode,
+    dt: f64,
+    run_dir: PathBuf,
+    sensor_names: Vec<String>,
+    dims: (usize, usize, usize, Vec<usize>),
+    metrics: Box<dyn Metrics>,
+    trajectory: BufWriter<File>,
+    loops: BufWriter<File>,
+    hlog: BufWriter<File>,
+    pending: BTreeMap<u64, Partial>,
+    /// The next loop to write.
+    next_k: u64,
+    newest_k: u64,
+    end_to_end: Recorder,
+    hops: Vec<Recorder>,
+    jitter: Recorder,
+    wake: Recorder,
+    data_age: Vec<Recorder>,
+    /// Start of the current interval-log interval (CLOCK_MONOTONIC), and of the run.
+    interval_start: Option<u64>,
+    first_publish: Option<u64>,
+    last_counters: PlantCounters,
+    report: MonitorReport,
+    last_status: Instant,
+}
+
+fn create(dir: &Path, name: &str) -> Result<BufWriter<File>> {
+    let path = dir.join(name);
+    Ok(BufWriter::new(File::create(&path).with_context(|| format!("create {}", path.display()))?))
+}
+
+impl Writer {
+    fn new(context: &Context) -> Result<Self> {
+        let scenario = context.scenario.as_ref();
+        let config = &context.config;
+        let dir = &context.run_dir;
+        let sensor_names: Vec<String> = config.sensors.keys().cloned().collect();
+        let sensor_dims: Vec<usize> = config.sensors.values().map(|s| config.signal_of(s).components.len()).collect();
+
+        let mut trajectory = create(dir, "trajectory.csv")?;
+        let mut columns: Vec<String> = vec!["k".into(), "t".into()];
+        columns.extend(scenario.state_names().iter().map(|n| n.to_string()));
+        for (name, spec) in &config.sensors {
+            match config.signal_of(spec).components {
+                [_] => columns.push(format!("meas.{name}")),
+                components => columns.extend(components.iter().map(|c| format!("meas.{name}.{c}"))),
+            }
+        }
+        columns.extend(scenario.estimate_names().iter().map(|n| format!("est.{n}")));
+        columns.extend(scenario.input_names().iter().map(|n| format!("cmd.{n}")));
+        writeln!(trajectory, "{}", columns.join(","))?;
+
+        let mut loops = create(dir, "loops.csv")?;
+        let mut columns: Vec<String> = vec!["k".into(), "t".into()];
+        columns.extend(LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")));
+        columns.extend(
+            ["end_to_end_ns", "deadline_miss", "rejected", "tick_scheduled_ns", "tick_wake_ns", "tick_period_ns"]
+                .map(String::from),
+        );
+        writeln!(loops, "{}", columns.join(","))?;
+
+        let mut hlog = create(dir, "latency.hlog")?;
+        let mut serializer = V2DeflateSerializer::new();
+        IntervalLogWriterBuilder::new()
+            .add_comment(&format!("LoopLab latency per hop and end to end, ns; scenario {}", config.scenario))
+            .add_comment("Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time")
+            .with_start_time(SystemTime::now())
+            .with_base_time(SystemTime::now())
+            .with_max_value_divisor(1000.0)
+            .begin_log_with(&mut hlog, &mut serializer)?;
+        writeln!(hlog, "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\"")?;
+
+        Ok(Self {
+            mode: config.mode,
+            dt: config.dt(),
+            run_dir: dir.clone(),
+            dims: (
+                scenario.state_names().len(),
+                scenario.estimate_names().len(),
+                scenario.input_names().len(),
+                sensor_dims,
+            ),
+            data_age: sensor_names.iter().map(|_| Recorder::new()).collect(),
+            sensor_names,
+            metrics: scenario.metrics(),
+            trajectory,
+            loops,
+            hlog,
+            pending: BTreeMap::new(),
+            next_k: 0,
+            newest_k: 0,
+            end_to_end: Recorder::new(),
+            hops: HOPS.iter().map(|_| Recorder::new()).collect(),
+            jitter: Recorder::new(),
+            wake: Recorder::new(),
+            interval_start: None,
+            first_publish: None,
+            last_counters: PlantCounters::default(),
+            report: MonitorReport::default(),
+            last_status: Instant::now(),
+        })
+    }
+
+    fn run(mut self, rx: Receiver<Sample>) -> Result<MonitorReport> {
+        loop {
+            match rx.recv_timeout(STATUS_PERIOD) {
+                Ok(sample) => self.take(sample)?,
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+            if self.last_status.elapsed() >= STATUS_PERIOD {
+                self.last_status = Instant::now();
+                self.status()?;
+            }
+        }
+        // Everything has arrived: write the loops still waiting for parts.
+        while let Some((&k, _)) = self.pending.first_key_value() {
+            self.next_k = self.next_k.max(k);
+            self.write_next()?;
+        }
+        self.finish()
+    }
+
+    fn take(&mut self, sample: Sample) -> Result<()> {
+        let (k, topic) = match &sample {
+            Sample::State(s) => (s.header.k, Topic::State),
+            Sample::Measurements(s) => (s.header.k, Topic::Measurements),
+            Sample::Estimate(s) => (s.header.k, Topic::Estimate),
+            Sample::Command(s) => (s.header.k, Topic::Command),
+            Sample::Record(s) => (s.header.k, Topic::Loop),
+        };
+        *self.report.received.entry(topic.name().to_owned()).or_default() += 1;
+        if k < self.next_k {
+            // This loop was already written without this part (it came too late); it stays
+            // counted as received.
+            return Ok(());
+        }
+        self.newest_k = self.newest_k.max(k);
+        let part = self.pending.entry(k).or_default();
+        match sample {
+            Sample::State(s) => part.state = Some(s),
+            Sample::Measurements(s) => part.measurements = Some(s),
+            Sample::Estimate(s) => part.estimate = Some(s),
+            Sample::Command(s) => part.command = Some(s),
+            Sample::Record(s) => part.record = Some(s),
+        }
+        // Write loops in order: complete ones at once, incomplete ones when they are too old
+        // to be completed.
+        while let Some((&k, part)) = self.pending.first_key_value() {
+            if !(part.complete() || self.newest_k >= k + JOIN_WINDOW) {
+                break;
+            }
+            self.next_k = self.next_k.max(k);
+            self.write_next()?;
+        }
+        Ok(())
+    }
+
+    /// Writes the loop `next_k` (whatever arrived of it) and moves on.
+    fn write_next(&mut self) -> Result<()> {
+        let k = self.next_k;
+        let part = self.pending.remove(&k).unwrap_or_default();
+        self.next_k = k + 1;
+        let t = k as f64 * self.dt;
+
+        if let Some(state) = &part.state {
+            self.last_counters = state.counters;
+            if self.mode == Mode::Realtime {
+                let timing = state.timing;
+                if timing.period_ns > 0 {
+                    let period = (self.dt * 1e9).round() as i64;
+                    self.jitter.record((timing.period_ns as i64 - period).unsigned_abs());
+                }
+                self.wake.record(timing.wake_ns.saturating_sub(timing.scheduled_ns));
+            }
+        }
+
+        let mut end_to_end = None;
+        if part.record.is_none() {
+            let missing = &mut self.report.missing_records;
+            match missing.last_mut() {
+                Some(range) if range[1] + 1 == k => range[1] = k,
+                _ => {
+                    if missing.len() < MAX_MISSING_RANGES {
+                        missing.push([k, k]);
+                    }
+                }
+            }
+        }
+        if let Some(record) = &part.record {
+            self.report.records += 1;
+            self.report.late_records += u64::from(record.deadline_miss);
+            let stamps = record.header.trace.stamps();
+            let e2e = stamps[7].saturating_sub(stamps[0]);
+            end_to_end = Some(e2e);
+            self.end_to_end.record(e2e);
+            for (recorder, (_, from, to)) in self.hops.iter_mut().zip(HOPS) {
+                recorder.record(stamps[to].saturating_sub(stamps[from]));
+            }
+            self.interval_log(stamps[0])?;
+        }
+
+        if let (Some(meas), Some(e2e)) = (&part.measurements, end_to_end) {
+            // Simulation-time age of the sample used, plus (real time) the wall-clock time the
+            // command took to take effect.
+            let actuation = if self.mode == Mode::Realtime { e2e as f64 } else { 0.0 };
+            for (recorder, reading) in self.data_age.iter_mut().zip(&meas.readings) {
+                if reading.valid != 0 {
+                    recorder.record(((t - reading.sample_time) * 1e9 + actuation).round().max(0.0) as u64);
+                }
+            }
+        }
+
+        self.write_loop_row(k, t, &part, end_to_end)?;
+        self.write_trajectory_row(k, t, &part)
+    }
+
+    fn write_loop_row(&mut self, k: u64, t: f64, part: &Partial, e2e: Option<u64>) -> Result<()> {
+        let mut row = format!("{k},{t}");
+        match &part.record {
+            Some(r) => {
+                for s in r.header.trace.stamps() {
+                    row.push_str(&format!(",{s}"));
+                }
+                row.push_str(&format!(",{},{},{}", e2e.unwrap_or(0), r.deadline_miss, r.rejected));
+            }
+            None => row.push_str(&",".repeat(11)),
+        }
+        match &part.state {
+            Some(s) if self.mode == Mode::Realtime => {
+                let tm = s.timing;
+                row.push_str(&format!(",{},{},{}", tm.scheduled_ns, tm.wake_ns, tm.period_ns));
+            }
+            _ => row.push_str(",,,"),
+        }
+        writeln!(self.loops, "{row}")?;
+        Ok(())
+    }
+
+    fn write_trajectory_row(&mut self, k: u64, t: f64, part: &Partial) -> Result<()> {
+        let (n_state, n_est, n_input, sensor_dims) = &self.dims;
+        let mut row = format!("{k},{t}");
+        let mut push = |values: Option<&[f64]>, n: usize| match values {
+            Some(v) => v[..n].iter().for_each(|x| row.push_str(&format!(",{x}"))),
+            None => row.push_str(&",".repeat(n)),
+        };
+        push(part.state.as_ref().map(|s| &s.x[..]), *n_state);
+        for (i, dim) in sensor_dims.iter().enumerate() {
+            push(part.measurements.as_ref().map(|m| &m.readings[i].value[..]), *dim);
+        }
+        push(part.estimate.as_ref().map(|e| &e.x[..]), *n_est);
+        push(part.command.as_ref().map(|c| &c.u[..]), *n_input);
+        writeln!(self.trajectory, "{row}")?;
+
+        match (&part.state, &part.measurements, &part.estimate, &part.command) {
+            (Some(s), Some(m), Some(e), Some(c)) => self.metrics.observe(&Row {
+                k,
+                t,
+                state: &s.x[..*n_state],
+                readings: &m.readings[..sensor_dims.len()],
+                estimate: &e.x[..*n_est],
+                command: &c.u[..*n_input],
+            }),
+            _ => self.report.partial_rows += 1,
+        }
+        Ok(())
+    }
+
+    /// Closes the interval-log interval when a record starts past its end.
+    fn interval_log(&mut self, publish_ns: u64) -> Result<()> {
+        let first = *self.first_publish.get_or_insert(publish_ns);
+        let start = *self.interval_start.get_or_insert(publish_ns);
+        if publish_ns >= start + HLOG_INTERVAL_NS {
+            self.flush_interval(first, start, publish_ns)?;
+            self.interval_start = Some(publish_ns);
+        }
+        Ok(())
+    }
+
+    fn flush_interval(&mut self, first: u64, start: u64, end: u64) -> Result<()> {
+        let mut serializer = V2DeflateSerializer::new();
+        let mut log = IntervalLogWriterBuilder::new().begin_log_with(&mut self.hlog, &mut serializer)?;
+        let offset = Duration::from_nanos(start - first);
+        let length = Duration::from_nanos(end.saturating_sub(start).max(1));
+        let recorders = std::iter::once(("end_to_end", &mut self.end_to_end))
+            .chain(HOPS.iter().map(|h| h.0).zip(self.hops.iter_mut()));
+        for (tag, recorder) in recorders {
+            if recorder.interval.is_empty() {
+                continue;
+            }
+            log.write_histogram(&recorder.interval, offset, length, Tag::new(tag))
+                .map_err(|e| anyhow!("write latency.hlog: {e}"))?;
+            recorder.interval.reset();
+        }
+        Ok(())
+    }
+
+    fn status(&self) -> Result<()> {
+        let e2e = &self.end_to_end.total;
+        emit(&ChildEvent::Status(MonitorStatus {
+            loops_recorded: self.report.records,
+            end_to_end_p99_ns: (!e2e.is_empty()).then(|| e2e.value_at_quantile(0.99)),
+            deadline_misses: self.last_counters.deadline_misses,
+        }))
+    }
+
+    fn finish(mut self) -> Result<MonitorReport> {
+        if let (Some(first), Some(start)) = (self.first_publish, self.interval_start) {
+            self.flush_interval(first, start, now_ns())?;
+        }
+        for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog] {
+            file.flush().with_context(|| format!("write to {}", self.run_dir.display()))?;
+        }
+        let mut report = self.report;
+        report.loops_seen = self.next_k;
+        report.end_to_end = self.end_to_end.stats();
+        report.hops = HOPS.iter().zip(&self.hops).map(|((name, _, _), r)| (name.to_string(), r.stats())).collect();
+        report.plant_tick_jitter = self.jitter.stats();
+        report.plant_wake_latency = self.wake.stats();
+        report.data_age = self.sensor_names.iter().cloned().zip(self.data_age.iter().map(Recorder::stats)).collect();
+        report.metrics = self.metrics.finish();
+        Ok(report)
+    }
+}

@@ -1,0 +1,218 @@
+//! The messages of the loop: fixed-size `#[repr(C)]` iceoryx2 payloads, with no heap inside.
+//!
+//! Every message starts with a [`Header`]: the loop index k (the plant tick the data derives
+//! from), the simulation time of that tick, and the [`LoopTrace`] of CLOCK_MONOTONIC stamps
+//! that travels with the data. Each stage copies the header of its input into its output and
+//! adds its own receive and publish stamps; the plant adds the time the command reached it and
+//! publishes the finished [`LoopRecord`], so one record holds the whole loop.
+//!
+//! Dimensions are upper bounds: every process reads the real ones from the launch file.
+
+use iceoryx2::prelude::*;
+
+/// Largest true-state vector a scenario may have.
+pub const MAX_STATE: usize = 32;
+/// Largest command vector.
+pub const MAX_INPUT: usize = 8;
+/// Largest number of sensors in one launch file.
+pub const MAX_SENSORS: usize = 8;
+/// Largest number of components one sensor may measure.
+pub const MAX_SENSOR_DIM: usize = 12;
+/// Largest estimate vector.
+pub const MAX_ESTIMATE: usize = 48;
+
+/// CLOCK_MONOTONIC stamps (ns) of one loop, in the order the data passes. Zero means "not yet".
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("looplab::LoopTrace")]
+#[repr(C)]
+pub struct LoopTrace {
+    pub plant_publish: u64,
+    pub sensors_receive: u64,
+    pub sensors_publish: u64,
+    pub estimator_receive: u64,
+    pub estimator_publish: u64,
+    pub controller_receive: u64,
+    pub controller_publish: u64,
+    /// When the command of this loop reached the plant.
+    pub plant_receive: u64,
+}
+
+impl LoopTrace {
+    /// The stamps in the order the data passes, named as in `loops.csv`.
+    pub const STAMP_NAMES: [&'static str; 8] = [
+        "plant_publish",
+        "sensors_receive",
+        "sensors_publish",
+        "estimator_receive",
+        "estimator_publish",
+        "controller_receive",
+        "controller_publish",
+        "plant_receive",
+    ];
+
+    pub fn stamps(&self) -> [u64; 8] {
+        [
+            self.plant_publish,
+            self.sensors_receive,
+            self.sensors_publish,
+            self.estimator_receive,
+            self.estimator_publish,
+            self.controller_receive,
+            self.controller_publish,
+            self.plant_receive,
+        ]
+    }
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("looplab::Header")]
+#[repr(C)]
+pub struct Header {
+    /// Loop index: the plant tick this data derives from.
+    pub k: u64,
+    /// Simulation time of tick k, in seconds.
+    pub t: f64,
+    pub trace: LoopTrace,
+}
+
+/// How the plant's clock behaved at the tick that produced a state (real-time mode only;
+/// all zero in lockstep mode).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("looplab::TickTiming")]
+#[repr(C)]
+pub struct TickTiming {
+    /// When the tick was due: start + k·dt.
+    pub scheduled_ns: u64,
+    /// When the plant woke for it.
+    pub wake_ns: u64,
+    /// Time since the previous tick's wake-up (0 for the first tick).
+    pub period_ns: u64,
+}
+
+/// Running totals kept by the plant, sent with every state so that the last state seen tells
+/// the monitor where the run stands.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("looplab::PlantCounters")]
+#[repr(C)]
+pub struct PlantCounters {
+    /// Loops whose command had not arrived when the next tick began (real-time mode).
+    pub deadline_misses: u64,
+    /// Commands rejected as non-finite or out of range (the last valid one is held).
+    pub rejected_commands: u64,
+    /// Timer periods that passed with no wake-up at all (the plant process was held up).
+    pub skipped_ticks: u64,
+}
+
+/// The true state of the plant at tick k, published once per tick.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("looplab::PlantState")]
+#[repr(C)]
+pub struct PlantState {
+    pub header: Header,
+    pub x: [f64; MAX_STATE],
+    /// The command the actuator actually applied over the last interval, as a motor
+    /// controller reports it; the estimator uses it to predict.
+    pub u_applied: [f64; MAX_INPUT],
+    pub timing: TickTiming,
+    pub counters: PlantCounters,
+}
+
+/// One sensor's current (held) value.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("looplab::SensorReading")]
+#[repr(C)]
+pub struct SensorReading {
+    pub value: [f64; MAX_SENSOR_DIM],
+    /// Simulation time at which the truth behind this value was sampled.
+    pub sample_time: f64,
+    /// Number of samples this sensor has delivered before this one (0 for the first).
+    pub seq: u64,
+    /// 1 if this value was delivered at this tick, 0 if it is held from an earlier tick.
+    pub fresh: u32,
+    /// 0 until the sensor's first sample has arrived (transport delay).
+    pub valid: u32,
+}
+
+/// Every sensor's held value at tick k, in the launch file's sensor order (sorted by name).
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("looplab::Measurements")]
+#[repr(C)]
+pub struct Measurements {
+    pub header: Header,
+    pub readings: [SensorReading; MAX_SENSORS],
+    /// The actuator's report of the command applied over the last interval.
+    pub u_applied: [f64; MAX_INPUT],
+}
+
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("looplab::Estimate")]
+#[repr(C)]
+pub struct Estimate {
+    pub header: Header,
+    pub x: [f64; MAX_ESTIMATE],
+}
+
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("looplab::Command")]
+#[repr(C)]
+pub struct Command {
+    pub header: Header,
+    pub u: [f64; MAX_INPUT],
+}
+
+/// A finished loop, published by the plant when the command of loop k reaches it.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("looplab::LoopRecord")]
+#[repr(C)]
+pub struct LoopRecord {
+    pub header: Header,
+    /// 1 if the command arrived after tick k+1 began (real-time mode).
+    pub deadline_miss: u32,
+    /// 1 if the plant rejected the command (non-finite or out of range).
+    pub rejected: u32,
+}
+
+/// All-zero values: every message is plain numbers, so zero is a valid starting point.
+macro_rules! zeroed_default {
+    ($($t:ty),*) => {$(
+        impl Default for $t {
+            fn default() -> Self {
+                // SAFETY: the type is `repr(C)` and made only of integers and floats, for
+                // which the all-zero bit pattern is a valid value.
+                unsafe { std::mem::zeroed() }
+            }
+        }
+    )*};
+}
+zeroed_default!(PlantState, Measurements, Estimate, Command, LoopRecord);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_are_fixed_size_and_small() {
+        // Sizes are part of the contract between processes; a change here changes the wire
+        // format (iceoryx2 also refuses mismatched layouts at connect time).
+        assert_eq!(std::mem::size_of::<Header>(), 80);
+        assert_eq!(std::mem::size_of::<PlantState>(), 80 + 8 * (MAX_STATE + MAX_INPUT) + 48);
+        assert_eq!(std::mem::size_of::<SensorReading>(), 8 * MAX_SENSOR_DIM + 24);
+        assert_eq!(std::mem::size_of::<Command>(), 80 + 8 * MAX_INPUT);
+        assert!(std::mem::size_of::<Measurements>() < 1200);
+    }
+
+    #[test]
+    fn trace_stamps_follow_the_data() {
+        let trace = LoopTrace {
+            plant_publish: 1,
+            sensors_receive: 2,
+            sensors_publish: 3,
+            estimator_receive: 4,
+            estimator_publish: 5,
+            controller_receive: 6,
+            controller_publish: 7,
+            plant_receive: 8,
+        };
+        assert_eq!(trace.stamps(), [1, 2, 3, 4, 5, 6, 7, 8]);
+    }
+}

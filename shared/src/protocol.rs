@@ -1,0 +1,117 @@
+//! How the launcher and its children talk, outside the loop itself.
+//!
+//! - Each child writes one JSON object per line on its stdout: `ready` once all its iceoryx2
+//!   ports exist, `status` (the monitor, a few times a second), and one report when it ends.
+//! - The launcher writes `start` on the plant's stdin once every child is ready, so that no
+//!   sample is sent before every reader, the monitor included, is connected.
+//! - Everything for humans goes to stderr, which the launcher saves in the run folder.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use serde::{Deserialize, Serialize};
+
+use crate::signals::StopFlag;
+
+/// Arguments every loop process takes; the launcher fills them in.
+#[derive(Debug, Parser)]
+#[command(about = "A LoopLab loop process; started by `looplab run`, not by hand.")]
+pub struct ProcessArgs {
+    /// The resolved launch file of the run.
+    #[arg(long)]
+    pub launch: PathBuf,
+    /// The run's id: it names the run's iceoryx2 services and files.
+    #[arg(long)]
+    pub run_id: String,
+    /// The run folder, where the monitor writes its files.
+    #[arg(long)]
+    pub run_dir: PathBuf,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum ChildEvent {
+    Ready,
+    Status(MonitorStatus),
+    PlantReport(PlantReport),
+    StageReport(StageReport),
+    MonitorReport(Box<crate::monitor::MonitorReport>),
+}
+
+/// The live numbers behind the launcher's status line.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MonitorStatus {
+    pub loops_recorded: u64,
+    pub end_to_end_p99_ns: Option<u64>,
+    pub deadline_misses: u64,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct PlantReport {
+    /// Loops (ticks) that ran: states published plus skipped ticks.
+    pub loops: u64,
+    /// States published.
+    pub published: u64,
+    /// Commands received (in time or late).
+    pub commands: u64,
+    pub deadline_misses: u64,
+    pub rejected_commands: u64,
+    pub skipped_ticks: u64,
+    /// CLOCK_MONOTONIC of the first and last state published.
+    pub first_publish_ns: u64,
+    pub last_publish_ns: u64,
+    /// The run was stopped (signal) before all its loops ran.
+    pub stopped_early: bool,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct StageReport {
+    /// Inputs handled.
+    pub processed: u64,
+    /// Loops never seen because a newer input replaced them (real-time mode).
+    pub skipped: u64,
+    /// Outputs dropped for a reader that stayed full (lockstep back-pressure limit).
+    pub dropped: u64,
+    /// Extra per-stage numbers.
+    #[serde(default)]
+    pub extra: BTreeMap<String, f64>,
+}
+
+/// Writes one event line on stdout for the launcher.
+pub fn emit(event: &ChildEvent) -> Result<()> {
+    let line = serde_json::to_string(event).context("encode event")?;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}").and_then(|_| out.flush()).context("write event to the launcher")
+}
+
+/// Blocks until the launcher writes `start` on stdin. Returns false if a stop was requested or
+/// the launcher went away first.
+pub fn wait_for_start(stop: &StopFlag) -> Result<bool> {
+    let mut line = Vec::new();
+    while !stop.requested() {
+        let mut pfd = libc::pollfd { fd: 0, events: libc::POLLIN, revents: 0 };
+        // SAFETY: one valid pollfd; a signal makes poll return early, which the loop handles.
+        let ready = unsafe { libc::poll(&mut pfd, 1, 100) };
+        if ready <= 0 {
+            continue;
+        }
+        let mut byte = [0u8; 1];
+        // SAFETY: reads one byte from stdin into a buffer we own.
+        let n = unsafe { libc::read(0, byte.as_mut_ptr().cast(), 1) };
+        if n <= 0 {
+            return Ok(false);
+        }
+        if byte[0] == b'\n' {
+            if line == b"start" {
+                return Ok(true);
+            }
+            line.clear();
+        } else {
+            line.push(byte[0]);
+        }
+    }
+    Ok(false)
+}

@@ -1,0 +1,192 @@
+//! `summary.json` and the report printed at the end of a run.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use serde::{Deserialize, Serialize};
+
+use crate::monitor::{HOPS, Stats};
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Summary {
+    pub scenario: String,
+    /// One line naming the system and its variant.
+    pub title: String,
+    pub mode: String,
+    pub rate_hz: f64,
+    pub duration_s: f64,
+    pub seed: u64,
+    pub run_id: String,
+    pub run_dir: String,
+    /// Wall-clock start of the run (UTC, RFC 3339).
+    pub started_at: String,
+    /// Loops that ran: states the plant published.
+    pub loops: u64,
+    pub loops_planned: u64,
+    /// Every planned loop ran and every process ended cleanly.
+    pub completed: bool,
+    /// Why the run ended early, when it did.
+    pub stopped_because: Option<String>,
+    pub deadline_misses: u64,
+    pub rejected_commands: u64,
+    pub skipped_ticks: u64,
+    /// Loops whose state went out but whose command never reached the plant: a stage was held
+    /// up and a newer input replaced it (real-time mode; each is also a deadline miss).
+    pub loops_without_command: u64,
+    /// Wall-clock time from the first to the last state published.
+    pub wall_time_s: f64,
+    /// Loops per wall-clock second over that time.
+    pub loops_per_s: f64,
+    pub processes: Vec<ProcessInfo>,
+    pub latency_ns: Latency,
+    pub jitter_ns: Jitter,
+    /// Per sensor: how old the sample behind command k was when command k took effect.
+    pub data_age_ns: BTreeMap<String, Stats>,
+    pub monitor: MonitorCounts,
+    pub metrics: BTreeMap<String, f64>,
+    pub shared_memory: SharedMemoryCheck,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ProcessInfo {
+    pub name: String,
+    pub pid: u32,
+    /// Exit status as text: "0", "1", "signal 9", or "running" if it never ended.
+    pub exit: String,
+    /// User + system CPU time, seconds.
+    pub cpu_s: f64,
+    /// Sensors, estimator, controller: inputs handled, and loops never seen because a newer
+    /// input replaced them (real-time mode).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub processed: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skipped: Option<u64>,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct Latency {
+    pub end_to_end: Stats,
+    pub hops: BTreeMap<String, Stats>,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct Jitter {
+    /// |actual tick period − dt|, real-time mode only.
+    pub plant_tick: Stats,
+    /// Wake-up − scheduled tick time, real-time mode only.
+    pub plant_wake_latency: Stats,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MonitorCounts {
+    /// Loop records the monitor got.
+    pub records: u64,
+    /// Loop records the plant published that never reached the monitor.
+    pub lost: u64,
+    /// Which loops have no record, as inclusive ranges (at most 100); skipped ticks (no state
+    /// published) have none either.
+    pub missing: Vec<[u64; 2]>,
+    /// Samples the monitor received per topic.
+    pub received: BTreeMap<String, u64>,
+    /// Trajectory rows with some part missing.
+    pub partial_rows: u64,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct SharedMemoryCheck {
+    /// No file of the run is left in /dev/shm or /tmp/iceoryx2.
+    pub clean: bool,
+    /// Stale resources of dead processes the launcher removed.
+    pub removed_dead_nodes: u64,
+    /// Files still there.
+    pub leftover: Vec<String>,
+}
+
+fn micros(ns: Option<u64>) -> String {
+    match ns {
+        Some(ns) => format!("{:.1}", ns as f64 / 1000.0),
+        None => "-".into(),
+    }
+}
+
+fn stats_row(out: &mut String, label: &str, s: &Stats) {
+    let _ = writeln!(
+        out,
+        "  {label:<26}{:>9}{:>9}{:>9}{:>9}{:>9}{:>9}{:>10}",
+        s.count,
+        micros(s.min),
+        micros(s.p50),
+        micros(s.p90),
+        micros(s.p99),
+        micros(s.p999),
+        micros(s.max)
+    );
+}
+
+/// The human-readable report.
+pub fn render(s: &Summary) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "\nLoopLab · {} · {} · {} Hz · {} s · seed {}", s.title, s.mode, s.rate_hz, s.duration_s, s.seed);
+    let status = match (&s.stopped_because, s.completed) {
+        (Some(why), _) => format!("stopped early: {why}"),
+        (None, true) => "completed".into(),
+        (None, false) => "did not complete".into(),
+    };
+    let _ = writeln!(
+        out,
+        "  {status}: {} of {} loops in {:.2} s ({:.0} loops/s) · deadline misses {} · rejected commands {}",
+        s.loops, s.loops_planned, s.wall_time_s, s.loops_per_s, s.deadline_misses, s.rejected_commands
+    );
+    let _ = writeln!(
+        out,
+        "  monitor: {} loop records, {} lost; {} loops had no command (a stage skipped them), {} ticks were skipped{}",
+        s.monitor.records,
+        s.monitor.lost,
+        s.loops_without_command,
+        s.skipped_ticks,
+        if s.monitor.missing.is_empty() {
+            String::new()
+        } else {
+            format!("; no record for loops {}", s.monitor.missing.iter().map(|[a, b]| format!("{a}–{b}")).collect::<Vec<_>>().join(", "))
+        }
+    );
+
+    let _ = writeln!(
+        out,
+        "\n  {:<26}{:>9}{:>9}{:>9}{:>9}{:>9}{:>9}{:>10}",
+        "latency (µs)", "count", "min", "p50", "p90", "p99", "p99.9", "max"
+    );
+    let empty = Stats::default();
+    for (hop, _, _) in HOPS {
+        stats_row(&mut out, &hop.replace('_', " "), s.latency_ns.hops.get(hop).unwrap_or(&empty));
+    }
+    stats_row(&mut out, "END TO END", &s.latency_ns.end_to_end);
+    if s.jitter_ns.plant_tick.count > 0 || s.jitter_ns.plant_wake_latency.count > 0 {
+        stats_row(&mut out, "tick period error |T−dt|", &s.jitter_ns.plant_tick);
+        stats_row(&mut out, "tick wake-up latency", &s.jitter_ns.plant_wake_latency);
+    }
+    for (sensor, stats) in &s.data_age_ns {
+        stats_row(&mut out, &format!("data age: {sensor}"), stats);
+    }
+
+    let _ = writeln!(out, "\n  metrics");
+    for (name, value) in &s.metrics {
+        let _ = writeln!(out, "    {name:<34}{value:>14.6}");
+    }
+    let _ = writeln!(
+        out,
+        "\n  processes: {}",
+        s.processes
+            .iter()
+            .map(|p| format!("{} (pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let _ = if s.shared_memory.clean {
+        writeln!(out, "  shared memory: clean, no file of the run is left")
+    } else {
+        writeln!(out, "  shared memory: NOT CLEAN, left behind: {}", s.shared_memory.leftover.join(", "))
+    };
+    let _ = writeln!(out, "  run folder: {}", s.run_dir);
+    out
+}

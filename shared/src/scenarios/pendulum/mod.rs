@@ -1,0 +1,288 @@
+//! Reaction-wheel inverted pendulum with a biased angle sensor (paper 003; note
+//! `../shared/papers/003-reaction-wheel-pendulum.md`).
+//!
+//! - `plant`: the nonlinear model;
+//! - `sensors`: what the encoder and the motor controller's speed sensor read;
+//! - `estimator`: the bias observer and the no-bias observer;
+//! - `controller`: the LQR state feedback with the current limit.
+
+pub mod controller;
+pub mod estimator;
+pub mod plant;
+pub mod sensors;
+
+use std::collections::BTreeMap;
+
+use nalgebra::{RowVector3, Vector3};
+use serde::Deserialize;
+
+use self::controller::StateFeedback;
+use self::estimator::{Kind, PendulumEstimator};
+use self::plant::{Model, PendulumPlant};
+use super::{Controller, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry};
+use crate::launch::{LaunchConfig, LaunchError};
+
+pub const ENTRY: ScenarioEntry = ScenarioEntry {
+    name: "pendulum",
+    description: "reaction-wheel inverted pendulum with a biased encoder, LQR and a bias observer (paper 003)",
+    file: "launch/pendulum.toml",
+    text: include_str!("../../../../launch/pendulum.toml"),
+    sections: &["model", "plant", "estimator", "controller"],
+    signals: sensors::SIGNALS,
+    build,
+};
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlantSection {
+    /// RK4 steps per loop period.
+    substeps: u32,
+    initial: Initial,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Initial {
+    theta: f64,
+    theta_dot: f64,
+    wheel_speed: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EstimatorSection {
+    kind: Kind,
+    #[serde(rename = "bias-observer")]
+    bias_observer: ObserverSection<3>,
+    #[serde(rename = "no-bias")]
+    no_bias: ObserverSection<2>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ObserverSection<const N: usize> {
+    /// Error-dynamics poles (real, negative), at cos z = 1 for the bias observer.
+    #[serde(with = "serde_arrays")]
+    poles: [f64; N],
+    /// Explicit gains; when given they are used as they are and `poles` is ignored.
+    #[serde(default, with = "serde_arrays::option")]
+    gains: Option<[f64; N]>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ControllerSection {
+    /// K in I = −K X, X = (θ, θ̇, φ̇).
+    gains: [f64; 3],
+}
+
+/// Fixed-length arrays from TOML arrays, with a length error that names the expected length.
+mod serde_arrays {
+    use serde::{Deserialize, Deserializer, de::Error};
+
+    pub fn deserialize<'de, D: Deserializer<'de>, const N: usize>(d: D) -> Result<[f64; N], D::Error> {
+        let v = Vec::<f64>::deserialize(d)?;
+        let len = v.len();
+        v.try_into().map_err(|_| D::Error::custom(format!("expected {N} numbers, got {len}")))
+    }
+
+    pub mod option {
+        use super::*;
+        pub fn deserialize<'de, D: Deserializer<'de>, const N: usize>(d: D) -> Result<Option<[f64; N]>, D::Error> {
+            super::deserialize(d).map(Some)
+        }
+    }
+}
+
+pub struct Pendulum {
+    model: Model,
+    plant: PlantSection,
+    estimator: EstimatorSection,
+    bias_gains: Vector3<f64>,
+    no_bias_gains: nalgebra::Vector2<f64>,
+    controller: ControllerSection,
+    encoder: usize,
+    wheel_speed: usize,
+    bias_true: f64,
+    dt: f64,
+}
+
+fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+    let model: Model = c.section("model")?;
+    for (key, value) in [
+        ("m_p", model.m_p),
+        ("l_p", model.l_p),
+        ("j_p", model.j_p),
+        ("m_r", model.m_r),
+        ("l_r", model.l_r),
+        ("j_r", model.j_r),
+        ("g", model.g),
+        ("torque_constant", model.torque_constant),
+        ("current_limit_a", model.current_limit_a),
+    ] {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(c.error(&format!("model.{key}"), format!("must be a positive number, got {value}")));
+        }
+    }
+    let plant: PlantSection = c.section("plant")?;
+    if plant.substeps == 0 {
+        return Err(c.error("plant.substeps", "must be at least 1"));
+    }
+    let estimator: EstimatorSection = c.section("estimator")?;
+    let poles_key = |kind: &str| format!("estimator.{kind}.poles");
+    if estimator.bias_observer.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
+        return Err(c.error(&poles_key("bias-observer"), "every pole must be a negative number (a stable error)"));
+    }
+    if estimator.no_bias.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
+        return Err(c.error(&poles_key("no-bias"), "every pole must be a negative number (a stable error)"));
+    }
+    let bias_gains = match estimator.bias_observer.gains {
+        Some(g) => Vector3::from(g),
+        None => estimator::bias_observer_gains(model.a(), estimator.bias_observer.poles),
+    };
+    let no_bias_gains = match estimator.no_bias.gains {
+        Some(g) => nalgebra::Vector2::from(g),
+        None => estimator::no_bias_gains(estimator.no_bias.poles),
+    };
+    let controller: ControllerSection = c.section("controller")?;
+    let (encoder, _, encoder_spec) = c.sensor_for("theta")?;
+    let (wheel_speed, _, _) = c.sensor_for("wheel_speed")?;
+    let bias_true = encoder_spec.bias.expand(1)[0];
+    Ok(Box::new(Pendulum {
+        model,
+        plant,
+        estimator,
+        bias_gains,
+        no_bias_gains,
+        controller,
+        encoder,
+        wheel_speed,
+        bias_true,
+        dt: c.dt(),
+    }))
+}
+
+impl Scenario for Pendulum {
+    fn title(&self) -> String {
+        let kind = match self.estimator.kind {
+            Kind::BiasObserver => "bias-observer",
+            Kind::NoBias => "no-bias",
+        };
+        format!("reaction-wheel pendulum, {kind}")
+    }
+
+    fn state_names(&self) -> &'static [&'static str] {
+        &["theta", "theta_dot", "wheel_speed"]
+    }
+
+    fn input_names(&self) -> &'static [&'static str] {
+        &["current"]
+    }
+
+    fn estimate_names(&self) -> &'static [&'static str] {
+        &["theta", "theta_dot", "wheel_speed", "bias"]
+    }
+
+    fn input_limits(&self) -> Vec<(f64, f64)> {
+        vec![(-self.model.current_limit_a, self.model.current_limit_a)]
+    }
+
+    fn plant(&self) -> Box<dyn Plant> {
+        let i = &self.plant.initial;
+        Box::new(PendulumPlant::new(
+            self.model.clone(),
+            self.plant.substeps,
+            Vector3::new(i.theta, i.theta_dot, i.wheel_speed),
+        ))
+    }
+
+    fn estimator(&self) -> Box<dyn Estimator> {
+        Box::new(PendulumEstimator::new(
+            self.estimator.kind,
+            &self.model,
+            self.bias_gains,
+            self.no_bias_gains,
+            self.encoder,
+            self.wheel_speed,
+        ))
+    }
+
+    fn controller(&self) -> Box<dyn Controller> {
+        Box::new(StateFeedback {
+            gains: RowVector3::from(self.controller.gains),
+            current_limit: self.model.current_limit_a,
+        })
+    }
+
+    fn metrics(&self) -> Box<dyn Metrics> {
+        Box::new(PendulumMetrics {
+            bias_true: self.bias_true,
+            observer: self.estimator.kind == Kind::BiasObserver,
+            dt: self.dt,
+            ..Default::default()
+        })
+    }
+}
+
+/// Seconds at the end of the run over which the settled values are averaged (the encoder's
+/// quantisation leaves a small limit cycle, so one sample is a noisy final value).
+const FINAL_WINDOW_S: f64 = 1.0;
+
+#[derive(Default)]
+struct PendulumMetrics {
+    bias_true: f64,
+    observer: bool,
+    dt: f64,
+    rows: u64,
+    last: Option<(f64, f64, f64, f64)>,
+    theta_max_abs: f64,
+    /// Last time the bias estimate was outside the 2% band (None: never).
+    bias_last_outside: Option<f64>,
+    /// (t, θ, φ̇) of the rows in the final window.
+    recent: std::collections::VecDeque<(f64, f64, f64)>,
+}
+
+impl Metrics for PendulumMetrics {
+    fn observe(&mut self, row: &Row) {
+        let (theta, wheel_speed, bias_estimate) = (row.state[0], row.state[2], row.estimate[3]);
+        self.rows += 1;
+        self.last = Some((row.t, theta, wheel_speed, bias_estimate));
+        self.theta_max_abs = self.theta_max_abs.max(theta.abs());
+        if (bias_estimate - self.bias_true).abs() >= 0.02 * self.bias_true.abs() {
+            self.bias_last_outside = Some(row.t);
+        }
+        self.recent.push_back((row.t, theta, wheel_speed));
+        while self.recent.front().is_some_and(|(t, _, _)| *t <= row.t - FINAL_WINDOW_S) {
+            self.recent.pop_front();
+        }
+    }
+
+    fn finish(&self) -> BTreeMap<String, f64> {
+        let mut m = BTreeMap::new();
+        let Some((t_final, theta, wheel_speed, bias_estimate)) = self.last else {
+            return m;
+        };
+        m.insert("theta_final_rad".into(), theta);
+        m.insert("theta_max_abs_rad".into(), self.theta_max_abs);
+        m.insert("wheel_speed_final_rad_s".into(), wheel_speed);
+        let n = self.recent.len() as f64;
+        m.insert("theta_mean_last_1s_rad".into(), self.recent.iter().map(|r| r.1).sum::<f64>() / n);
+        m.insert("wheel_speed_mean_last_1s_rad_s".into(), self.recent.iter().map(|r| r.2).sum::<f64>() / n);
+        m.insert("bias_true_rad".into(), self.bias_true);
+        m.insert("bias_estimate_final_rad".into(), bias_estimate);
+        // Settled means inside the band from some time on; a run that ends outside it (or a
+        // zero bias, which has no 2% band) has no settling time.
+        if self.observer && self.bias_true != 0.0 {
+            match self.bias_last_outside {
+                None => {
+                    m.insert("observer_settling_s".into(), 0.0);
+                }
+                Some(t) if t < t_final => {
+                    m.insert("observer_settling_s".into(), t + self.dt);
+                }
+                Some(_) => {}
+            }
+        }
+        m
+    }
+}

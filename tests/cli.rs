@@ -1,0 +1,100 @@
+//! The command line: help, the scenario list, and bad input, which must give one clear error
+//! naming the file and key, exit code 2, and leave nothing behind.
+
+mod common;
+
+use common::{fresh_dir, looplab};
+
+fn stdout_of(args: &[&str]) -> String {
+    let out = looplab().args(args).output().unwrap();
+    assert!(out.status.success(), "looplab {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).unwrap()
+}
+
+#[test]
+fn help_explains_the_commands_and_options() {
+    let help = stdout_of(&["--help"]);
+    for word in ["run", "list", "Examples"] {
+        assert!(help.contains(word), "--help lacks {word}:\n{help}");
+    }
+    let help = stdout_of(&["run", "--help"]);
+    for word in ["--mode", "--duration", "--set", "--out", "realtime", "lockstep", "KEY=VALUE"] {
+        assert!(help.contains(word), "run --help lacks {word}:\n{help}");
+    }
+}
+
+#[test]
+fn list_names_the_scenarios() {
+    let list = stdout_of(&["list"]);
+    assert!(list.contains("pendulum") && list.contains("launch/pendulum.toml"), "{list}");
+}
+
+/// Runs looplab with bad input; expects exit code 2, the given fragments in stderr, and no run
+/// folder left behind.
+fn rejects(args: &[&str], expected: &[&str]) {
+    let out_dir = fresh_dir("rejected");
+    let out = looplab().arg("run").args(args).arg("--out").arg(&out_dir).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "looplab run {args:?} should fail with 2:\n{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "one clear error line:\n{stderr}");
+    for fragment in expected {
+        assert!(stderr.contains(fragment), "error for {args:?} should contain {fragment:?}:\n{stderr}");
+    }
+    assert!(!out_dir.exists(), "bad input must not create the run folder");
+}
+
+#[test]
+fn bad_input_is_one_clear_error_with_exit_code_2() {
+    rejects(&["pendulm"], &["unknown scenario \"pendulm\"", "allowed: pendulum"]);
+    rejects(&["pendulum", "--set", "sensors.encoder.biass=1"], &["key `sensors.encoder.biass`", "unknown field", "`bias`"]);
+    rejects(&["pendulum", "--set", "sensors.gyro.period_s=0.01"], &["--set sensors.gyro.period_s=0.01", "key `sensors.gyro`", "missing field `signal`"]);
+    rejects(&["pendulum", "--set", "estimator.kind=kalman"], &["key `estimator.kind`", "bias-observer", "no-bias"]);
+    rejects(&["pendulum", "--rate", "0"], &["key `rate_hz`", "positive"]);
+    rejects(&["pendulum", "--set", "rate_hz=-1000"], &["key `rate_hz`"]);
+    rejects(&["pendulum", "--set", "sensors.wheel_speed.period_s=0.0025"], &["key `sensors.wheel_speed.period_s`", "multiple of the loop period"]);
+    rejects(&["pendulum", "--set", "sensors.encoder.signal=height"], &["key `sensors.encoder.signal`", "theta, wheel_speed"]);
+    rejects(&["pendulum", "--set", "controller.gains=[1, 2]"], &["key `controller.gains`"]);
+    rejects(&["pendulum", "--set", "novalue"], &["expected KEY=VALUE"]);
+}
+
+#[test]
+fn bad_launch_files_are_named_in_the_error() {
+    let dir = fresh_dir("bad-files");
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path.to_str().unwrap().to_owned()
+    };
+    let broken = write("broken.toml", "scenario = \"pendulum\"\nrate_hz = [\n");
+    rejects(&[&broken], &[&broken, "not valid TOML: line 2, column"]);
+    let unknown = write("unknown.toml", "scenario = \"rocket\"\n");
+    rejects(&[&unknown], &[&unknown, "key `scenario`", "unknown scenario \"rocket\""]);
+    let typo = write("typo.toml", "scenario = \"pendulum\"\n[plant.initial]\ntheta = 0.1\nomega = 2.0\n");
+    rejects(&[&typo], &[&typo, "key `plant.initial.omega`"]);
+    let missing = dir.join("absent.toml");
+    rejects(&[missing.to_str().unwrap()], &["absent.toml", "cannot read"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_missing_binary_is_named() {
+    // A launcher alone in a folder, without its loop processes.
+    let dir = fresh_dir("lonely");
+    std::fs::create_dir_all(&dir).unwrap();
+    let lonely = dir.join("looplab");
+    std::fs::copy(env!("CARGO_BIN_EXE_looplab"), &lonely).unwrap();
+    let out_dir = dir.join("out");
+    let out = std::process::Command::new(&lonely)
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .args(["run", "pendulum", "--out"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("missing binary") && stderr.contains(&dir.join("monitor").display().to_string()), "{stderr}");
+    assert!(!out_dir.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

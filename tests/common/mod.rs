@@ -1,0 +1,101 @@
+//! Helpers for the integration tests: run the real `looplab` binary (which starts the real
+//! processes over real iceoryx2 shared memory) and read what it wrote.
+
+#![allow(dead_code)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicU32, Ordering};
+
+pub fn looplab() -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_looplab"));
+    // Under `cargo test` these are set, and the launcher would ask cargo to build its siblings;
+    // cargo has built them already.
+    command.env_remove("CARGO").env_remove("CARGO_MANIFEST_DIR");
+    command
+}
+
+/// A fresh, not yet existing folder under the system's temp folder.
+pub fn fresh_dir(name: &str) -> PathBuf {
+    static COUNTER: AtomicU32 = AtomicU32::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("looplab-test-{}-{name}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+pub struct Run {
+    pub dir: PathBuf,
+    pub output: Output,
+    pub summary: serde_json::Value,
+}
+
+impl Run {
+    pub fn metric(&self, name: &str) -> f64 {
+        self.summary["metrics"][name].as_f64().unwrap_or_else(|| panic!("no metric {name} in {}", self.summary["metrics"]))
+    }
+
+    pub fn trajectory(&self) -> Table {
+        Table::read(&self.dir.join("trajectory.csv"))
+    }
+
+    pub fn stdout(&self) -> String {
+        String::from_utf8_lossy(&self.output.stdout).into_owned()
+    }
+}
+
+impl Drop for Run {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+/// Runs `looplab run <args> --out <fresh dir> -q` and expects success.
+pub fn run(name: &str, args: &[&str]) -> Run {
+    let dir = fresh_dir(name);
+    let output = looplab().arg("run").args(args).arg("--out").arg(&dir).arg("-q").output().expect("start looplab");
+    assert!(
+        output.status.success(),
+        "looplab run {args:?} failed ({}):\n{}\n{}",
+        output.status,
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let summary = read_summary(&dir);
+    Run { dir, output, summary }
+}
+
+pub fn read_summary(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
+    serde_json::from_str(&text).expect("summary.json is JSON")
+}
+
+/// A CSV file by column name.
+pub struct Table {
+    pub columns: BTreeMap<String, usize>,
+    pub rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    pub fn read(path: &Path) -> Self {
+        let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let mut lines = text.lines();
+        let columns = lines.next().expect("header").split(',').enumerate().map(|(i, c)| (c.to_owned(), i)).collect();
+        let rows = lines.map(|l| l.split(',').map(str::to_owned).collect()).collect();
+        Self { columns, rows }
+    }
+
+    /// A numeric column (panics on an empty cell: tests read complete runs).
+    pub fn col(&self, name: &str) -> Vec<f64> {
+        let i = *self.columns.get(name).unwrap_or_else(|| panic!("no column {name}; have {:?}", self.columns.keys()));
+        self.rows.iter().map(|r| r[i].parse().unwrap_or_else(|_| panic!("{name}: {:?} is not a number", r[i]))).collect()
+    }
+}
+
+/// True if a process with this pid exists (and is not a zombie of ours).
+pub fn alive(pid: i64) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| !stat.contains(") Z "))
+}

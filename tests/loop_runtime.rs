@@ -1,0 +1,250 @@
+//! The loop as processes: start-up without loss, the summary contract, determinism, isolation of
+//! concurrent runs, and clean shutdown on signals and on a dead process.
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use common::{Table, alive, fresh_dir, looplab, read_summary, run};
+
+const STATS_FIELDS: [&str; 8] = ["count", "min", "p50", "p90", "p99", "p999", "max", "mean"];
+const HOPS: [&str; 7] = [
+    "plant_to_sensors",
+    "sensors_compute",
+    "sensors_to_estimator",
+    "estimator_compute",
+    "estimator_to_controller",
+    "controller_compute",
+    "controller_to_plant",
+];
+
+fn assert_no_files_left(run_id: &str) {
+    let left = looplab_shared::ipc::files_of_run(run_id).unwrap();
+    assert!(left.is_empty(), "files of run {run_id} left behind: {left:?}");
+}
+
+fn assert_processes_gone(summary: &serde_json::Value) {
+    let processes = summary["processes"].as_array().unwrap();
+    assert_eq!(processes.len(), 5);
+    for p in processes {
+        let pid = p["pid"].as_i64().unwrap();
+        assert!(!alive(pid), "{} (pid {pid}) is still running", p["name"]);
+        assert_ne!(p["exit"], "running");
+    }
+}
+
+#[test]
+fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
+    let r = run("realtime", &["pendulum", "--duration", "2"]);
+    let s = &r.summary;
+    for key in ["scenario", "mode", "rate_hz", "duration_s", "seed", "loops", "deadline_misses", "processes", "metrics"] {
+        assert!(s.get(key).is_some(), "summary.json has no {key}");
+    }
+    assert_eq!(s["scenario"], "pendulum");
+    assert_eq!(s["mode"], "realtime");
+    assert_eq!(s["rate_hz"], 1000.0);
+    assert_eq!(s["loops"], 2000);
+    assert_eq!(s["completed"], true);
+    let names: Vec<_> = s["processes"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap().to_owned()).collect();
+    for name in ["plant", "sensors", "estimator", "controller", "monitor"] {
+        assert!(names.iter().any(|n| n == name), "no process {name} in {names:?}");
+    }
+    for p in s["processes"].as_array().unwrap() {
+        assert!(p["pid"].as_u64().unwrap() > 0);
+        assert_eq!(p["exit"], "0", "{p}");
+    }
+
+    let records = s["monitor"]["records"].as_u64().unwrap();
+    let published = s["loops"].as_u64().unwrap() - s["skipped_ticks"].as_u64().unwrap();
+    let without_command = s["loops_without_command"].as_u64().unwrap();
+    assert_eq!(records + s["monitor"]["lost"].as_u64().unwrap() + without_command, published, "nothing lost silently");
+    let e2e = &s["latency_ns"]["end_to_end"];
+    for field in STATS_FIELDS {
+        assert!(e2e.get(field).is_some(), "end_to_end has no {field}");
+        assert!(s["jitter_ns"]["plant_tick"].get(field).is_some(), "plant_tick jitter has no {field}");
+    }
+    assert_eq!(e2e["count"], records);
+    let (min, p50, p99, max) = (e2e["min"].as_u64().unwrap(), e2e["p50"].as_u64().unwrap(), e2e["p99"].as_u64().unwrap(), e2e["max"].as_u64().unwrap());
+    assert!(0 < min && min <= p50 && p50 <= p99 && p99 <= max, "{e2e}");
+    let mut hop_sum = 0.0;
+    for hop in HOPS {
+        let h = &s["latency_ns"]["hops"][hop];
+        assert_eq!(h["count"], records, "hop {hop}");
+        hop_sum += h["mean"].as_f64().unwrap();
+    }
+    // The hops partition each loop, so their means add up to the end-to-end mean.
+    assert!((hop_sum - e2e["mean"].as_f64().unwrap()).abs() < 1.0, "hops {hop_sum} vs e2e {}", e2e["mean"]);
+    assert!(s["jitter_ns"]["plant_tick"]["count"].as_u64().unwrap() > 1900);
+    assert_eq!(s["shared_memory"]["clean"], true);
+    assert_processes_gone(s);
+    assert_no_files_left(s["run_id"].as_str().unwrap());
+
+    // The run folder.
+    for file in ["summary.json", "trajectory.csv", "loops.csv", "latency.hlog", "launch.toml"] {
+        assert!(r.dir.join(file).is_file(), "no {file} in the run folder");
+    }
+    let resolved = std::fs::read_to_string(r.dir.join("launch.toml")).unwrap();
+    assert!(resolved.contains("duration_s = 2.0"), "the resolved launch file has the override");
+    let loops = Table::read(&r.dir.join("loops.csv"));
+    assert_eq!(loops.rows.len() as u64, published, "one row per loop");
+    let trajectory = r.trajectory();
+    for column in ["t", "theta", "theta_dot", "wheel_speed", "meas.encoder", "meas.wheel_speed", "est.bias", "cmd.current"] {
+        assert!(trajectory.columns.contains_key(column), "trajectory.csv has no {column}");
+    }
+
+    // latency.hlog is a standard HdrHistogram interval log holding every end-to-end sample.
+    let hlog = std::fs::read(r.dir.join("latency.hlog")).unwrap();
+    let mut e2e_count = 0;
+    for entry in hdrhistogram::serialization::interval_log::IntervalLogIterator::new(&hlog) {
+        if let Ok(hdrhistogram::serialization::interval_log::LogEntry::Interval(h)) = entry
+            && h.tag().map(|t| t.as_str()) == Some("end_to_end")
+        {
+            let bytes = base64_decode(h.encoded_histogram());
+            let hist: hdrhistogram::Histogram<u64> =
+                hdrhistogram::serialization::Deserializer::new().deserialize(&mut bytes.as_slice()).unwrap();
+            e2e_count += hist.len();
+        }
+    }
+    assert_eq!(e2e_count, records);
+}
+
+/// Standard base64, as the interval log writes it.
+fn base64_decode(text: &str) -> Vec<u8> {
+    const ALPHABET: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = Vec::new();
+    let (mut acc, mut bits) = (0u32, 0);
+    for c in text.bytes().filter(|c| *c != b'=') {
+        acc = (acc << 6) | ALPHABET.iter().position(|a| *a == c).expect("base64") as u32;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    out
+}
+
+#[test]
+fn lockstep_records_loop_zero_and_every_loop_after_it() {
+    let r = run("lockstep-all", &["pendulum", "--mode", "lockstep", "--duration", "3"]);
+    let s = &r.summary;
+    assert_eq!(s["loops"], 3000);
+    assert_eq!(s["monitor"]["records"], 3000);
+    assert_eq!(s["monitor"]["lost"], 0);
+    assert_eq!(s["monitor"]["missing"].as_array().unwrap().len(), 0);
+    assert_eq!(s["deadline_misses"], 0);
+    let loops = Table::read(&r.dir.join("loops.csv"));
+    assert_eq!(loops.col("k")[0], 0.0);
+    // Loop 0 has every stamp, in the order the data passed.
+    let stamps: Vec<f64> = ["plant_publish_ns", "sensors_receive_ns", "sensors_publish_ns", "estimator_receive_ns", "estimator_publish_ns", "controller_receive_ns", "controller_publish_ns", "plant_receive_ns"]
+        .iter()
+        .map(|c| loops.col(c)[0])
+        .collect();
+    assert!(stamps[0] > 0.0 && stamps.windows(2).all(|w| w[0] <= w[1]), "{stamps:?}");
+    assert!(s["loops_per_s"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn lockstep_runs_are_deterministic_and_concurrent_runs_are_isolated() {
+    let args = ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", "sensors.encoder.noise_std=0.001", "--set", "seed=42"];
+    let (a, b) = std::thread::scope(|scope| {
+        let a = scope.spawn(|| run("determinism-a", &args));
+        let b = scope.spawn(|| run("determinism-b", &args));
+        (a.join().unwrap(), b.join().unwrap())
+    });
+    assert_ne!(a.summary["run_id"], b.summary["run_id"]);
+    for r in [&a, &b] {
+        assert_eq!(r.summary["monitor"]["records"], 3000, "a concurrent run must not see the other's messages");
+        assert_eq!(r.summary["monitor"]["received"]["state"], 3000);
+    }
+    let trajectory = |r: &common::Run| std::fs::read(r.dir.join("trajectory.csv")).unwrap();
+    assert!(trajectory(&a) == trajectory(&b), "two lockstep runs with one seed differ");
+
+    let other_seed = run("determinism-c", &["pendulum", "--mode", "lockstep", "--duration", "3", "--set", "sensors.encoder.noise_std=0.001", "--set", "seed=43"]);
+    assert!(trajectory(&a) != trajectory(&other_seed), "the seed should change the noise");
+}
+
+#[test]
+fn a_launch_file_path_runs() {
+    let dir = fresh_dir("launch-file");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("short.toml");
+    std::fs::write(&file, "scenario = \"pendulum\"\nmode = \"lockstep\"\nduration_s = 0.5\n[sensors.encoder]\nbias = 0.02\n").unwrap();
+    let r = run("launch-file-run", &[file.to_str().unwrap()]);
+    assert_eq!(r.summary["loops"], 500);
+    assert_eq!(r.metric("bias_true_rad"), 0.02);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Starts a long real-time run and returns it with its run folder once the loop is running.
+fn start_long_run(name: &str) -> (std::process::Child, std::path::PathBuf) {
+    let dir = fresh_dir(name);
+    let child = looplab()
+        .args(["run", "pendulum", "--duration", "60", "-q", "--out"])
+        .arg(&dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The loop is running once the monitor has written loop rows (it flushes as it goes).
+    let until = Instant::now() + Duration::from_secs(30);
+    while std::fs::metadata(dir.join("loops.csv")).map_or(0, |m| m.len()) < 100_000 {
+        assert!(Instant::now() < until, "the run did not start");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    (child, dir)
+}
+
+fn wait_exit(mut child: std::process::Child) -> std::process::ExitStatus {
+    let until = Instant::now() + Duration::from_secs(60);
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status;
+        }
+        assert!(Instant::now() < until, "looplab did not stop");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn sigint_and_sigterm_stop_the_run_cleanly_with_a_report() {
+    for (signal, name) in [(libc::SIGINT, "sigint"), (libc::SIGTERM, "sigterm")] {
+        let (child, dir) = start_long_run(name);
+        unsafe { libc::kill(child.id() as i32, signal) };
+        let status = wait_exit(child);
+        assert_eq!(status.code(), Some(130), "{name}: exit status");
+        let s = read_summary(&dir);
+        assert_eq!(s["completed"], false);
+        assert_eq!(s["stopped_because"], "interrupted by a signal");
+        assert!(s["loops"].as_u64().unwrap() > 0);
+        assert_eq!(s["shared_memory"]["clean"], true, "{name}: {}", s["shared_memory"]);
+        for p in s["processes"].as_array().unwrap() {
+            assert_eq!(p["exit"], "0", "{name}: every process exits cleanly: {p}");
+        }
+        assert_processes_gone(&s);
+        assert_no_files_left(s["run_id"].as_str().unwrap());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+#[test]
+fn a_killed_process_is_reported_and_its_shared_memory_removed() {
+    let (child, dir) = start_long_run("killed");
+    // The estimator's pid is in no file yet; find it among the launcher's children.
+    let estimator = std::fs::read_to_string(format!("/proc/{}/task/{}/children", child.id(), child.id()))
+        .unwrap()
+        .split_whitespace()
+        .map(|pid| pid.parse::<i32>().unwrap())
+        .find(|pid| std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.trim() == "estimator"))
+        .expect("the estimator runs");
+    unsafe { libc::kill(estimator, libc::SIGKILL) };
+    let status = wait_exit(child);
+    assert_eq!(status.code(), Some(1));
+    let s = read_summary(&dir);
+    let why = s["stopped_because"].as_str().unwrap();
+    assert!(why.contains("estimator exited with status signal 9"), "{why}");
+    assert_eq!(s["shared_memory"]["clean"], true, "{}", s["shared_memory"]);
+    assert_processes_gone(&s);
+    assert_no_files_left(s["run_id"].as_str().unwrap());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,114 @@
+//! The reaction-wheel pendulum (paper 003) through the real five-process loop, in lockstep mode,
+//! against the paper's analytic results. Each case sets δ and K from the command line, so the
+//! launch-file path is what is tested.
+
+mod common;
+
+use common::run;
+
+/// The paper's K and two other stabilising gains.
+const GAINS: [[f64; 3]; 3] = [[-378.0, -55.0, -1.0], [-300.0, -45.0, -0.8], [-420.0, -60.0, -1.2]];
+
+fn gains_arg(k: [f64; 3]) -> String {
+    format!("controller.gains=[{:?}, {:?}, {:?}]", k[0], k[1], k[2])
+}
+
+/// Without bias estimation the pendulum stands at the true vertical while the wheel settles at
+/// φ̇ = −k₁δ/k₃ (paper §3). The settled values are averaged over the last second: the encoder's
+/// quantisation leaves a small limit cycle.
+#[test]
+fn no_bias_estimator_stands_upright_with_the_wheel_at_minus_k1_delta_over_k3() {
+    for (delta, k) in [(0.05, GAINS[0]), (-0.04, GAINS[1]), (0.03, GAINS[2]), (-0.06, GAINS[0])] {
+        let bias = format!("sensors.encoder.bias={delta:?}");
+        let gains = gains_arg(k);
+        let r = run(
+            "no-bias",
+            &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", "estimator.kind=no-bias", "--set", &bias, "--set", &gains],
+        );
+        let law = -k[0] * delta / k[2];
+        let wheel = r.metric("wheel_speed_mean_last_1s_rad_s");
+        assert!((wheel - law).abs() < 0.01 * law.abs(), "δ = {delta}, K = {k:?}: wheel {wheel} rad/s, law {law} rad/s");
+        let theta = r.metric("theta_mean_last_1s_rad");
+        assert!(theta.abs() < 1e-3, "δ = {delta}, K = {k:?}: θ settles at {theta} rad, not 0");
+        assert!(r.metric("theta_final_rad").abs() < 2e-3);
+        assert!(r.summary["metrics"].get("observer_settling_s").is_none(), "no-bias has no observer settling time");
+    }
+}
+
+/// With the bias observer, δ̂ → δ (within 2%), θ → 0 and the wheel stops (|φ̇| < 1 rad/s from
+/// 10 s on).
+#[test]
+fn bias_observer_finds_the_bias_and_stops_the_wheel() {
+    for (delta, k) in [(0.1, GAINS[0]), (-0.07, GAINS[0]), (0.06, GAINS[1]), (-0.05, GAINS[2])] {
+        let bias = format!("sensors.encoder.bias={delta:?}");
+        let gains = gains_arg(k);
+        let r = run("observer", &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", &bias, "--set", &gains]);
+        let estimate = r.metric("bias_estimate_final_rad");
+        assert!((estimate - delta).abs() < 0.02 * delta.abs(), "δ = {delta}, K = {k:?}: δ̂ = {estimate}");
+        assert_eq!(r.metric("bias_true_rad"), delta);
+        let theta = r.metric("theta_mean_last_1s_rad");
+        assert!(theta.abs() < 1e-3, "δ = {delta}, K = {k:?}: θ settles at {theta}");
+
+        let trajectory = r.trajectory();
+        let worst_after_10s = trajectory
+            .col("t")
+            .iter()
+            .zip(trajectory.col("wheel_speed"))
+            .filter(|(t, _)| **t >= 10.0)
+            .map(|(_, w)| w.abs())
+            .fold(0.0, f64::max);
+        assert!(worst_after_10s < 1.0, "δ = {delta}, K = {k:?}: |φ̇| reaches {worst_after_10s} rad/s after 10 s");
+
+        let settling = r.metric("observer_settling_s");
+        assert!(settling > 0.0 && settling < 2.0, "δ = {delta}: observer settling {settling} s");
+    }
+}
+
+/// The sensors' zero-order hold, through the real sensors process: with the noise off, a
+/// sensor's value changes only at its own sample instants (plus its transport delay) and there
+/// equals the quantised truth plus bias.
+#[test]
+fn sensor_values_are_held_between_their_own_sample_instants() {
+    let (period_ticks, delay, bias, quantum) = (5usize, 2usize, 0.3, 0.01);
+    let r = run(
+        "zoh",
+        &[
+            "pendulum",
+            "--mode",
+            "lockstep",
+            "--duration",
+            "1",
+            "--set",
+            "sensors.wheel_speed.noise_std=0.0",
+            "--set",
+            "sensors.wheel_speed.period_s=0.005",
+            "--set",
+            &format!("sensors.wheel_speed.delay_ticks={delay}"),
+            "--set",
+            &format!("sensors.wheel_speed.bias={bias:?}"),
+            "--set",
+            &format!("sensors.wheel_speed.quantum={quantum:?}"),
+        ],
+    );
+    let t = r.trajectory();
+    let (theta, wheel) = (t.col("theta"), t.col("wheel_speed"));
+    let (encoder, speed) = (t.col("meas.encoder"), t.col("meas.wheel_speed"));
+    let q = 2.0 * std::f64::consts::PI / 10000.0;
+    assert_eq!(theta.len(), 1000);
+    let mut changes = 0;
+    for k in 0..theta.len() {
+        // The encoder samples every tick: q(θ + δ).
+        assert_eq!(encoder[k], ((theta[k] + 0.1) / q).round() * q, "encoder at tick {k}");
+        if k < delay {
+            continue;
+        }
+        // The wheel speed sampled at the last sample instant j ≤ k − delay.
+        let j = (k - delay) / period_ticks * period_ticks;
+        assert_eq!(speed[k], ((wheel[j] + bias) / quantum).round() * quantum, "wheel speed at tick {k}");
+        if k > delay && speed[k] != speed[k - 1] {
+            assert_eq!((k - delay) % period_ticks, 0, "the held wheel speed changed between sample instants, at tick {k}");
+            changes += 1;
+        }
+    }
+    assert!(changes > 100, "the wheel speed should change at most sample instants, changed {changes} times");
+}
