@@ -227,16 +227,24 @@ fn sigint_and_sigterm_stop_the_run_cleanly_with_a_report() {
     }
 }
 
-#[test]
-fn a_killed_process_is_reported_and_its_shared_memory_removed() {
-    let (child, dir) = start_long_run("killed");
-    // The estimator's pid is in no file yet; find it among the launcher's children.
-    let estimator = std::fs::read_to_string(format!("/proc/{}/task/{}/children", child.id(), child.id()))
+/// The launcher's children: (name, pid, command line).
+fn children_of(launcher: u32) -> Vec<(String, i32, String)> {
+    std::fs::read_to_string(format!("/proc/{launcher}/task/{launcher}/children"))
         .unwrap()
         .split_whitespace()
         .map(|pid| pid.parse::<i32>().unwrap())
-        .find(|pid| std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.trim() == "estimator"))
-        .expect("the estimator runs");
+        .filter_map(|pid| {
+            let name = std::fs::read_to_string(format!("/proc/{pid}/comm")).ok()?.trim().to_owned();
+            let cmdline = std::fs::read_to_string(format!("/proc/{pid}/cmdline")).ok()?.replace('\0', " ");
+            Some((name, pid, cmdline))
+        })
+        .collect()
+}
+
+#[test]
+fn a_killed_process_is_reported_and_its_shared_memory_removed() {
+    let (child, dir) = start_long_run("killed");
+    let estimator = children_of(child.id()).into_iter().find(|(name, _, _)| name == "estimator").expect("the estimator runs").1;
     unsafe { libc::kill(estimator, libc::SIGKILL) };
     let status = wait_exit(child);
     assert_eq!(status.code(), Some(1));
@@ -246,5 +254,23 @@ fn a_killed_process_is_reported_and_its_shared_memory_removed() {
     assert_eq!(s["shared_memory"]["clean"], true, "{}", s["shared_memory"]);
     assert_processes_gone(&s);
     assert_no_files_left(s["run_id"].as_str().unwrap());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_killed_launcher_leaves_no_process_and_no_file_behind() {
+    let (launcher, dir) = start_long_run("launcher-killed");
+    let children = children_of(launcher.id());
+    assert_eq!(children.len(), 5, "{children:?}");
+    let cmdline = &children[0].2;
+    let run_id = cmdline.split_whitespace().skip_while(|a| *a != "--run-id").nth(1).expect("--run-id").to_owned();
+    unsafe { libc::kill(launcher.id() as i32, libc::SIGKILL) };
+    wait_exit(launcher);
+    let until = Instant::now() + Duration::from_secs(20);
+    while children.iter().any(|(_, pid, _)| alive(i64::from(*pid))) {
+        assert!(Instant::now() < until, "children outlived the launcher: {children:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_no_files_left(&run_id);
     std::fs::remove_dir_all(&dir).unwrap();
 }

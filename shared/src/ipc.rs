@@ -281,23 +281,30 @@ pub struct Cleanup {
 pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
     let config = run_config(run_id)?;
     let mut removed_dead_nodes = 0;
+    let mut alive_nodes = 0;
     Node::<ipc::Service>::list(&config, |state| {
-        if let NodeState::Dead(view) = state
-            && view.try_remove_stale_resources().is_ok()
-        {
-            removed_dead_nodes += 1;
+        match state {
+            NodeState::Dead(view) => {
+                if view.try_remove_stale_resources().is_ok() {
+                    removed_dead_nodes += 1;
+                }
+            }
+            NodeState::Alive(_) => alive_nodes += 1,
+            _ => {}
         }
         CallbackProgression::Continue
     })
     .map_err(|e| anyhow!("cannot list the run's iceoryx2 nodes: {e:?}"))?;
 
     let mut leftover = paths_of_run(run_id, &config);
-    // iceoryx2 keeps one registry file per prefix for good; the prefix is this run's alone and
-    // every node of the run is gone, so it goes too.
-    leftover.retain(|path| {
-        let registry = path.starts_with(SHM_DIR) && path.to_string_lossy().ends_with(".global_mgmt");
-        !(registry && std::fs::remove_file(path).is_ok())
-    });
+    // iceoryx2 keeps one registry file per prefix for good. The prefix is this run's alone, so
+    // once no node of the run is alive, it goes too.
+    if alive_nodes == 0 {
+        leftover.retain(|path| {
+            let registry = path.starts_with(SHM_DIR) && path.to_string_lossy().ends_with(".global_mgmt");
+            !(registry && std::fs::remove_file(path).is_ok())
+        });
+    }
     Ok(Cleanup { removed_dead_nodes, leftover: leftover.iter().map(|p| p.display().to_string()).collect() })
 }
 

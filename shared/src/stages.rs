@@ -56,6 +56,8 @@ pub struct Context {
 pub fn process_main(name: &str, body: fn(&Context) -> Result<ChildEvent>) -> ExitCode {
     use clap::Parser;
     let args = ProcessArgs::parse();
+    // SAFETY: getppid has no preconditions.
+    let launcher = unsafe { libc::getppid() };
     let result = (|| -> Result<()> {
         let stop = StopFlag::install()?;
         let (config, scenario) = load_resolved(Path::new(&args.launch))?;
@@ -64,6 +66,11 @@ pub fn process_main(name: &str, body: fn(&Context) -> Result<ChildEvent>) -> Exi
         let report = body(&context)?;
         emit(&report)
     })();
+    // Our node is gone now. If the launcher died (we were stopped by PR_SET_PDEATHSIG), nobody
+    // else will tidy up: the last process of the run to go removes what is left of it.
+    if unsafe { libc::getppid() } != launcher {
+        let _ = crate::ipc::clean_up_run(&args.run_id);
+    }
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
