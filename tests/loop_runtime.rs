@@ -86,7 +86,9 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     let resolved = std::fs::read_to_string(r.dir.join("launch.toml")).unwrap();
     assert!(resolved.contains("duration_s = 2.0"), "the resolved launch file has the override");
     let loops = Table::read(&r.dir.join("loops.csv"));
-    assert_eq!(loops.rows.len() as u64, published, "one row per loop");
+    // One row per loop seen (a skipped tick after the last published state has none).
+    let rows = loops.rows.len() as u64;
+    assert!(published <= rows && rows <= s["loops"].as_u64().unwrap(), "{rows} rows");
     let trajectory = r.trajectory();
     for column in ["t", "theta", "theta_dot", "wheel_speed", "meas.encoder", "meas.wheel_speed", "est.bias", "cmd.current"] {
         assert!(trajectory.columns.contains_key(column), "trajectory.csv has no {column}");

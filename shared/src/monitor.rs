@@ -130,8 +130,6 @@ pub struct MonitorReport {
     pub plant_wake_latency: Stats,
     /// Per sensor: age of the sample command k used, when command k took effect.
     pub data_age: BTreeMap<String, Stats>,
-    /// Loop records flagged as deadline misses.
-    pub late_records: u64,
     /// Trajectory rows written with some part missing.
     pub partial_rows: u64,
     pub metrics: BTreeMap<String, f64>,
@@ -159,14 +157,20 @@ struct Partial {
 }
 
 impl Partial {
-    fn complete(&self) -> bool {
-        self.state.is_some()
-            && self.measurements.is_some()
-            && self.estimate.is_some()
-            && self.command.is_some()
-            && self.record.is_some()
+    /// Whether the part from `topic` is here, by topic index (see [`TOPICS`]).
+    fn has(&self, topic: usize) -> bool {
+        match topic {
+            0 => self.state.is_some(),
+            1 => self.measurements.is_some(),
+            2 => self.estimate.is_some(),
+            3 => self.command.is_some(),
+            _ => self.record.is_some(),
+        }
     }
 }
+
+/// The topics the monitor reads, in the order data flows.
+const TOPICS: [Topic; 5] = [Topic::State, Topic::Measurements, Topic::Estimate, Topic::Command, Topic::Loop];
 
 pub fn run(context: &Context) -> Result<ChildEvent> {
     let ipc = &context.ipc;
@@ -224,7 +228,8 @@ struct Writer {
     pending: BTreeMap<u64, Partial>,
     /// The next loop to write.
     next_k: u64,
-    newest_k: u64,
+    /// Per topic (as in [`TOPICS`]), the newest loop received.
+    newest: [Option<u64>; 5],
     end_to_end: Recorder,
     hops: Vec<Recorder>,
     jitter: Recorder,
@@ -302,7 +307,7 @@ impl Writer {
             hlog,
             pending: BTreeMap::new(),
             next_k: 0,
-            newest_k: 0,
+            newest: [None; 5],
             end_to_end: Recorder::new(),
             hops: HOPS.iter().map(|_| Recorder::new()).collect(),
             jitter: Recorder::new(),
@@ -328,28 +333,31 @@ impl Writer {
             }
         }
         // Everything has arrived: write the loops still waiting for parts.
-        while let Some((&k, _)) = self.pending.first_key_value() {
-            self.next_k = self.next_k.max(k);
+        while self.newest_any().is_some_and(|newest| self.next_k <= newest) {
             self.write_next()?;
         }
         self.finish()
     }
 
+    fn newest_any(&self) -> Option<u64> {
+        self.newest.iter().flatten().copied().max()
+    }
+
     fn take(&mut self, sample: Sample) -> Result<()> {
         let (k, topic) = match &sample {
-            Sample::State(s) => (s.header.k, Topic::State),
-            Sample::Measurements(s) => (s.header.k, Topic::Measurements),
-            Sample::Estimate(s) => (s.header.k, Topic::Estimate),
-            Sample::Command(s) => (s.header.k, Topic::Command),
-            Sample::Record(s) => (s.header.k, Topic::Loop),
+            Sample::State(s) => (s.header.k, 0),
+            Sample::Measurements(s) => (s.header.k, 1),
+            Sample::Estimate(s) => (s.header.k, 2),
+            Sample::Command(s) => (s.header.k, 3),
+            Sample::Record(s) => (s.header.k, 4),
         };
-        *self.report.received.entry(topic.name().to_owned()).or_default() += 1;
+        *self.report.received.entry(TOPICS[topic].name().to_owned()).or_default() += 1;
+        self.newest[topic] = self.newest[topic].max(Some(k));
         if k < self.next_k {
-            // This loop was already written without this part (it came too late); it stays
-            // counted as received.
+            // That loop was written without this part, which came too late; it stays counted
+            // as received.
             return Ok(());
         }
-        self.newest_k = self.newest_k.max(k);
         let part = self.pending.entry(k).or_default();
         match sample {
             Sample::State(s) => part.state = Some(s),
@@ -358,13 +366,17 @@ impl Writer {
             Sample::Command(s) => part.command = Some(s),
             Sample::Record(s) => part.record = Some(s),
         }
-        // Write loops in order: complete ones at once, incomplete ones when they are too old
-        // to be completed.
-        while let Some((&k, part)) = self.pending.first_key_value() {
-            if !(part.complete() || self.newest_k >= k + JOIN_WINDOW) {
+        // Write loops in order, each once every part is either here or will never come: each
+        // topic delivers in loop order, so a newer loop on a topic means this loop's part from
+        // it was skipped or lost. A loop still open after JOIN_WINDOW newer ones goes as it is.
+        while let Some(newest) = self.newest_any() {
+            let k = self.next_k;
+            let part = self.pending.get(&k);
+            let settled = (0..TOPICS.len())
+                .all(|t| part.is_some_and(|p| p.has(t)) || self.newest[t].is_some_and(|n| n > k));
+            if k > newest || !(settled || newest >= k + JOIN_WINDOW) {
                 break;
             }
-            self.next_k = self.next_k.max(k);
             self.write_next()?;
         }
         Ok(())
@@ -403,7 +415,6 @@ impl Writer {
         }
         if let Some(record) = &part.record {
             self.report.records += 1;
-            self.report.late_records += u64::from(record.deadline_miss);
             let stamps = record.header.trace.stamps();
             let e2e = stamps[7].saturating_sub(stamps[0]);
             end_to_end = Some(e2e);

@@ -68,6 +68,7 @@ pub fn process_main(name: &str, body: fn(&Context) -> Result<ChildEvent>) -> Exi
     })();
     // Our node is gone now. If the launcher died (we were stopped by PR_SET_PDEATHSIG), nobody
     // else will tidy up: the last process of the run to go removes what is left of it.
+    // SAFETY: as above.
     if unsafe { libc::getppid() } != launcher {
         let _ = crate::ipc::clean_up_run(&args.run_id);
     }
@@ -339,13 +340,13 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
                     ticks -= 1;
                 }
                 let mut u = [0.0; MAX_INPUT];
-                for _ in 0..ticks {
+                let mut advanced = 0;
+                while advanced < ticks && p.k < loops {
                     u = p.advance();
-                    if p.k == loops {
-                        break;
-                    }
+                    advanced += 1;
                 }
-                p.counters.skipped_ticks += ticks.saturating_sub(1);
+                // Only the newest state goes out; the ticks passed over have none.
+                p.counters.skipped_ticks += advanced.saturating_sub(1);
                 if p.k < loops && (ticks > 0 || p.report.published == 0) {
                     let timing = TickTiming {
                         scheduled_ns: start_ns + p.k * period_ns,
