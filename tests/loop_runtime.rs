@@ -74,7 +74,8 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     }
     // The hops partition each loop, so their means add up to the end-to-end mean.
     assert!((hop_sum - e2e["mean"].as_f64().unwrap()).abs() < 1.0, "hops {hop_sum} vs e2e {}", e2e["mean"]);
-    assert!(s["jitter_ns"]["plant_tick"]["count"].as_u64().unwrap() > 1900);
+    // One period per published state after the first.
+    assert_eq!(s["jitter_ns"]["plant_tick"]["count"].as_u64().unwrap() + 1, s["monitor"]["received"]["state"].as_u64().unwrap());
     assert_eq!(s["shared_memory"]["clean"], true);
     assert_processes_gone(s);
     assert_no_files_left(s["run_id"].as_str().unwrap());
@@ -144,6 +145,20 @@ fn lockstep_records_loop_zero_and_every_loop_after_it() {
         .collect();
     assert!(stamps[0] > 0.0 && stamps.windows(2).all(|w| w[0] <= w[1]), "{stamps:?}");
     assert!(s["loops_per_s"].as_f64().unwrap() > 0.0);
+}
+
+/// A run so short that the plant is gone microseconds after it starts: the monitor must still
+/// have every loop, because every reader connects before the loop starts.
+#[test]
+fn very_short_runs_record_every_loop() {
+    for _ in 0..8 {
+        let r = run("very-short", &["pendulum", "--mode", "lockstep", "--duration", "0.005"]);
+        assert_eq!(r.summary["loops"], 5);
+        assert_eq!(r.summary["monitor"]["records"], 5, "{}", r.summary["monitor"]);
+        for topic in ["state", "measurements", "estimate", "command", "loop"] {
+            assert_eq!(r.summary["monitor"]["received"][topic], 5, "{topic}: {}", r.summary["monitor"]);
+        }
+    }
 }
 
 #[test]

@@ -15,7 +15,7 @@
 
 use std::fmt::Debug;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow};
@@ -23,10 +23,12 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 
 use crate::launch::Mode;
+use crate::signals::StopFlag;
 
 /// Samples the monitor can fall behind by before it loses any (real-time mode); at 1 kHz that
 /// is a second of slack.
@@ -39,6 +41,8 @@ const MAX_SUBSCRIBERS: usize = 4;
 const MAX_NODES: usize = 10;
 /// How long to keep retrying a service open while other processes are creating it.
 const OPEN_RETRY: Duration = Duration::from_secs(3);
+/// How long a reader waits at start-up for its writer to exist.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(20);
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Topic {
@@ -118,10 +122,6 @@ impl Ipc {
         Ok(Self { node, run_id: run_id.to_owned(), mode })
     }
 
-    pub fn node(&self) -> &Node<ipc::Service> {
-        &self.node
-    }
-
     fn pubsub<T: Debug + ZeroCopySend + 'static>(
         &self,
         topic: Topic,
@@ -158,17 +158,18 @@ impl Ipc {
 
     /// A publisher that, if `wake` is set, also wakes the topic's readers after each sample.
     pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic, wake: bool) -> Result<TopicPublisher<T>> {
-        let dropped = Arc::new(AtomicU64::new(0));
-        let counter = dropped.clone();
+        let counters = Arc::new(BackpressureCounters::default());
+        let handler_counters = counters.clone();
         let publisher = self
             .pubsub::<T>(topic)?
             .publisher_builder()
             .max_loaned_samples(1)
             .set_backpressure_handler(move |info: &BackpressureInfo| {
+                handler_counters.waiting.store(true, Ordering::Relaxed);
                 if info.elapsed_time < LOCKSTEP_BACKPRESSURE_LIMIT {
                     BackpressureAction::Retry
                 } else {
-                    counter.fetch_add(1, Ordering::Relaxed);
+                    handler_counters.dropped.fetch_add(1, Ordering::Relaxed);
                     BackpressureAction::DiscardData
                 }
             })
@@ -184,46 +185,60 @@ impl Ipc {
         } else {
             None
         };
-        Ok(TopicPublisher { topic, publisher, notifier, dropped })
+        Ok(TopicPublisher { topic, publisher, notifier, counters })
     }
 
     /// A reader for the next stage: a one-sample buffer (the newest wins in real-time mode)
     /// and a listener that wakes it.
     pub fn stage_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic) -> Result<TopicSubscriber<T>> {
-        let subscriber = self.subscriber_with_buffer::<T>(topic, 1)?;
-        let listener = self
-            .event(topic)?
-            .listener_builder()
-            .create()
-            .map_err(|e| anyhow!("cannot create the {} listener: {e:?}", topic.name()))?;
-        Ok(TopicSubscriber { subscriber, listener: Some(listener) })
+        let mut subscriber = self.subscriber_with_buffer::<T>(topic, 1)?;
+        subscriber.listener = Some(
+            self.event(topic)?
+                .listener_builder()
+                .create()
+                .map_err(|e| anyhow!("cannot create the {} listener: {e:?}", topic.name()))?,
+        );
+        Ok(subscriber)
     }
 
     /// A passive reader for the monitor: a deep buffer and no listener, so publishing never
     /// wakes the monitor and the monitor never slows the loop.
     pub fn passive_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic) -> Result<TopicSubscriber<T>> {
-        let subscriber = self.subscriber_with_buffer::<T>(topic, MONITOR_BUFFER)?;
-        Ok(TopicSubscriber { subscriber, listener: None })
+        self.subscriber_with_buffer::<T>(topic, MONITOR_BUFFER)
     }
 
     fn subscriber_with_buffer<T: Debug + ZeroCopySend + Copy + 'static>(
         &self,
         topic: Topic,
         buffer: usize,
-    ) -> Result<Subscriber<ipc::Service, T, ()>> {
-        self.pubsub::<T>(topic)?
+    ) -> Result<TopicSubscriber<T>> {
+        let service = self.pubsub::<T>(topic)?;
+        let subscriber = service
             .subscriber_builder()
             .buffer_size(buffer)
             .create()
-            .map_err(|e| anyhow!("cannot create the {} subscriber: {e:?}", topic.name()))
+            .map_err(|e| anyhow!("cannot create the {} subscriber: {e:?}", topic.name()))?;
+        Ok(TopicSubscriber { topic, service, subscriber, listener: None })
     }
+}
+
+/// What a publisher's back-pressure handler saw (lockstep mode only: in real-time mode readers
+/// overflow and the handler never runs).
+#[derive(Default)]
+struct BackpressureCounters {
+    /// Set when the current send found a reader full.
+    waiting: AtomicBool,
+    /// Sends that had to wait for a full reader.
+    waited: AtomicU64,
+    /// Samples dropped for a reader that stayed full past the limit.
+    dropped: AtomicU64,
 }
 
 pub struct TopicPublisher<T: Debug + ZeroCopySend + 'static> {
     topic: Topic,
     publisher: Publisher<ipc::Service, T, ()>,
     notifier: Option<Notifier<ipc::Service>>,
-    dropped: Arc<AtomicU64>,
+    counters: Arc<BackpressureCounters>,
 }
 
 impl<T: Debug + ZeroCopySend + Copy + 'static> TopicPublisher<T> {
@@ -231,24 +246,47 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicPublisher<T> {
     pub fn send(&self, value: &T) -> Result<()> {
         let sample = self.publisher.loan_uninit().with_context(|| format!("loan on {}", self.topic.name()))?;
         sample.write_payload(*value).send().with_context(|| format!("send on {}", self.topic.name()))?;
+        if self.counters.waiting.swap(false, Ordering::Relaxed) {
+            self.counters.waited.fetch_add(1, Ordering::Relaxed);
+        }
         if let Some(notifier) = &self.notifier {
             notifier.notify().with_context(|| format!("notify on {}", self.topic.name()))?;
         }
         Ok(())
     }
 
-    /// Samples dropped for a reader that stayed full past the lockstep limit.
-    pub fn dropped(&self) -> u64 {
-        self.dropped.load(Ordering::Relaxed)
+    /// Sends that waited for a full reader (lockstep), and samples dropped for one that stayed
+    /// full past the limit.
+    pub fn backpressure(&self) -> (u64, u64) {
+        (self.counters.waited.load(Ordering::Relaxed), self.counters.dropped.load(Ordering::Relaxed))
     }
 }
 
 pub struct TopicSubscriber<T: Debug + ZeroCopySend + 'static> {
+    topic: Topic,
+    service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
     subscriber: Subscriber<ipc::Service, T, ()>,
     listener: Option<Listener<ipc::Service>>,
 }
 
 impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
+    /// Waits until the topic's writer exists and connects to it. iceoryx2 connects readers
+    /// lazily; a reader that has not connected loses what a writer sent if the writer is gone
+    /// before it connects, so every process connects before it reports ready.
+    pub fn connect(&self, stop: &StopFlag) -> Result<()> {
+        let start = Instant::now();
+        while self.service.dynamic_config().number_of_publishers() == 0 {
+            if stop.requested() {
+                return Ok(());
+            }
+            if start.elapsed() > CONNECT_TIMEOUT {
+                return Err(anyhow!("no writer on {} after {} s", self.topic.name(), CONNECT_TIMEOUT.as_secs()));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        self.subscriber.update_connections().map_err(|e| anyhow!("connect to {}: {e}", self.topic.name()))
+    }
+
     /// The next queued sample, copied out of shared memory (the chunk goes back at once).
     pub fn receive(&self) -> Result<Option<T>> {
         Ok(self.subscriber.receive().context("receive")?.map(|sample| *sample))

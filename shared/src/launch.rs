@@ -206,14 +206,12 @@ impl LaunchConfig {
             .collect();
         match found.as_slice() {
             [one] => Ok(*one),
-            [] => Err(LaunchError::new(
-                &self.origins.file,
-                Some("sensors"),
+            [] => Err(self.error(
+                "sensors",
                 format!("the {} scenario needs a sensor with signal = \"{signal}\", and none has it", self.scenario),
             )),
-            many => Err(LaunchError::new(
-                &self.origins.file,
-                Some("sensors"),
+            many => Err(self.error(
+                "sensors",
                 format!(
                     "the {} scenario needs exactly one sensor with signal = \"{signal}\"; found {}",
                     self.scenario,
@@ -271,7 +269,9 @@ fn scenario_names() -> String {
 /// Resolves what the user asked to run, a scenario name or a launch-file path, with overrides,
 /// into a checked configuration and the scenario it describes.
 pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
-    let looks_like_path = target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file();
+    // A scenario's name wins over a file of that name; anything else that looks like a path is one.
+    let looks_like_path =
+        builtin(target).is_none() && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
     let (origin, document) = if looks_like_path {
         let text = std::fs::read_to_string(target)
             .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;

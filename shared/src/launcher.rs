@@ -157,7 +157,10 @@ fn run(args: RunArgs) -> ExitCode {
             print!("{}", report::render(&summary));
             match outcome {
                 Outcome::Completed if summary.shared_memory.clean => ExitCode::SUCCESS,
-                Outcome::Completed => ExitCode::FAILURE,
+                Outcome::Completed => {
+                    eprintln!("error: files of the run were left behind: {}", summary.shared_memory.leftover.join(", "));
+                    ExitCode::FAILURE
+                }
                 Outcome::Interrupted => ExitCode::from(EXIT_INTERRUPTED),
                 Outcome::Failed(why) => {
                     eprintln!("error: {why}");
@@ -226,13 +229,17 @@ fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
         None => {
             let stamp = chrono::Local::now().format("%Y%m%d-%H%M%S");
             let base = PathBuf::from("runs").join(format!("{stamp}-{scenario}"));
-            let mut dir = base.clone();
-            let mut n = 2;
-            while dir.exists() {
-                dir = PathBuf::from(format!("{}-{n}", base.display()));
-                n += 1;
+            std::fs::create_dir_all("runs").context("cannot create the runs folder")?;
+            // Claim a new folder atomically: two runs started in the same second get two.
+            let mut n = 1;
+            loop {
+                let dir = if n == 1 { base.clone() } else { PathBuf::from(format!("{}-{n}", base.display())) };
+                match std::fs::create_dir(&dir) {
+                    Ok(()) => break dir,
+                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => n += 1,
+                    Err(e) => return Err(e).with_context(|| format!("cannot create the run folder {}", dir.display())),
+                }
             }
-            dir
         }
     };
     std::fs::create_dir_all(dir.join("logs")).with_context(|| format!("cannot create the run folder {}", dir.display()))?;
@@ -336,6 +343,10 @@ impl Supervisor {
         };
         supervisor.stop_all();
         supervisor.progress.finish_and_clear();
+        let outcome = match outcome {
+            Outcome::Completed => supervisor.check_ends(),
+            other => other,
+        };
         for reader in supervisor.readers.drain(..) {
             let _ = reader.join();
         }
@@ -371,11 +382,16 @@ impl Supervisor {
                 // Its own process group: a Ctrl-C in the terminal reaches only the launcher,
                 // which then stops the loop in order.
                 .process_group(0);
-            // SAFETY: prctl is async-signal-safe. If the launcher dies, the child is asked to
-            // stop, so nothing is orphaned.
+            // SAFETY: prctl and getppid are async-signal-safe. If the launcher dies, the child
+            // is asked to stop, so nothing is orphaned; if it died before prctl took effect,
+            // the child does not start at all.
+            let launcher = std::process::id() as libc::pid_t;
             unsafe {
-                command.pre_exec(|| {
+                command.pre_exec(move || {
                     libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                    if libc::getppid() != launcher {
+                        return Err(std::io::Error::other("the launcher is gone"));
+                    }
                     Ok(())
                 });
             }
@@ -393,10 +409,6 @@ impl Supervisor {
             self.children.push(Child { name, pid: child.id(), stdin: child.stdin.take(), exit: None, cpu_s: 0.0 });
         }
         Ok(())
-    }
-
-    fn index(&self, name: &str) -> usize {
-        self.children.iter().position(|c| c.name == name).expect("every process is started")
     }
 
     /// Files an event; returns the index of a child whose output ended.
@@ -458,7 +470,7 @@ impl Supervisor {
                 Err(_) => {}
             }
         }
-        let plant = self.index("plant");
+        let plant = self.children.iter().position(|c| c.name == "plant").expect("every process was started");
         let started = self.children[plant].stdin.as_mut().map(|s| s.write_all(b"start\n").and_then(|_| s.flush()));
         if !matches!(started, Some(Ok(()))) {
             return Outcome::Failed("cannot tell the plant to start".into());
@@ -486,11 +498,30 @@ impl Supervisor {
         }
     }
 
+    /// After a run whose plant finished: every other process must have ended cleanly too, and
+    /// the monitor must have reported.
+    fn check_ends(&self) -> Outcome {
+        let failed: Vec<String> = self
+            .children
+            .iter()
+            .filter(|c| !c.exit.as_ref().is_some_and(|(_, ok)| *ok))
+            .map(|c| format!("{} exited with status {}", c.name, c.exit.as_ref().map_or("unknown", |(s, _)| s.as_str())))
+            .collect();
+        if !failed.is_empty() {
+            Outcome::Failed(format!("{}; see the logs folder", failed.join(", ")))
+        } else if self.reports.monitor.is_none() {
+            Outcome::Failed("the monitor sent no report".into())
+        } else {
+            Outcome::Completed
+        }
+    }
+
     /// Stops every process still running, in order, each with SIGTERM and then, past its
     /// timeout, SIGKILL; collects their reports on the way.
     fn stop_all(&mut self) {
         for name in STOP_ORDER {
-            let index = self.index(name);
+            // A start-up failure can leave some processes never started.
+            let Some(index) = self.children.iter().position(|c| c.name == name) else { continue };
             if self.children[index].try_reap() {
                 continue;
             }
@@ -511,8 +542,8 @@ impl Supervisor {
                 }
             }
         }
-        // Reports still in the pipes of processes that have exited.
-        while let Ok(event) = self.events.recv_timeout(Duration::from_millis(200)) {
+        // Every process has exited: read what is left in their pipes, until every reader is done.
+        while let Ok(event) = self.events.recv_timeout(Duration::from_secs(5)) {
             self.handle(event);
         }
     }
@@ -584,6 +615,8 @@ impl Supervisor {
                 missing,
                 received: monitor.received.clone(),
                 partial_rows: monitor.partial_rows,
+                loop_waits: plant.waited + self.reports.stages.values().map(|r| r.waited).sum::<u64>(),
+                dropped_for_monitor: plant.dropped + self.reports.stages.values().map(|r| r.dropped).sum::<u64>(),
             },
             metrics: monitor.metrics.clone(),
             shared_memory: SharedMemoryCheck {

@@ -156,16 +156,34 @@ struct Partial {
     record: Option<LoopRecord>,
 }
 
-impl Partial {
-    /// Whether the part from `topic` is here, by topic index (see [`TOPICS`]).
-    fn has(&self, topic: usize) -> bool {
-        match topic {
-            0 => self.state.is_some(),
-            1 => self.measurements.is_some(),
-            2 => self.estimate.is_some(),
-            3 => self.command.is_some(),
-            _ => self.record.is_some(),
+impl Sample {
+    /// The loop it belongs to, and its topic's index in [`TOPICS`].
+    fn key(&self) -> (u64, usize) {
+        match self {
+            Sample::State(s) => (s.header.k, 0),
+            Sample::Measurements(s) => (s.header.k, 1),
+            Sample::Estimate(s) => (s.header.k, 2),
+            Sample::Command(s) => (s.header.k, 3),
+            Sample::Record(s) => (s.header.k, 4),
         }
+    }
+}
+
+impl Partial {
+    fn put(&mut self, sample: Sample) {
+        match sample {
+            Sample::State(s) => self.state = Some(s),
+            Sample::Measurements(s) => self.measurements = Some(s),
+            Sample::Estimate(s) => self.estimate = Some(s),
+            Sample::Command(s) => self.command = Some(s),
+            Sample::Record(s) => self.record = Some(s),
+        }
+    }
+
+    /// Whether the part from topic index `topic` is here.
+    fn has(&self, topic: usize) -> bool {
+        [self.state.is_some(), self.measurements.is_some(), self.estimate.is_some(), self.command.is_some(), self.record.is_some()]
+            [topic]
     }
 }
 
@@ -179,6 +197,11 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     let estimates: TopicSubscriber<Estimate> = ipc.passive_subscriber(Topic::Estimate)?;
     let commands: TopicSubscriber<Command> = ipc.passive_subscriber(Topic::Command)?;
     let records: TopicSubscriber<LoopRecord> = ipc.passive_subscriber(Topic::Loop)?;
+    states.connect(&context.stop)?;
+    measurements.connect(&context.stop)?;
+    estimates.connect(&context.stop)?;
+    commands.connect(&context.stop)?;
+    records.connect(&context.stop)?;
     let writer = Writer::new(context)?;
     emit(&ChildEvent::Ready)?;
 
@@ -238,6 +261,8 @@ struct Writer {
     /// Start of the current interval-log interval (CLOCK_MONOTONIC), and of the run.
     interval_start: Option<u64>,
     first_publish: Option<u64>,
+    /// Whether `latency.hlog` has its header yet.
+    hlog_started: bool,
     last_counters: PlantCounters,
     report: MonitorReport,
     last_status: Instant,
@@ -278,16 +303,7 @@ impl Writer {
         );
         writeln!(loops, "{}", columns.join(","))?;
 
-        let mut hlog = create(dir, "latency.hlog")?;
-        let mut serializer = V2DeflateSerializer::new();
-        IntervalLogWriterBuilder::new()
-            .add_comment(&format!("LoopLab latency per hop and end to end, ns; scenario {}", config.scenario))
-            .add_comment("Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time")
-            .with_start_time(SystemTime::now())
-            .with_base_time(SystemTime::now())
-            .with_max_value_divisor(1000.0)
-            .begin_log_with(&mut hlog, &mut serializer)?;
-        writeln!(hlog, "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\"")?;
+        let hlog = create(dir, "latency.hlog")?;
 
         Ok(Self {
             mode: config.mode,
@@ -314,6 +330,7 @@ impl Writer {
             wake: Recorder::new(),
             interval_start: None,
             first_publish: None,
+            hlog_started: false,
             last_counters: PlantCounters::default(),
             report: MonitorReport::default(),
             last_status: Instant::now(),
@@ -344,28 +361,18 @@ impl Writer {
     }
 
     fn take(&mut self, sample: Sample) -> Result<()> {
-        let (k, topic) = match &sample {
-            Sample::State(s) => (s.header.k, 0),
-            Sample::Measurements(s) => (s.header.k, 1),
-            Sample::Estimate(s) => (s.header.k, 2),
-            Sample::Command(s) => (s.header.k, 3),
-            Sample::Record(s) => (s.header.k, 4),
-        };
+        let (k, topic) = sample.key();
         *self.report.received.entry(TOPICS[topic].name().to_owned()).or_default() += 1;
+        if TOPICS[topic] == Topic::Loop {
+            self.report.records += 1;
+        }
         self.newest[topic] = self.newest[topic].max(Some(k));
         if k < self.next_k {
             // That loop was written without this part, which came too late; it stays counted
             // as received.
             return Ok(());
         }
-        let part = self.pending.entry(k).or_default();
-        match sample {
-            Sample::State(s) => part.state = Some(s),
-            Sample::Measurements(s) => part.measurements = Some(s),
-            Sample::Estimate(s) => part.estimate = Some(s),
-            Sample::Command(s) => part.command = Some(s),
-            Sample::Record(s) => part.record = Some(s),
-        }
+        self.pending.entry(k).or_default().put(sample);
         // Write loops in order, each once every part is either here or will never come: each
         // topic delivers in loop order, so a newer loop on a topic means this loop's part from
         // it was skipped or lost. A loop still open after JOIN_WINDOW newer ones goes as it is.
@@ -414,7 +421,6 @@ impl Writer {
             }
         }
         if let Some(record) = &part.record {
-            self.report.records += 1;
             let stamps = record.header.trace.stamps();
             let e2e = stamps[7].saturating_sub(stamps[0]);
             end_to_end = Some(e2e);
@@ -504,6 +510,18 @@ impl Writer {
 
     fn flush_interval(&mut self, first: u64, start: u64, end: u64) -> Result<()> {
         let mut serializer = V2DeflateSerializer::new();
+        if !self.hlog_started {
+            // Timestamps count from the first state the plant published.
+            let first_wall = SystemTime::now() - Duration::from_nanos(now_ns().saturating_sub(first));
+            IntervalLogWriterBuilder::new()
+                .add_comment("LoopLab latency per hop and end to end, in ns")
+                .add_comment("Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time")
+                .with_start_time(first_wall)
+                .with_base_time(first_wall)
+                .begin_log_with(&mut self.hlog, &mut serializer)?;
+            writeln!(self.hlog, "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\"")?;
+            self.hlog_started = true;
+        }
         let mut log = IntervalLogWriterBuilder::new().begin_log_with(&mut self.hlog, &mut serializer)?;
         let offset = Duration::from_nanos(start - first);
         let length = Duration::from_nanos(end.saturating_sub(start).max(1));

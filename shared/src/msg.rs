@@ -95,7 +95,7 @@ pub struct TickTiming {
 #[type_name("looplab::PlantCounters")]
 #[repr(C)]
 pub struct PlantCounters {
-    /// Loops whose command had not arrived when the next tick began (real-time mode).
+    /// Loops whose command had not reached the plant when tick k+1 was due (real-time mode).
     pub deadline_misses: u64,
     /// Commands rejected as non-finite or out of range (the last valid one is held).
     pub rejected_commands: u64,
@@ -166,7 +166,8 @@ pub struct Command {
 #[repr(C)]
 pub struct LoopRecord {
     pub header: Header,
-    /// 1 if the command arrived after tick k+1 began (real-time mode).
+    /// 1 if the command reached the plant after tick k+1 was due (real-time mode); it then
+    /// takes effect one period later, if it is still the newest.
     pub deadline_miss: u32,
     /// 1 if the plant rejected the command (non-finite or out of range).
     pub rejected: u32,

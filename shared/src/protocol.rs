@@ -6,7 +6,6 @@
 //!   sample is sent before every reader, the monitor included, is connected.
 //! - Everything for humans goes to stderr, which the launcher saves in the run folder.
 
-use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -65,19 +64,22 @@ pub struct PlantReport {
     pub last_publish_ns: u64,
     /// The run was stopped (signal) before all its loops ran.
     pub stopped_early: bool,
+    /// Samples that waited for a full reader, and samples dropped for one (lockstep).
+    pub waited: u64,
+    pub dropped: u64,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct StageReport {
     /// Inputs handled.
     pub processed: u64,
-    /// Loops never seen because a newer input replaced them (real-time mode).
+    /// Loops this stage never saw (real-time mode): a newer input replaced them, or the plant
+    /// skipped the tick.
     pub skipped: u64,
-    /// Outputs dropped for a reader that stayed full (lockstep back-pressure limit).
+    /// Outputs that waited for a full reader (lockstep back-pressure).
+    pub waited: u64,
+    /// Outputs dropped for a reader that stayed full past the lockstep limit.
     pub dropped: u64,
-    /// Extra per-stage numbers.
-    #[serde(default)]
-    pub extra: BTreeMap<String, f64>,
 }
 
 /// Writes one event line on stdout for the launcher.

@@ -20,7 +20,7 @@ pub struct Summary {
     pub run_dir: String,
     /// Wall-clock start of the run (UTC, RFC 3339).
     pub started_at: String,
-    /// Loops that ran: states the plant published.
+    /// Loops (ticks) that ran: states published plus skipped ticks.
     pub loops: u64,
     pub loops_planned: u64,
     /// Every planned loop ran and every process ended cleanly.
@@ -55,8 +55,8 @@ pub struct ProcessInfo {
     pub exit: String,
     /// User + system CPU time, seconds.
     pub cpu_s: f64,
-    /// Sensors, estimator, controller: inputs handled, and loops never seen because a newer
-    /// input replaced them (real-time mode).
+    /// Sensors, estimator, controller: inputs handled, and loops never seen (real-time mode: a
+    /// newer input replaced them, or the plant skipped the tick).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub processed: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -90,6 +90,11 @@ pub struct MonitorCounts {
     pub received: BTreeMap<String, u64>,
     /// Trajectory rows with some part missing.
     pub partial_rows: u64,
+    /// Lockstep only: samples a stage had to hold back because the monitor's buffer was full
+    /// (lockstep keeps every record, so a slow monitor holds the loop instead of losing them),
+    /// and samples dropped for it after the 5 s limit.
+    pub loop_waits: u64,
+    pub dropped_for_monitor: u64,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]

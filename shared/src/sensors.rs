@@ -2,7 +2,8 @@
 //!
 //! Each sensor samples the truth at its own instants (every `period_s`, a whole number of loop
 //! ticks, from tick 0), adds its bias and Gaussian noise, quantises, and delivers the value
-//! `delay_ticks` later. Between deliveries it holds the last value (zero-order hold). Every
+//! `delay_ticks` later. (In real-time mode the sensors process can miss a tick; a sensor whose
+//! instant fell on it samples at the next tick it sees, with that tick's time as sample time.) Between deliveries it holds the last value (zero-order hold). Every
 //! tick, every sensor's held value is published with its sample time, sequence number and a
 //! fresh flag. Noise comes from one ChaCha8 generator per sensor, seeded from the run's seed
 //! and the sensor's name, so a run is reproducible and adding a sensor does not change the
@@ -28,6 +29,8 @@ struct EmulatedSensor {
     rng: ChaCha8Rng,
     /// Samples taken but not yet delivered: (delivery tick, value, sample time).
     in_flight: VecDeque<(u64, [f64; MAX_SENSOR_DIM], f64)>,
+    /// The first tick at or after which the next sample is due.
+    next_sample: u64,
     held: SensorReading,
     delivered: u64,
 }
@@ -59,6 +62,7 @@ impl SensorEmulator {
                     quantum: spec.quantum,
                     rng: ChaCha8Rng::seed_from_u64(config.seed ^ fnv1a(name)),
                     in_flight: VecDeque::new(),
+                    next_sample: 0,
                     held: SensorReading::default(),
                     delivered: 0,
                 }
@@ -71,7 +75,8 @@ impl SensorEmulator {
     /// held reading into `out`.
     pub fn tick(&mut self, k: u64, t: f64, x: &[f64], out: &mut [SensorReading]) {
         for (sensor, out) in self.sensors.iter_mut().zip(out.iter_mut()) {
-            if k.is_multiple_of(sensor.period_ticks) {
+            if k >= sensor.next_sample {
+                sensor.next_sample = (k / sensor.period_ticks + 1) * sensor.period_ticks;
                 let mut value = [0.0; MAX_SENSOR_DIM];
                 (sensor.read)(x, &mut value[..sensor.dim]);
                 for ((v, bias), std) in value.iter_mut().zip(&sensor.bias).zip(&sensor.noise_std) {
@@ -157,6 +162,24 @@ mod tests {
             }
             let sampled_at = (k - 3) / 10 * 10;
             assert_eq!(speed.fresh, u32::from((k - 3) % 10 == 0), "tick {k}");
+            assert_eq!(speed.value[0], truth(sampled_at)[2], "tick {k}");
+            assert_eq!(speed.sample_time, sampled_at as f64 * 1e-3);
+        }
+    }
+
+    #[test]
+    fn a_sample_instant_the_process_never_saw_is_taken_at_the_next_tick() {
+        let (mut emu, _) = emulator(&["sensors.wheel_speed.noise_std=0.0"]);
+        let mut out = [SensorReading::default(); 2];
+        for k in (0..30).filter(|k| *k != 10) {
+            emu.tick(k, k as f64 * 1e-3, &truth(k), &mut out);
+            let speed = out[1];
+            let sampled_at = match k {
+                0..10 => 0,
+                11..20 => 11,
+                _ => 20,
+            };
+            assert_eq!(speed.fresh, u32::from(k == sampled_at), "tick {k}");
             assert_eq!(speed.value[0], truth(sampled_at)[2], "tick {k}");
             assert_eq!(speed.sample_time, sampled_at as f64 * 1e-3);
         }

@@ -1,6 +1,7 @@
 //! The loop processes: plant, sensors, estimator and controller. Each binary in `services/` is
 //! one call into here; the monitor is in `crate::monitor`.
 
+use std::collections::VecDeque;
 use std::fmt::Debug;
 use std::path::Path;
 use std::process::ExitCode;
@@ -20,8 +21,6 @@ use crate::signals::StopFlag;
 
 /// Longest a wait blocks before it looks at the stop flag again (a signal also ends it early).
 const WAIT_SLICE: Duration = Duration::from_millis(100);
-/// Real-time mode: the first tick is this far after `start`, so the timer is armed in time.
-const FIRST_TICK_DELAY_NS: u64 = 1_000_000;
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.
 const LATE_COMMAND_GRACE: Duration = Duration::from_millis(50);
@@ -130,6 +129,7 @@ fn relay<In: Message, Out: Message>(
     let _wake = ws
         .attach_notification(subscriber.listener().expect("stage subscribers have a listener"))
         .map_err(|e| anyhow!("cannot attach the {} listener: {e:?}", input.name()))?;
+    subscriber.connect(&context.stop)?;
     emit(&ChildEvent::Ready)?;
 
     let mut report = StageReport::default();
@@ -154,7 +154,7 @@ fn relay<In: Message, Out: Message>(
             last_k = Some(k);
         }
     }
-    report.dropped = publisher.dropped();
+    (report.waited, report.dropped) = publisher.backpressure();
     Ok(ChildEvent::StageReport(report))
 }
 
@@ -184,28 +184,36 @@ pub fn controller(context: &Context) -> Result<ChildEvent> {
     })
 }
 
-/// The plant's state between ticks: the truth, the held command, and the counters.
+/// The plant's state between ticks: the truth, the commands, and the counters.
 struct PlantLoop {
     plant: Box<dyn crate::scenarios::Plant>,
     limits: Vec<(f64, f64)>,
     dt: f64,
-    /// The last valid command, held (zero-order hold) until a newer one arrives.
+    /// Real-time mode: when tick 0 was and the period (ns); tick j is due at start + j·period.
+    /// None in lockstep mode, where every command is in time by construction.
+    schedule: Option<(u64, u64)>,
+    /// The command in effect (zero-order hold): the last valid one that has taken effect.
     held: [f64; MAX_INPUT],
-    /// The loop index of the held command (None: none yet; the input is zero).
-    held_k: Option<u64>,
-    /// The newest loop whose command arrived, valid or not.
-    received_k: Option<u64>,
+    /// Valid commands that arrived but have not taken effect yet: (arrival, command).
+    queued: VecDeque<(u64, [f64; MAX_INPUT])>,
+    /// The newest loop whose command arrived in time (valid or not).
+    in_time_k: Option<u64>,
     /// The newest tick whose state was published.
     published_k: Option<u64>,
     state_out: TopicPublisher<PlantState>,
     loop_out: TopicPublisher<LoopRecord>,
     counters: PlantCounters,
     report: PlantReport,
-    /// The tick whose state was published last.
+    /// The current tick: the plant's state is at t = k·dt.
     k: u64,
 }
 
 impl PlantLoop {
+    /// When tick `tick` is due (real-time mode).
+    fn due(&self, tick: u64) -> Option<u64> {
+        self.schedule.map(|(start, period)| start + tick * period)
+    }
+
     fn publish_state(&mut self, timing: TickTiming, u_applied: [f64; MAX_INPUT]) -> Result<()> {
         let mut msg = PlantState {
             header: Header { k: self.k, t: self.k as f64 * self.dt, trace: LoopTrace::default() },
@@ -227,43 +235,48 @@ impl PlantLoop {
         Ok(())
     }
 
-    /// Takes one command: stamps its arrival, keeps it if valid, publishes the loop record.
+    /// Takes one command: stamps its arrival, queues it if valid, publishes the loop record.
+    /// The command of loop k is in time if it arrives before tick k+1 is due.
     fn accept(&mut self, command: &Command) -> Result<()> {
         let arrived = now_ns();
         let k = command.header.k;
         let m = self.limits.len();
         let valid = command.u[..m].iter().zip(&self.limits).all(|(u, (lo, hi))| u.is_finite() && lo <= u && u <= hi);
+        let in_time = self.due(k + 1).is_none_or(|due| arrived <= due);
         if valid {
-            if self.held_k.is_none_or(|held| k > held) {
-                self.held = command.u;
-                self.held_k = Some(k);
-            }
+            self.queued.push_back((arrived, command.u));
         } else {
             self.counters.rejected_commands += 1;
         }
+        if in_time {
+            self.in_time_k = self.in_time_k.max(Some(k));
+        }
         self.report.commands += 1;
-        self.received_k = self.received_k.max(Some(k));
-        let mut record = LoopRecord {
-            header: command.header,
-            // The command for loop k is due before tick k+1, and tick self.k has begun.
-            deadline_miss: u32::from(k < self.k),
-            rejected: u32::from(!valid),
-        };
+        let mut record =
+            LoopRecord { header: command.header, deadline_miss: u32::from(!in_time), rejected: u32::from(!valid) };
         record.header.trace.plant_receive = arrived;
         self.loop_out.send(&record)
     }
 
-    /// Integrates one period from tick `self.k` with the held command. If tick k's state went
-    /// out and command k is not in, loop k missed its deadline.
+    /// Integrates one period, tick k → k+1, with the newest valid command that had arrived
+    /// when tick k+1 was due (zero-order hold). If tick k's state went out and command k was
+    /// not in by then, loop k missed its deadline.
     fn advance(&mut self) -> [f64; MAX_INPUT] {
-        if self.published_k == Some(self.k) && self.received_k.is_none_or(|r| r < self.k) {
+        let due = self.due(self.k + 1);
+        while let Some(&(arrived, u)) = self.queued.front() {
+            if due.is_some_and(|due| arrived > due) {
+                break;
+            }
+            self.held = u;
+            self.queued.pop_front();
+        }
+        if self.published_k == Some(self.k) && self.in_time_k.is_none_or(|k| k < self.k) {
             self.counters.deadline_misses += 1;
         }
         let m = self.limits.len();
-        let u = self.held;
-        self.plant.step(&u[..m], self.dt);
+        self.plant.step(&self.held[..m], self.dt);
         self.k += 1;
-        u
+        self.held
     }
 
     fn drain(&mut self, commands: &TopicSubscriber<Command>) -> Result<()> {
@@ -281,9 +294,10 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
         plant: context.scenario.plant(),
         limits: context.scenario.input_limits(),
         dt: context.config.dt(),
+        schedule: None,
         held: [0.0; MAX_INPUT],
-        held_k: None,
-        received_k: None,
+        queued: VecDeque::new(),
+        in_time_k: None,
         published_k: None,
         state_out: context.ipc.publisher(Topic::State, true)?,
         loop_out: context.ipc.publisher(Topic::Loop, false)?,
@@ -295,6 +309,7 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
     let _wake = ws
         .attach_notification(commands.listener().expect("stage subscribers have a listener"))
         .map_err(|e| anyhow!("cannot attach the command listener: {e:?}"))?;
+    commands.connect(&context.stop)?;
     emit(&ChildEvent::Ready)?;
     if !wait_for_start(&context.stop)? {
         p.report.stopped_early = true;
@@ -304,13 +319,13 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
     let loops = context.config.loops();
     match context.config.mode {
         Mode::Lockstep => {
-            p.publish_state(TickTiming::default(), [0.0; MAX_INPUT])?;
+            p.publish_state(TickTiming::default(), p.held)?;
             while p.k < loops && !context.stop.requested() {
                 wait(&ws)?;
                 p.drain(&commands)?;
                 // Tick k → k+1 only once command k is in (if it was rejected, the last valid
                 // one is held).
-                if p.received_k == Some(p.k) {
+                if p.in_time_k == Some(p.k) {
                     let u = p.advance();
                     if p.k < loops {
                         p.publish_state(TickTiming::default(), u)?;
@@ -319,41 +334,37 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
             }
         }
         Mode::Realtime => {
+            // Tick 0 is now; the timer's first expiry is tick 1.
             let period_ns = (p.dt * 1e9).round() as u64;
-            let start_ns = now_ns() + FIRST_TICK_DELAY_NS;
-            let timer = TickTimer::new(start_ns, period_ns)?;
+            let start_ns = now_ns();
+            p.schedule = Some((start_ns, period_ns));
+            let timer = TickTimer::new(start_ns + period_ns, period_ns)?;
             let _tick = ws.attach_notification(&timer).map_err(|e| anyhow!("cannot attach the tick timer: {e:?}"))?;
-            let mut previous_wake: Option<u64> = None;
-            let mut started = false;
+            let mut previous_wake = start_ns;
+            p.publish_state(TickTiming { scheduled_ns: start_ns, wake_ns: start_ns, period_ns: 0 }, p.held)?;
             while p.k < loops && !context.stop.requested() {
                 wait(&ws)?;
+                let woke = now_ns();
                 p.drain(&commands)?;
                 let expired = timer.expirations();
-                if expired == 0 {
-                    continue;
-                }
-                let wake_ns = now_ns();
-                // The first expiry is tick 0; each further one moves the plant one period.
-                let mut ticks = expired;
-                if !started {
-                    started = true;
-                    ticks -= 1;
-                }
-                let mut u = [0.0; MAX_INPUT];
+                let mut u = p.held;
                 let mut advanced = 0;
-                while advanced < ticks && p.k < loops {
+                while advanced < expired && p.k < loops {
                     u = p.advance();
                     advanced += 1;
                 }
+                if advanced == 0 {
+                    continue;
+                }
                 // Only the newest state goes out; the ticks passed over have none.
-                p.counters.skipped_ticks += advanced.saturating_sub(1);
-                if p.k < loops && (ticks > 0 || p.report.published == 0) {
+                p.counters.skipped_ticks += advanced - 1;
+                if p.k < loops {
                     let timing = TickTiming {
                         scheduled_ns: start_ns + p.k * period_ns,
-                        wake_ns,
-                        period_ns: previous_wake.map_or(0, |prev| wake_ns - prev),
+                        wake_ns: woke,
+                        period_ns: woke - previous_wake,
                     };
-                    previous_wake = Some(wake_ns);
+                    previous_wake = woke;
                     p.publish_state(timing, u)?;
                 }
             }
@@ -370,5 +381,8 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
     p.report.rejected_commands = p.counters.rejected_commands;
     p.report.skipped_ticks = p.counters.skipped_ticks;
     p.report.loops = p.report.published + p.report.skipped_ticks;
+    let (state_waited, state_dropped) = p.state_out.backpressure();
+    let (loop_waited, loop_dropped) = p.loop_out.backpressure();
+    (p.report.waited, p.report.dropped) = (state_waited + loop_waited, state_dropped + loop_dropped);
     Ok(ChildEvent::PlantReport(p.report))
 }

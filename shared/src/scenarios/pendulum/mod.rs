@@ -217,6 +217,7 @@ impl Scenario for Pendulum {
     fn metrics(&self) -> Box<dyn Metrics> {
         Box::new(PendulumMetrics {
             bias_true: self.bias_true,
+            current_limit: self.model.current_limit_a,
             observer: self.estimator.kind == Kind::BiasObserver,
             dt: self.dt,
             ..Default::default()
@@ -231,9 +232,11 @@ const FINAL_WINDOW_S: f64 = 1.0;
 #[derive(Default)]
 struct PendulumMetrics {
     bias_true: f64,
+    current_limit: f64,
+    /// Loops whose command was at the current limit.
+    saturated: u64,
     observer: bool,
     dt: f64,
-    rows: u64,
     last: Option<(f64, f64, f64, f64)>,
     theta_max_abs: f64,
     /// Last time the bias estimate was outside the 2% band (None: never).
@@ -245,7 +248,9 @@ struct PendulumMetrics {
 impl Metrics for PendulumMetrics {
     fn observe(&mut self, row: &Row) {
         let (theta, wheel_speed, bias_estimate) = (row.state[0], row.state[2], row.estimate[3]);
-        self.rows += 1;
+        if row.command[0].abs() >= self.current_limit {
+            self.saturated += 1;
+        }
         self.last = Some((row.t, theta, wheel_speed, bias_estimate));
         self.theta_max_abs = self.theta_max_abs.max(theta.abs());
         if (bias_estimate - self.bias_true).abs() >= 0.02 * self.bias_true.abs() {
@@ -268,6 +273,7 @@ impl Metrics for PendulumMetrics {
         let n = self.recent.len() as f64;
         m.insert("theta_mean_last_1s_rad".into(), self.recent.iter().map(|r| r.1).sum::<f64>() / n);
         m.insert("wheel_speed_mean_last_1s_rad_s".into(), self.recent.iter().map(|r| r.2).sum::<f64>() / n);
+        m.insert("current_at_limit_s".into(), self.saturated as f64 * self.dt);
         m.insert("bias_true_rad".into(), self.bias_true);
         m.insert("bias_estimate_final_rad".into(), bias_estimate);
         // Settled means inside the band from some time on; a run that ends outside it (or a
