@@ -46,13 +46,25 @@ fn rejects(args: &[&str], expected: &[&str]) {
 #[test]
 fn bad_input_is_one_clear_error_with_exit_code_2() {
     rejects(&["pendulm"], &["unknown scenario \"pendulm\"", "allowed: pendulum"]);
-    rejects(&["pendulum", "--set", "sensors.encoder.biass=1"], &["key `sensors.encoder.biass`", "unknown field", "`bias`"]);
-    rejects(&["pendulum", "--set", "sensors.gyro.period_s=0.01"], &["--set sensors.gyro.period_s=0.01", "key `sensors.gyro`", "missing field `signal`"]);
+    rejects(
+        &["pendulum", "--set", "sensors.encoder.biass=1"],
+        &["key `sensors.encoder.biass`", "unknown field", "`bias`"],
+    );
+    rejects(
+        &["pendulum", "--set", "sensors.gyro.period_s=0.01"],
+        &["--set sensors.gyro.period_s=0.01", "key `sensors.gyro`", "missing field `signal`"],
+    );
     rejects(&["pendulum", "--set", "estimator.kind=kalman"], &["key `estimator.kind`", "bias-observer", "no-bias"]);
     rejects(&["pendulum", "--rate", "0"], &["key `rate_hz`", "positive"]);
     rejects(&["pendulum", "--set", "rate_hz=-1000"], &["key `rate_hz`"]);
-    rejects(&["pendulum", "--set", "sensors.wheel_speed.period_s=0.0025"], &["key `sensors.wheel_speed.period_s`", "multiple of the loop period"]);
-    rejects(&["pendulum", "--set", "sensors.encoder.signal=height"], &["key `sensors.encoder.signal`", "theta, wheel_speed"]);
+    rejects(
+        &["pendulum", "--set", "sensors.wheel_speed.period_s=0.0025"],
+        &["key `sensors.wheel_speed.period_s`", "multiple of the loop period"],
+    );
+    rejects(
+        &["pendulum", "--set", "sensors.encoder.signal=height"],
+        &["key `sensors.encoder.signal`", "theta, wheel_speed"],
+    );
     rejects(&["pendulum", "--set", "controller.gains=[1, 2]"], &["key `controller.gains`"]);
     rejects(&["pendulum", "--set", "novalue"], &["expected KEY=VALUE"]);
 }
@@ -94,7 +106,10 @@ fn a_missing_binary_is_named() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("missing binary") && stderr.contains(&dir.join("monitor").display().to_string()), "{stderr}");
+    assert!(
+        stderr.contains("missing binary") && stderr.contains(&dir.join("monitor").display().to_string()),
+        "{stderr}"
+    );
     assert!(!out_dir.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }

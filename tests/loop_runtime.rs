@@ -37,7 +37,8 @@ fn assert_processes_gone(summary: &serde_json::Value) {
 fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     let r = run("realtime", &["pendulum", "--duration", "2"]);
     let s = &r.summary;
-    for key in ["scenario", "mode", "rate_hz", "duration_s", "seed", "loops", "deadline_misses", "processes", "metrics"] {
+    for key in ["scenario", "mode", "rate_hz", "duration_s", "seed", "loops", "deadline_misses", "processes", "metrics"]
+    {
         assert!(s.get(key).is_some(), "summary.json has no {key}");
     }
     assert_eq!(s["scenario"], "pendulum");
@@ -45,7 +46,8 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     assert_eq!(s["rate_hz"], 1000.0);
     assert_eq!(s["loops"], 2000);
     assert_eq!(s["completed"], true);
-    let names: Vec<_> = s["processes"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap().to_owned()).collect();
+    let names: Vec<_> =
+        s["processes"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap().to_owned()).collect();
     for name in ["plant", "sensors", "estimator", "controller", "monitor"] {
         assert!(names.iter().any(|n| n == name), "no process {name} in {names:?}");
     }
@@ -64,7 +66,12 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
         assert!(s["jitter_ns"]["plant_tick"].get(field).is_some(), "plant_tick jitter has no {field}");
     }
     assert_eq!(e2e["count"], records);
-    let (min, p50, p99, max) = (e2e["min"].as_u64().unwrap(), e2e["p50"].as_u64().unwrap(), e2e["p99"].as_u64().unwrap(), e2e["max"].as_u64().unwrap());
+    let (min, p50, p99, max) = (
+        e2e["min"].as_u64().unwrap(),
+        e2e["p50"].as_u64().unwrap(),
+        e2e["p99"].as_u64().unwrap(),
+        e2e["max"].as_u64().unwrap(),
+    );
     assert!(0 < min && min <= p50 && p50 <= p99 && p99 <= max, "{e2e}");
     let mut hop_sum = 0.0;
     for hop in HOPS {
@@ -75,7 +82,10 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     // The hops partition each loop, so their means add up to the end-to-end mean.
     assert!((hop_sum - e2e["mean"].as_f64().unwrap()).abs() < 1.0, "hops {hop_sum} vs e2e {}", e2e["mean"]);
     // One period per published state after the first.
-    assert_eq!(s["jitter_ns"]["plant_tick"]["count"].as_u64().unwrap() + 1, s["monitor"]["received"]["state"].as_u64().unwrap());
+    assert_eq!(
+        s["jitter_ns"]["plant_tick"]["count"].as_u64().unwrap() + 1,
+        s["monitor"]["received"]["state"].as_u64().unwrap()
+    );
     assert_eq!(s["shared_memory"]["clean"], true);
     assert_processes_gone(s);
     assert_no_files_left(s["run_id"].as_str().unwrap());
@@ -91,7 +101,9 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     let rows = loops.rows.len() as u64;
     assert!(published <= rows && rows <= s["loops"].as_u64().unwrap(), "{rows} rows");
     let trajectory = r.trajectory();
-    for column in ["t", "theta", "theta_dot", "wheel_speed", "meas.encoder", "meas.wheel_speed", "est.bias", "cmd.current"] {
+    for column in
+        ["t", "theta", "theta_dot", "wheel_speed", "meas.encoder", "meas.wheel_speed", "est.bias", "cmd.current"]
+    {
         assert!(trajectory.columns.contains_key(column), "trajectory.csv has no {column}");
     }
 
@@ -139,10 +151,19 @@ fn lockstep_records_loop_zero_and_every_loop_after_it() {
     let loops = Table::read(&r.dir.join("loops.csv"));
     assert_eq!(loops.col("k")[0], 0.0);
     // Loop 0 has every stamp, in the order the data passed.
-    let stamps: Vec<f64> = ["plant_publish_ns", "sensors_receive_ns", "sensors_publish_ns", "estimator_receive_ns", "estimator_publish_ns", "controller_receive_ns", "controller_publish_ns", "plant_receive_ns"]
-        .iter()
-        .map(|c| loops.col(c)[0])
-        .collect();
+    let stamps: Vec<f64> = [
+        "plant_publish_ns",
+        "sensors_receive_ns",
+        "sensors_publish_ns",
+        "estimator_receive_ns",
+        "estimator_publish_ns",
+        "controller_receive_ns",
+        "controller_publish_ns",
+        "plant_receive_ns",
+    ]
+    .iter()
+    .map(|c| loops.col(c)[0])
+    .collect();
     assert!(stamps[0] > 0.0 && stamps.windows(2).all(|w| w[0] <= w[1]), "{stamps:?}");
     assert!(s["loops_per_s"].as_f64().unwrap() > 0.0);
 }
@@ -163,7 +184,17 @@ fn very_short_runs_record_every_loop() {
 
 #[test]
 fn lockstep_runs_are_deterministic_and_concurrent_runs_are_isolated() {
-    let args = ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", "sensors.encoder.noise_std=0.001", "--set", "seed=42"];
+    let args = [
+        "pendulum",
+        "--mode",
+        "lockstep",
+        "--duration",
+        "3",
+        "--set",
+        "sensors.encoder.noise_std=0.001",
+        "--set",
+        "seed=42",
+    ];
     let (a, b) = std::thread::scope(|scope| {
         let a = scope.spawn(|| run("determinism-a", &args));
         let b = scope.spawn(|| run("determinism-b", &args));
@@ -177,7 +208,20 @@ fn lockstep_runs_are_deterministic_and_concurrent_runs_are_isolated() {
     let trajectory = |r: &common::Run| std::fs::read(r.dir.join("trajectory.csv")).unwrap();
     assert!(trajectory(&a) == trajectory(&b), "two lockstep runs with one seed differ");
 
-    let other_seed = run("determinism-c", &["pendulum", "--mode", "lockstep", "--duration", "3", "--set", "sensors.encoder.noise_std=0.001", "--set", "seed=43"]);
+    let other_seed = run(
+        "determinism-c",
+        &[
+            "pendulum",
+            "--mode",
+            "lockstep",
+            "--duration",
+            "3",
+            "--set",
+            "sensors.encoder.noise_std=0.001",
+            "--set",
+            "seed=43",
+        ],
+    );
     assert!(trajectory(&a) != trajectory(&other_seed), "the seed should change the noise");
 }
 
@@ -186,7 +230,11 @@ fn a_launch_file_path_runs() {
     let dir = fresh_dir("launch-file");
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("short.toml");
-    std::fs::write(&file, "scenario = \"pendulum\"\nmode = \"lockstep\"\nduration_s = 0.5\n[sensors.encoder]\nbias = 0.02\n").unwrap();
+    std::fs::write(
+        &file,
+        "scenario = \"pendulum\"\nmode = \"lockstep\"\nduration_s = 0.5\n[sensors.encoder]\nbias = 0.02\n",
+    )
+    .unwrap();
     let r = run("launch-file-run", &[file.to_str().unwrap()]);
     assert_eq!(r.summary["loops"], 500);
     assert_eq!(r.metric("bias_true_rad"), 0.02);
@@ -261,7 +309,8 @@ fn children_of(launcher: u32) -> Vec<(String, i32, String)> {
 #[test]
 fn a_killed_process_is_reported_and_its_shared_memory_removed() {
     let (child, dir) = start_long_run("killed");
-    let estimator = children_of(child.id()).into_iter().find(|(name, _, _)| name == "estimator").expect("the estimator runs").1;
+    let estimator =
+        children_of(child.id()).into_iter().find(|(name, _, _)| name == "estimator").expect("the estimator runs").1;
     unsafe { libc::kill(estimator, libc::SIGKILL) };
     let status = wait_exit(child);
     assert_eq!(status.code(), Some(1));

@@ -23,7 +23,19 @@ fn no_bias_estimator_stands_upright_with_the_wheel_at_minus_k1_delta_over_k3() {
         let gains = gains_arg(k);
         let r = run(
             "no-bias",
-            &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", "estimator.kind=no-bias", "--set", &bias, "--set", &gains],
+            &[
+                "pendulum",
+                "--mode",
+                "lockstep",
+                "--duration",
+                "12",
+                "--set",
+                "estimator.kind=no-bias",
+                "--set",
+                &bias,
+                "--set",
+                &gains,
+            ],
         );
         let law = -k[0] * delta / k[2];
         let wheel = r.metric("wheel_speed_mean_last_1s_rad_s");
@@ -42,7 +54,8 @@ fn bias_observer_finds_the_bias_and_stops_the_wheel() {
     for (delta, k) in [(0.1, GAINS[0]), (-0.07, GAINS[0]), (0.06, GAINS[1]), (-0.05, GAINS[2])] {
         let bias = format!("sensors.encoder.bias={delta:?}");
         let gains = gains_arg(k);
-        let r = run("observer", &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", &bias, "--set", &gains]);
+        let r =
+            run("observer", &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", &bias, "--set", &gains]);
         let estimate = r.metric("bias_estimate_final_rad");
         assert!((estimate - delta).abs() < 0.02 * delta.abs(), "δ = {delta}, K = {k:?}: δ̂ = {estimate}");
         assert_eq!(r.metric("bias_true_rad"), delta);
@@ -106,7 +119,11 @@ fn sensor_values_are_held_between_their_own_sample_instants() {
         let j = (k - delay) / period_ticks * period_ticks;
         assert_eq!(speed[k], ((wheel[j] + bias) / quantum).round() * quantum, "wheel speed at tick {k}");
         if k > delay && speed[k] != speed[k - 1] {
-            assert_eq!((k - delay) % period_ticks, 0, "the held wheel speed changed between sample instants, at tick {k}");
+            assert_eq!(
+                (k - delay) % period_ticks,
+                0,
+                "the held wheel speed changed between sample instants, at tick {k}"
+            );
             changes += 1;
         }
     }

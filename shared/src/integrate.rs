@@ -4,7 +4,11 @@ use nalgebra::SVector;
 
 /// One RK4 step of size `h` for the autonomous system ẋ = f(x) (inputs held constant by the
 /// caller's closure).
-pub fn rk4_step<const N: usize>(f: &impl Fn(&SVector<f64, N>) -> SVector<f64, N>, x: &SVector<f64, N>, h: f64) -> SVector<f64, N> {
+pub fn rk4_step<const N: usize>(
+    f: &impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+    x: &SVector<f64, N>,
+    h: f64,
+) -> SVector<f64, N> {
     let k1 = f(x);
     let k2 = f(&(x + k1 * (h / 2.0)));
     let k3 = f(&(x + k2 * (h / 2.0)));

@@ -157,7 +157,11 @@ impl Ipc {
     }
 
     /// A publisher that, if `wake` is set, also wakes the topic's readers after each sample.
-    pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic, wake: bool) -> Result<TopicPublisher<T>> {
+    pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(
+        &self,
+        topic: Topic,
+        wake: bool,
+    ) -> Result<TopicPublisher<T>> {
         let counters = Arc::new(BackpressureCounters::default());
         let handler_counters = counters.clone();
         let publisher = self
@@ -190,7 +194,10 @@ impl Ipc {
 
     /// A reader for the next stage: a one-sample buffer (the newest wins in real-time mode)
     /// and a listener that wakes it.
-    pub fn stage_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic) -> Result<TopicSubscriber<T>> {
+    pub fn stage_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(
+        &self,
+        topic: Topic,
+    ) -> Result<TopicSubscriber<T>> {
         let mut subscriber = self.subscriber_with_buffer::<T>(topic, 1)?;
         subscriber.listener = Some(
             self.event(topic)?
@@ -203,7 +210,10 @@ impl Ipc {
 
     /// A passive reader for the monitor: a deep buffer and no listener, so publishing never
     /// wakes the monitor and the monitor never slows the loop.
-    pub fn passive_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(&self, topic: Topic) -> Result<TopicSubscriber<T>> {
+    pub fn passive_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(
+        &self,
+        topic: Topic,
+    ) -> Result<TopicSubscriber<T>> {
         self.subscriber_with_buffer::<T>(topic, MONITOR_BUFFER)
     }
 
@@ -322,11 +332,7 @@ pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
     let mut alive_nodes = 0;
     Node::<ipc::Service>::list(&config, |state| {
         match state {
-            NodeState::Dead(view) => {
-                if view.try_remove_stale_resources().is_ok() {
-                    removed_dead_nodes += 1;
-                }
-            }
+            NodeState::Dead(view) => removed_dead_nodes += u64::from(view.try_remove_stale_resources().is_ok()),
             NodeState::Alive(_) => alive_nodes += 1,
             _ => {}
         }

@@ -278,11 +278,27 @@ pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Bo
         let user: toml::Table = toml::from_str(&text).map_err(|e| toml_error(target, &text, &e))?;
         let name = match user.get("scenario") {
             Some(toml::Value::String(name)) => name.clone(),
-            Some(_) => return Err(LaunchError::new(target, Some("scenario"), format!("must be a string; allowed: {}", scenario_names()))),
-            None => return Err(LaunchError::new(target, Some("scenario"), format!("missing; allowed: {}", scenario_names()))),
+            Some(_) => {
+                return Err(LaunchError::new(
+                    target,
+                    Some("scenario"),
+                    format!("must be a string; allowed: {}", scenario_names()),
+                ));
+            }
+            None => {
+                return Err(LaunchError::new(
+                    target,
+                    Some("scenario"),
+                    format!("missing; allowed: {}", scenario_names()),
+                ));
+            }
         };
         let entry = builtin(&name).ok_or_else(|| {
-            LaunchError::new(target, Some("scenario"), format!("unknown scenario \"{name}\"; allowed: {}", scenario_names()))
+            LaunchError::new(
+                target,
+                Some("scenario"),
+                format!("unknown scenario \"{name}\"; allowed: {}", scenario_names()),
+            )
         })?;
         let mut document = entry.defaults();
         merge(&mut document, user);
@@ -292,7 +308,10 @@ pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Bo
             LaunchError::new(
                 "command line",
                 None,
-                format!("unknown scenario \"{target}\"; allowed: {} (or a path to a .toml launch file)", scenario_names()),
+                format!(
+                    "unknown scenario \"{target}\"; allowed: {} (or a path to a .toml launch file)",
+                    scenario_names()
+                ),
             )
         })?;
         (entry.file.to_owned(), entry.defaults())
@@ -316,7 +335,8 @@ fn from_document(
 ) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
     let mut origins = Origins { file: origin.to_owned(), set_keys: BTreeMap::new() };
     for o in overrides {
-        set_dotted(&mut document, o).map_err(|message| LaunchError::new(format!("--set {}", o.text), Some(&o.key), message))?;
+        set_dotted(&mut document, o)
+            .map_err(|message| LaunchError::new(format!("--set {}", o.text), Some(&o.key), message))?;
         origins.set_keys.insert(o.key.clone(), o.text.clone());
     }
 
@@ -334,7 +354,10 @@ fn from_document(
         if !allowed.contains(key.as_str()) {
             return Err(origins.error(
                 key,
-                format!("unknown key; allowed at the top level: {}", allowed.iter().copied().collect::<Vec<_>>().join(", ")),
+                format!(
+                    "unknown key; allowed at the top level: {}",
+                    allowed.iter().copied().collect::<Vec<_>>().join(", ")
+                ),
             ));
         }
     }
@@ -383,7 +406,8 @@ fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
     for (name, s) in &c.sensors {
         let key = |field: &str| format!("sensors.{name}.{field}");
         let ticks = s.period_s * c.rate_hz;
-        if !(s.period_s.is_finite() && s.period_s > 0.0) || ticks.round() < 1.0 || (ticks - ticks.round()).abs() > 1e-6 {
+        if !(s.period_s.is_finite() && s.period_s > 0.0) || ticks.round() < 1.0 || (ticks - ticks.round()).abs() > 1e-6
+        {
             return Err(c.error(
                 &key("period_s"),
                 format!(
@@ -428,7 +452,11 @@ fn check_sensors(c: &LaunchConfig) -> Result<(), LaunchError> {
             {
                 return Err(c.error(
                     &format!("sensors.{name}.{field}"),
-                    format!("signal \"{}\" has {dim} components, so give one number or {dim}; got {}", s.signal, v.len()),
+                    format!(
+                        "signal \"{}\" has {dim} components, so give one number or {dim}; got {}",
+                        s.signal,
+                        v.len()
+                    ),
                 ));
             }
         }
@@ -486,7 +514,13 @@ fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<(), String> {
         let entry = table.entry(part.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
         table = match entry {
             toml::Value::Table(t) => t,
-            _ => return Err(format!("`{}` is a value, not a table, so it has no key `{}`", parts[..=i].join("."), parts[i + 1])),
+            _ => {
+                return Err(format!(
+                    "`{}` is a value, not a table, so it has no key `{}`",
+                    parts[..=i].join("."),
+                    parts[i + 1]
+                ));
+            }
         };
     }
     let value = match (table.get(*last), &o.value) {
@@ -522,7 +556,8 @@ mod tests {
 
     #[test]
     fn set_overrides_values_and_coerces_integers() {
-        let c = run(&["sensors.encoder.bias=0.05", "duration_s=30", "mode=lockstep", "estimator.kind=no-bias"]).unwrap();
+        let c =
+            run(&["sensors.encoder.bias=0.05", "duration_s=30", "mode=lockstep", "estimator.kind=no-bias"]).unwrap();
         assert_eq!(c.sensors["encoder"].bias, PerComponent::All(0.05));
         assert_eq!(c.duration_s, 30.0);
         assert_eq!(c.mode, Mode::Lockstep);
@@ -580,7 +615,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("looplab-launch-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let good = dir.join("good.toml");
-        std::fs::write(&good, "scenario = \"pendulum\"\nmode = \"lockstep\"\n[sensors.encoder]\nbias = -0.02\n").unwrap();
+        std::fs::write(&good, "scenario = \"pendulum\"\nmode = \"lockstep\"\n[sensors.encoder]\nbias = -0.02\n")
+            .unwrap();
         let (c, _) = resolve(good.to_str().unwrap(), &[]).unwrap();
         assert_eq!(c.mode, Mode::Lockstep);
         assert_eq!(c.sensors["encoder"].bias, PerComponent::All(-0.02));

@@ -95,7 +95,16 @@ struct RunArgs {
 
 impl Default for RunArgs {
     fn default() -> Self {
-        Self { target: "pendulum".into(), mode: None, duration: None, rate: None, seed: None, set: vec![], out: None, quiet: false }
+        Self {
+            target: "pendulum".into(),
+            mode: None,
+            duration: None,
+            rate: None,
+            seed: None,
+            set: vec![],
+            out: None,
+            quiet: false,
+        }
     }
 }
 
@@ -158,7 +167,10 @@ fn run(args: RunArgs) -> ExitCode {
             match outcome {
                 Outcome::Completed if summary.shared_memory.clean => ExitCode::SUCCESS,
                 Outcome::Completed => {
-                    eprintln!("error: files of the run were left behind: {}", summary.shared_memory.leftover.join(", "));
+                    eprintln!(
+                        "error: files of the run were left behind: {}",
+                        summary.shared_memory.leftover.join(", ")
+                    );
                     ExitCode::FAILURE
                 }
                 Outcome::Interrupted => ExitCode::from(EXIT_INTERRUPTED),
@@ -242,7 +254,8 @@ fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
             }
         }
     };
-    std::fs::create_dir_all(dir.join("logs")).with_context(|| format!("cannot create the run folder {}", dir.display()))?;
+    std::fs::create_dir_all(dir.join("logs"))
+        .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
     Ok(dir)
 }
 
@@ -330,13 +343,17 @@ impl Supervisor {
         let stop = StopFlag::install()?;
         let started_at = chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true);
 
-        let progress = if quiet { ProgressBar::hidden() } else { ProgressBar::with_draw_target(Some(config.loops()), ProgressDrawTarget::stderr()) };
+        let progress = if quiet {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::with_draw_target(Some(config.loops()), ProgressDrawTarget::stderr())
+        };
         progress.set_style(
-            ProgressStyle::with_template("{spinner} {bar:16} {pos}/{len} loops · {msg}")
-                .expect("valid template"),
+            ProgressStyle::with_template("{spinner} {bar:16} {pos}/{len} loops · {msg}").expect("valid template"),
         );
         let (tx, events) = crossbeam_channel::unbounded();
-        let mut supervisor = Supervisor { children: vec![], events, readers: vec![], reports: Reports::default(), progress };
+        let mut supervisor =
+            Supervisor { children: vec![], events, readers: vec![], reports: Reports::default(), progress };
         let outcome = match supervisor.spawn_all(binaries, &launch_file, &run_id, run_dir, tx) {
             Ok(()) => supervisor.supervise(&stop),
             Err(e) => Outcome::Failed(format!("{e:#}")),
@@ -353,7 +370,8 @@ impl Supervisor {
         let cleanup = ipc::clean_up_run(&run_id)?;
         let summary = supervisor.summary(config, scenario, &run_id, run_dir, started_at, &outcome, cleanup);
         let path = run_dir.join("summary.json");
-        std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n").with_context(|| format!("write {}", path.display()))?;
+        std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n")
+            .with_context(|| format!("write {}", path.display()))?;
         Ok((summary, outcome))
     }
 
@@ -460,12 +478,21 @@ impl Supervisor {
                 Ok((index, Some(ChildEvent::Ready))) => ready[index] = true,
                 Ok(event) => {
                     if let Some(index) = self.handle(event) {
-                        return Outcome::Failed(format!("{} during start-up; see logs/{}.log", self.exit_text(index), self.children[index].name));
+                        return Outcome::Failed(format!(
+                            "{} during start-up; see logs/{}.log",
+                            self.exit_text(index),
+                            self.children[index].name
+                        ));
                     }
                 }
                 Err(RecvTimeoutError::Timeout) if Instant::now() > deadline => {
-                    let late: Vec<_> = self.children.iter().zip(&ready).filter(|(_, r)| !**r).map(|(c, _)| c.name).collect();
-                    return Outcome::Failed(format!("not ready after {} s: {}", READY_TIMEOUT.as_secs(), late.join(", ")));
+                    let late: Vec<_> =
+                        self.children.iter().zip(&ready).filter(|(_, r)| !**r).map(|(c, _)| c.name).collect();
+                    return Outcome::Failed(format!(
+                        "not ready after {} s: {}",
+                        READY_TIMEOUT.as_secs(),
+                        late.join(", ")
+                    ));
                 }
                 Err(_) => {}
             }
@@ -488,7 +515,11 @@ impl Supervisor {
                         return if index == plant && clean_exit && self.reports.plant.is_some() {
                             Outcome::Completed
                         } else {
-                            Outcome::Failed(format!("{} during the run; see logs/{}.log", self.exit_text(index), child.name))
+                            Outcome::Failed(format!(
+                                "{} during the run; see logs/{}.log",
+                                self.exit_text(index),
+                                child.name
+                            ))
                         };
                     }
                 }
@@ -505,7 +536,9 @@ impl Supervisor {
             .children
             .iter()
             .filter(|c| !c.exit.as_ref().is_some_and(|(_, ok)| *ok))
-            .map(|c| format!("{} exited with status {}", c.name, c.exit.as_ref().map_or("unknown", |(s, _)| s.as_str())))
+            .map(|c| {
+                format!("{} exited with status {}", c.name, c.exit.as_ref().map_or("unknown", |(s, _)| s.as_str()))
+            })
             .collect();
         if !failed.is_empty() {
             Outcome::Failed(format!("{}; see the logs folder", failed.join(", ")))
@@ -607,7 +640,10 @@ impl Supervisor {
                 })
                 .collect(),
             latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
-            jitter_ns: Jitter { plant_tick: monitor.plant_tick_jitter.clone(), plant_wake_latency: monitor.plant_wake_latency.clone() },
+            jitter_ns: Jitter {
+                plant_tick: monitor.plant_tick_jitter.clone(),
+                plant_wake_latency: monitor.plant_wake_latency.clone(),
+            },
             data_age_ns: monitor.data_age.clone(),
             monitor: MonitorCounts {
                 records: monitor.records,

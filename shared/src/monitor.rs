@@ -182,8 +182,13 @@ impl Partial {
 
     /// Whether the part from topic index `topic` is here.
     fn has(&self, topic: usize) -> bool {
-        [self.state.is_some(), self.measurements.is_some(), self.estimate.is_some(), self.command.is_some(), self.record.is_some()]
-            [topic]
+        [
+            self.state.is_some(),
+            self.measurements.is_some(),
+            self.estimate.is_some(),
+            self.command.is_some(),
+            self.record.is_some(),
+        ][topic]
     }
 }
 
@@ -379,8 +384,8 @@ impl Writer {
         while let Some(newest) = self.newest_any() {
             let k = self.next_k;
             let part = self.pending.get(&k);
-            let settled = (0..TOPICS.len())
-                .all(|t| part.is_some_and(|p| p.has(t)) || self.newest[t].is_some_and(|n| n > k));
+            let settled =
+                (0..TOPICS.len()).all(|t| part.is_some_and(|p| p.has(t)) || self.newest[t].is_some_and(|n| n > k));
             if k > newest || !(settled || newest >= k + JOIN_WINDOW) {
                 break;
             }
@@ -515,11 +520,16 @@ impl Writer {
             let first_wall = SystemTime::now() - Duration::from_nanos(now_ns().saturating_sub(first));
             IntervalLogWriterBuilder::new()
                 .add_comment("LoopLab latency per hop and end to end, in ns")
-                .add_comment("Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time")
+                .add_comment(
+                    "Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time",
+                )
                 .with_start_time(first_wall)
                 .with_base_time(first_wall)
                 .begin_log_with(&mut self.hlog, &mut serializer)?;
-            writeln!(self.hlog, "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\"")?;
+            writeln!(
+                self.hlog,
+                "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\""
+            )?;
             self.hlog_started = true;
         }
         let mut log = IntervalLogWriterBuilder::new().begin_log_with(&mut self.hlog, &mut serializer)?;

@@ -131,7 +131,8 @@ fn stats_row(out: &mut String, label: &str, s: &Stats) {
 /// The human-readable report.
 pub fn render(s: &Summary) -> String {
     let mut out = String::new();
-    let _ = writeln!(out, "\nLoopLab · {} · {} · {} Hz · {} s · seed {}", s.title, s.mode, s.rate_hz, s.duration_s, s.seed);
+    let _ =
+        writeln!(out, "\nLoopLab · {} · {} · {} Hz · {} s · seed {}", s.title, s.mode, s.rate_hz, s.duration_s, s.seed);
     let status = match (&s.stopped_because, s.completed) {
         (Some(why), _) => format!("stopped early: {why}"),
         (None, true) => "completed".into(),
@@ -152,7 +153,10 @@ pub fn render(s: &Summary) -> String {
         if s.monitor.missing.is_empty() {
             String::new()
         } else {
-            format!("; no record for loops {}", s.monitor.missing.iter().map(|[a, b]| format!("{a}–{b}")).collect::<Vec<_>>().join(", "))
+            format!(
+                "; no record for loops {}",
+                s.monitor.missing.iter().map(|[a, b]| format!("{a}–{b}")).collect::<Vec<_>>().join(", ")
+            )
         }
     );
 

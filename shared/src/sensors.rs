@@ -82,7 +82,11 @@ impl SensorEmulator {
                 for ((v, bias), std) in value.iter_mut().zip(&sensor.bias).zip(&sensor.noise_std) {
                     let noise: f64 = StandardNormal.sample(&mut sensor.rng);
                     let measured = *v + bias + std * noise;
-                    *v = if sensor.quantum > 0.0 { (measured / sensor.quantum).round() * sensor.quantum } else { measured };
+                    *v = if sensor.quantum > 0.0 {
+                        (measured / sensor.quantum).round() * sensor.quantum
+                    } else {
+                        measured
+                    };
                 }
                 sensor.in_flight.push_back((k + sensor.delay_ticks, value, t));
             }
@@ -175,8 +179,8 @@ mod tests {
             emu.tick(k, k as f64 * 1e-3, &truth(k), &mut out);
             let speed = out[1];
             let sampled_at = match k {
-                0..10 => 0,
-                11..20 => 11,
+                0..=9 => 0,
+                11..=19 => 11,
                 _ => 20,
             };
             assert_eq!(speed.fresh, u32::from(k == sampled_at), "tick {k}");

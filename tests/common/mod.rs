@@ -33,7 +33,9 @@ pub struct Run {
 
 impl Run {
     pub fn metric(&self, name: &str) -> f64 {
-        self.summary["metrics"][name].as_f64().unwrap_or_else(|| panic!("no metric {name} in {}", self.summary["metrics"]))
+        self.summary["metrics"][name]
+            .as_f64()
+            .unwrap_or_else(|| panic!("no metric {name} in {}", self.summary["metrics"]))
     }
 
     pub fn trajectory(&self) -> Table {
@@ -91,7 +93,10 @@ impl Table {
     /// A numeric column (panics on an empty cell: tests read complete runs).
     pub fn col(&self, name: &str) -> Vec<f64> {
         let i = *self.columns.get(name).unwrap_or_else(|| panic!("no column {name}; have {:?}", self.columns.keys()));
-        self.rows.iter().map(|r| r[i].parse().unwrap_or_else(|_| panic!("{name}: {:?} is not a number", r[i]))).collect()
+        self.rows
+            .iter()
+            .map(|r| r[i].parse().unwrap_or_else(|_| panic!("{name}: {:?} is not a number", r[i])))
+            .collect()
     }
 }
 

@@ -159,8 +159,7 @@ mod tests {
         let a = paper_model().a();
         let l = bias_observer_gains(a, [-16.0, -20.0, -24.0]);
         assert!(l[2] < 0.0);
-        let mut poles: Vec<f64> =
-            bias_error_matrix(a, 1.0, &l).complex_eigenvalues().iter().map(|p| p.re).collect();
+        let mut poles: Vec<f64> = bias_error_matrix(a, 1.0, &l).complex_eigenvalues().iter().map(|p| p.re).collect();
         poles.sort_by(f64::total_cmp);
         for (got, want) in poles.iter().zip([-24.0, -20.0, -16.0]) {
             assert!((got - want).abs() < 1e-6, "{poles:?}");
@@ -174,14 +173,8 @@ mod tests {
     #[test]
     fn no_bias_observer_rests_at_the_reading() {
         let model = paper_model();
-        let mut est = PendulumEstimator::new(
-            Kind::NoBias,
-            &model,
-            Vector3::zeros(),
-            no_bias_gains([-50.0, -50.0]),
-            0,
-            1,
-        );
+        let mut est =
+            PendulumEstimator::new(Kind::NoBias, &model, Vector3::zeros(), no_bias_gains([-50.0, -50.0]), 0, 1);
         let reading = |v: f64| SensorReading { value: [v; 12], valid: 1, fresh: 1, ..Default::default() };
         let mut out = [0.0; 4];
         est.update(0.0, &[reading(0.3), reading(-2.0)], &[0.0], &mut out);
@@ -217,7 +210,9 @@ mod tests {
 
     #[test]
     fn bias_observer_with_the_papers_printed_gains_does_not_find_the_bias() {
+        // Unstable near the truth, it runs off to the false rest point y − x̂₃ = π − θ, where
+        // cos z = −1 and a positive l₃ is stabilising (δ̂ ≈ −3).
         let out = observe_held_pendulum(Vector3::new(546.0, 1100.0, 508.0));
-        assert!(!((out[3] - 0.1).abs() < 0.01), "the printed gains should not converge: {out:?}");
+        assert!((out[3] - 0.1).abs() >= 0.01, "the printed gains should not converge: {out:?}");
     }
 }
