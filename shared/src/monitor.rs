@@ -405,11 +405,12 @@ impl Writer {
             self.last_counters = state.counters;
             if self.mode == Mode::Realtime {
                 let timing = state.timing;
+                // Tick 0 is published at start, not on a timer wake-up.
                 if timing.period_ns > 0 {
                     let period = (self.dt * 1e9).round() as i64;
                     self.jitter.record((timing.period_ns as i64 - period).unsigned_abs());
+                    self.wake.record(timing.wake_ns.saturating_sub(timing.scheduled_ns));
                 }
-                self.wake.record(timing.wake_ns.saturating_sub(timing.scheduled_ns));
             }
         }
 
