@@ -14,7 +14,7 @@ fn stdout_of(args: &[&str]) -> String {
 #[test]
 fn help_explains_the_commands_and_options() {
     let help = stdout_of(&["--help"]);
-    for word in ["run", "list", "Examples"] {
+    for word in ["run", "list", "show", "Examples"] {
         assert!(help.contains(word), "--help lacks {word}:\n{help}");
     }
     let help = stdout_of(&["run", "--help"]);
@@ -24,9 +24,11 @@ fn help_explains_the_commands_and_options() {
 }
 
 #[test]
-fn list_names_the_scenarios() {
+fn list_names_the_scenarios_and_show_prints_their_keys() {
     let list = stdout_of(&["list"]);
     assert!(list.contains("pendulum") && list.contains("launch/pendulum.toml"), "{list}");
+    let show = stdout_of(&["show", "pendulum"]);
+    assert_eq!(show, std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/launch/pendulum.toml")).unwrap());
 }
 
 /// Runs looplab with bad input; expects exit code 2, the given fragments in stderr, and no run

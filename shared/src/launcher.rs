@@ -45,7 +45,7 @@ reports the latency of every hop and end to end, the plant's tick jitter, deadli
 data age and the scenario's control metrics, and writes a run folder with summary.json, \
 trajectory.csv, loops.csv, latency.hlog and the resolved launch file.\n\n\
 With no command, runs the default: the pendulum scenario, real time, 1 kHz, 10 s.",
-    after_help = "Examples:\n  looplab\n  looplab list\n  looplab run pendulum --mode lockstep --duration 30 \
+    after_help = "Examples:\n  looplab\n  looplab list\n  looplab show pendulum\n  looplab run pendulum --mode lockstep --duration 30 \
 --set sensors.encoder.bias=0.05 --set estimator.kind=no-bias\n  looplab run my-launch.toml --out /tmp/run1"
 )]
 pub struct Cli {
@@ -59,9 +59,19 @@ enum Command {
     Run(RunArgs),
     /// List the built-in scenarios and their launch files
     List,
+    /// Print a scenario's launch file: every key, its default and what it means
+    Show {
+        /// The scenario (see `looplab list`)
+        scenario: String,
+    },
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
+and meaning; --set takes any of them.\n\
+Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, launch.toml (resolved), logs/.\n\
+Exit codes: 0 completed, 1 the run failed (a process died, or files were left in shared memory), \
+2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written).")]
 struct RunArgs {
     /// A scenario name (see `looplab list`) or the path of a launch file (.toml). A launch file
     /// overrides its scenario's defaults key by key.
@@ -115,6 +125,16 @@ pub fn main() -> ExitCode {
             list();
             ExitCode::SUCCESS
         }
+        Some(Command::Show { scenario }) => match launch::builtin(&scenario) {
+            Some(entry) => {
+                print!("{}", entry.text);
+                ExitCode::SUCCESS
+            }
+            None => bad_input(format!(
+                "unknown scenario \"{scenario}\"; allowed: {}",
+                scenarios::ALL.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+            )),
+        },
         Some(Command::Run(args)) => run(args),
         None => run(RunArgs::default()),
     }
