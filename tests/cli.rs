@@ -99,13 +99,25 @@ fn a_missing_binary_is_named() {
     let lonely = dir.join("looplab");
     std::fs::copy(env!("CARGO_BIN_EXE_looplab"), &lonely).unwrap();
     let out_dir = dir.join("out");
-    let out = std::process::Command::new(&lonely)
-        .env_remove("CARGO")
-        .env_remove("CARGO_MANIFEST_DIR")
-        .args(["run", "pendulum", "--out"])
-        .arg(&out_dir)
-        .output()
-        .unwrap();
+    // Another test thread forking while the copy was open for writing makes exec fail with
+    // "text file busy" until that child has exec'd; try again.
+    let out = (0..100)
+        .find_map(|_| {
+            let result = std::process::Command::new(&lonely)
+                .env_remove("CARGO")
+                .env_remove("CARGO_MANIFEST_DIR")
+                .args(["run", "pendulum", "--out"])
+                .arg(&out_dir)
+                .output();
+            match result {
+                Err(e) if e.kind() == std::io::ErrorKind::ExecutableFileBusy => {
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                    None
+                }
+                other => Some(other.unwrap()),
+            }
+        })
+        .expect("the copied launcher never became executable");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(
