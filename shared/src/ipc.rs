@@ -100,6 +100,11 @@ fn retry<T, E: Debug>(what: &str, mut attempt: impl FnMut() -> Result<T, E>) -> 
     }
 }
 
+/// iceoryx2 logs only errors, unless IOX2_LOG_LEVEL says otherwise.
+fn quiet_logs() {
+    set_log_level_from_env_or(LogLevel::Error);
+}
+
 /// One process's connection to the run's services.
 pub struct Ipc {
     node: Node<ipc::Service>,
@@ -109,7 +114,7 @@ pub struct Ipc {
 
 impl Ipc {
     pub fn new(process: &str, run_id: &str, mode: Mode) -> Result<Self> {
-        set_log_level_from_env_or(LogLevel::Error);
+        quiet_logs();
         let config = run_config(run_id)?;
         let node = NodeBuilder::new()
             .name(&NodeName::new(process).map_err(|e| anyhow!("invalid node name {process}: {e:?}"))?)
@@ -315,8 +320,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
     }
 }
 
-/// Where iceoryx2 keeps a run's files on Linux: shared memory, and its root folder for nodes,
-/// services and event sockets.
+/// iceoryx2's shared-memory folder on Linux; its other files are under the config's root path.
 const SHM_DIR: &str = "/dev/shm";
 
 /// After a run: removes the resources of the run's dead nodes (processes that were killed) and
@@ -327,6 +331,7 @@ pub struct Cleanup {
 }
 
 pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
+    quiet_logs();
     let config = run_config(run_id)?;
     let mut removed_dead_nodes = 0;
     let mut alive_nodes = 0;

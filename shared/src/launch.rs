@@ -257,7 +257,7 @@ impl Override {
     }
 }
 
-/// The launch files compiled into the binary: one per scenario, the scenario's defaults.
+/// The built-in scenario of this name, with its default launch file compiled in.
 pub fn builtin(name: &str) -> Option<&'static scenarios::ScenarioEntry> {
     scenarios::ALL.iter().find(|s| s.name == name)
 }

@@ -67,11 +67,13 @@ enum Command {
 }
 
 #[derive(Debug, Args)]
-#[command(after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
+#[command(
+    after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
 and meaning; --set takes any of them.\n\
 Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, launch.toml (resolved), logs/.\n\
 Exit codes: 0 completed, 1 the run failed (a process died, or files were left in shared memory), \
-2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written).")]
+2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
+)]
 struct RunArgs {
     /// A scenario name (see `looplab list`) or the path of a launch file (.toml). A launch file
     /// overrides its scenario's defaults key by key.
