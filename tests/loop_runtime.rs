@@ -184,20 +184,12 @@ fn very_short_runs_record_every_loop() {
 
 #[test]
 fn lockstep_runs_are_deterministic_and_concurrent_runs_are_isolated() {
-    let args = [
-        "pendulum",
-        "--mode",
-        "lockstep",
-        "--duration",
-        "3",
-        "--set",
-        "sensors.encoder.noise_std=0.001",
-        "--set",
-        "seed=42",
-    ];
+    let args = |seed: &'static str| {
+        ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", "sensors.encoder.noise_std=0.001", "--set", seed]
+    };
     let (a, b) = std::thread::scope(|scope| {
-        let a = scope.spawn(|| run("determinism-a", &args));
-        let b = scope.spawn(|| run("determinism-b", &args));
+        let a = scope.spawn(|| run("determinism-a", &args("seed=42")));
+        let b = scope.spawn(|| run("determinism-b", &args("seed=42")));
         (a.join().unwrap(), b.join().unwrap())
     });
     assert_ne!(a.summary["run_id"], b.summary["run_id"]);
@@ -208,20 +200,7 @@ fn lockstep_runs_are_deterministic_and_concurrent_runs_are_isolated() {
     let trajectory = |r: &common::Run| std::fs::read(r.dir.join("trajectory.csv")).unwrap();
     assert!(trajectory(&a) == trajectory(&b), "two lockstep runs with one seed differ");
 
-    let other_seed = run(
-        "determinism-c",
-        &[
-            "pendulum",
-            "--mode",
-            "lockstep",
-            "--duration",
-            "3",
-            "--set",
-            "sensors.encoder.noise_std=0.001",
-            "--set",
-            "seed=43",
-        ],
-    );
+    let other_seed = run("determinism-c", &args("seed=43"));
     assert!(trajectory(&a) != trajectory(&other_seed), "the seed should change the noise");
 }
 
