@@ -414,28 +414,30 @@ impl Writer {
             }
         }
 
-        let mut end_to_end = None;
-        if part.record.is_none() {
-            let missing = &mut self.report.missing_records;
-            match missing.last_mut() {
-                Some(range) if range[1] + 1 == k => range[1] = k,
-                _ => {
-                    if missing.len() < MAX_MISSING_RANGES {
-                        missing.push([k, k]);
+        let end_to_end = match &part.record {
+            None => {
+                let missing = &mut self.report.missing_records;
+                match missing.last_mut() {
+                    Some(range) if range[1] + 1 == k => range[1] = k,
+                    _ => {
+                        if missing.len() < MAX_MISSING_RANGES {
+                            missing.push([k, k]);
+                        }
                     }
                 }
+                None
             }
-        }
-        if let Some(record) = &part.record {
-            let stamps = record.header.trace.stamps();
-            let e2e = stamps[7].saturating_sub(stamps[0]);
-            end_to_end = Some(e2e);
-            self.end_to_end.record(e2e);
-            for (recorder, (_, from, to)) in self.hops.iter_mut().zip(HOPS) {
-                recorder.record(stamps[to].saturating_sub(stamps[from]));
+            Some(record) => {
+                let stamps = record.header.trace.stamps();
+                let e2e = stamps[7].saturating_sub(stamps[0]);
+                self.end_to_end.record(e2e);
+                for (recorder, (_, from, to)) in self.hops.iter_mut().zip(HOPS) {
+                    recorder.record(stamps[to].saturating_sub(stamps[from]));
+                }
+                self.interval_log(stamps[0])?;
+                Some(e2e)
             }
-            self.interval_log(stamps[0])?;
-        }
+        };
 
         if let (Some(meas), Some(e2e)) = (&part.measurements, end_to_end) {
             // Simulation-time age of the sample used, plus (real time) the wall-clock time the
