@@ -262,7 +262,8 @@ pub fn builtin(name: &str) -> Option<&'static scenarios::ScenarioEntry> {
     scenarios::ALL.iter().find(|s| s.name == name)
 }
 
-fn scenario_names() -> String {
+/// The built-in scenarios' names, for error messages.
+pub fn scenario_names() -> String {
     scenarios::ALL.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
 }
 

@@ -132,10 +132,7 @@ pub fn main() -> ExitCode {
                 print!("{}", entry.text);
                 ExitCode::SUCCESS
             }
-            None => bad_input(format!(
-                "unknown scenario \"{scenario}\"; allowed: {}",
-                scenarios::ALL.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
-            )),
+            None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", launch::scenario_names())),
         },
         Some(Command::Run(args)) => run(args),
         None => run(RunArgs::default()),

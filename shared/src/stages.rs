@@ -214,10 +214,11 @@ impl PlantLoop {
         self.schedule.map(|(start, period)| start + tick * period)
     }
 
-    fn publish_state(&mut self, timing: TickTiming, u_applied: [f64; MAX_INPUT]) -> Result<()> {
+    /// Publishes the state at tick k, with the command that was held over the last period.
+    fn publish_state(&mut self, timing: TickTiming) -> Result<()> {
         let mut msg = PlantState {
             header: Header { k: self.k, t: self.k as f64 * self.dt, trace: LoopTrace::default() },
-            u_applied,
+            u_applied: self.held,
             timing,
             counters: self.counters,
             ..Default::default()
@@ -261,7 +262,7 @@ impl PlantLoop {
     /// Integrates one period, tick k → k+1, with the newest valid command that had arrived
     /// when tick k+1 was due (zero-order hold). If tick k's state went out and command k was
     /// not in by then, loop k missed its deadline.
-    fn advance(&mut self) -> [f64; MAX_INPUT] {
+    fn advance(&mut self) {
         let due = self.due(self.k + 1);
         while let Some(&(arrived, u)) = self.queued.front() {
             if due.is_some_and(|due| arrived > due) {
@@ -276,7 +277,6 @@ impl PlantLoop {
         let m = self.limits.len();
         self.plant.step(&self.held[..m], self.dt);
         self.k += 1;
-        self.held
     }
 
     fn drain(&mut self, commands: &TopicSubscriber<Command>) -> Result<()> {
@@ -319,16 +319,16 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
     let loops = context.config.loops();
     match context.config.mode {
         Mode::Lockstep => {
-            p.publish_state(TickTiming::default(), p.held)?;
+            p.publish_state(TickTiming::default())?;
             while p.k < loops && !context.stop.requested() {
                 wait(&ws)?;
                 p.drain(&commands)?;
                 // Tick k → k+1 only once command k is in (if it was rejected, the last valid
                 // one is held).
                 if p.in_time_k == Some(p.k) {
-                    let u = p.advance();
+                    p.advance();
                     if p.k < loops {
-                        p.publish_state(TickTiming::default(), u)?;
+                        p.publish_state(TickTiming::default())?;
                     }
                 }
             }
@@ -341,16 +341,15 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
             let timer = TickTimer::new(start_ns + period_ns, period_ns)?;
             let _tick = ws.attach_notification(&timer).map_err(|e| anyhow!("cannot attach the tick timer: {e:?}"))?;
             let mut previous_wake = start_ns;
-            p.publish_state(TickTiming { scheduled_ns: start_ns, wake_ns: start_ns, period_ns: 0 }, p.held)?;
+            p.publish_state(TickTiming { scheduled_ns: start_ns, wake_ns: start_ns, period_ns: 0 })?;
             while p.k < loops && !context.stop.requested() {
                 wait(&ws)?;
                 let woke = now_ns();
                 p.drain(&commands)?;
                 let expired = timer.expirations();
-                let mut u = p.held;
                 let mut advanced = 0;
                 while advanced < expired && p.k < loops {
-                    u = p.advance();
+                    p.advance();
                     advanced += 1;
                 }
                 if advanced == 0 {
@@ -365,7 +364,7 @@ pub fn plant(context: &Context) -> Result<ChildEvent> {
                         period_ns: woke - previous_wake,
                     };
                     previous_wake = woke;
-                    p.publish_state(timing, u)?;
+                    p.publish_state(timing)?;
                 }
             }
             // Record the last commands even when they come late.
