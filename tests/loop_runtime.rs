@@ -221,10 +221,12 @@ fn a_launch_file_path_runs() {
 }
 
 /// Starts a long real-time run and returns it with its run folder once the loop is running.
-fn start_long_run(name: &str) -> (std::process::Child, std::path::PathBuf) {
+fn start_long_run(name: &str, extra: &[&str]) -> (std::process::Child, std::path::PathBuf) {
     let dir = fresh_dir(name);
     let child = looplab()
-        .args(["run", "pendulum", "--duration", "60", "-q", "--out"])
+        .args(["run", "pendulum", "--duration", "60", "-q"])
+        .args(extra)
+        .arg("--out")
         .arg(&dir)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -253,7 +255,7 @@ fn wait_exit(mut child: std::process::Child) -> std::process::ExitStatus {
 #[test]
 fn sigint_and_sigterm_stop_the_run_cleanly_with_a_report() {
     for (signal, name) in [(libc::SIGINT, "sigint"), (libc::SIGTERM, "sigterm")] {
-        let (child, dir) = start_long_run(name);
+        let (child, dir) = start_long_run(name, &[]);
         unsafe { libc::kill(child.id() as i32, signal) };
         let status = wait_exit(child);
         assert_eq!(status.code(), Some(130), "{name}: exit status");
@@ -287,7 +289,7 @@ fn children_of(launcher: u32) -> Vec<(String, i32, String)> {
 
 #[test]
 fn a_killed_process_is_reported_and_its_shared_memory_removed() {
-    let (child, dir) = start_long_run("killed");
+    let (child, dir) = start_long_run("killed", &["--set", "supervision.restart=never"]);
     let estimator =
         children_of(child.id()).into_iter().find(|(name, _, _)| name == "estimator").expect("the estimator runs").1;
     unsafe { libc::kill(estimator, libc::SIGKILL) };
@@ -304,7 +306,7 @@ fn a_killed_process_is_reported_and_its_shared_memory_removed() {
 
 #[test]
 fn a_killed_launcher_leaves_no_process_and_no_file_behind() {
-    let (launcher, dir) = start_long_run("launcher-killed");
+    let (launcher, dir) = start_long_run("launcher-killed", &[]);
     let children = children_of(launcher.id());
     assert_eq!(children.len(), 5, "{children:?}");
     let cmdline = &children[0].2;

@@ -321,13 +321,29 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
 }
 
 /// iceoryx2's shared-memory folder on Linux; its other files are under the config's root path.
-const SHM_DIR: &str = "/dev/shm";
+pub const SHM_DIR: &str = "/dev/shm";
 
 /// After a run: removes the resources of the run's dead nodes (processes that were killed) and
 /// the run's own node registry, then lists every file of the run still there.
 pub struct Cleanup {
     pub removed_dead_nodes: u64,
     pub leftover: Vec<String>,
+}
+
+/// Removes the resources of the run's dead nodes (during a run, after a process died); returns
+/// how many it removed.
+pub fn remove_dead_nodes(run_id: &str) -> Result<u64> {
+    quiet_logs();
+    let config = run_config(run_id)?;
+    let mut removed = 0;
+    Node::<ipc::Service>::list(&config, |state| {
+        if let NodeState::Dead(view) = state {
+            removed += u64::from(view.try_remove_stale_resources().is_ok());
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("cannot list the run's iceoryx2 nodes: {e:?}"))?;
+    Ok(removed)
 }
 
 pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
@@ -347,11 +363,12 @@ pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
 
     let mut leftover = paths_of_run(run_id, &config);
     // iceoryx2 keeps one registry file per prefix for good. The prefix is this run's alone, so
-    // once no node of the run is alive, it goes too.
+    // once no node of the run is alive, it goes too, with the processes' snapshots.
     if alive_nodes == 0 {
         leftover.retain(|path| {
-            let registry = path.starts_with(SHM_DIR) && path.to_string_lossy().ends_with(".global_mgmt");
-            !(registry && std::fs::remove_file(path).is_ok())
+            let name = path.to_string_lossy();
+            let ours = name.ends_with(".global_mgmt") || name.ends_with(".snapshot");
+            !(path.starts_with(SHM_DIR) && ours && std::fs::remove_file(path).is_ok())
         });
     }
     Ok(Cleanup { removed_dead_nodes, leftover: leftover.iter().map(|p| p.display().to_string()).collect() })

@@ -12,11 +12,13 @@ use std::path::Path;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
+use crate::faults::{FaultSpec, Supervision};
 use crate::msg::{MAX_SENSOR_DIM, MAX_SENSORS};
 use crate::scenarios::{self, Scenario, ScenarioEntry, Signal};
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-const COMMON_KEYS: [&str; 6] = ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors"];
+const COMMON_KEYS: [&str; 8] =
+    ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision"];
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LaunchError {
@@ -119,6 +121,10 @@ struct CommonKeys {
     seed: u64,
     #[serde(default)]
     sensors: BTreeMap<String, SensorSpec>,
+    #[serde(default)]
+    faults: Vec<FaultSpec>,
+    #[serde(default)]
+    supervision: Supervision,
 }
 
 /// A checked launch configuration: the keys every scenario shares, plus the scenario's own
@@ -132,6 +138,9 @@ pub struct LaunchConfig {
     pub seed: u64,
     /// Sorted by name: this order is the order of readings in every `Measurements` message.
     pub sensors: BTreeMap<String, SensorSpec>,
+    /// Faults to inject, in the order given.
+    pub faults: Vec<FaultSpec>,
+    pub supervision: Supervision,
     /// The whole resolved document, as written to the run folder.
     pub document: toml::Table,
     entry: &'static ScenarioEntry,
@@ -151,7 +160,7 @@ impl Origins {
         for (set_key, set_text) in &self.set_keys {
             let within = |a: &str, b: &str| a == b || a.starts_with(&format!("{b}."));
             if within(key, set_key) || within(set_key, key) {
-                return format!("--set {set_text}");
+                return set_text.clone();
             }
         }
         self.file.clone()
@@ -234,6 +243,8 @@ pub struct Override {
     pub value: toml::Value,
     /// As the user typed it, for error messages.
     pub text: String,
+    /// Appends `value` to the array at `key` (a `--fault`) instead of setting it.
+    pub append: bool,
 }
 
 impl Override {
@@ -253,7 +264,21 @@ impl Override {
             .ok()
             .and_then(|mut t| t.remove("v"))
             .unwrap_or_else(|| toml::Value::String(raw.to_owned()));
-        Ok(Self { key: key.to_owned(), value, text: text.to_owned() })
+        Ok(Self { key: key.to_owned(), value, text: text.to_owned(), append: false })
+    }
+
+    /// Parses a `--fault` text (see [`crate::faults::FAULT_SYNTAX`]) into an entry appended to
+    /// the launch file's `faults` list.
+    pub fn fault(text: &str) -> Result<Self, LaunchError> {
+        let origin = format!("--fault {text}");
+        let spec = crate::faults::parse_fault(text).map_err(|e| LaunchError::new(&origin, None, e))?;
+        let value = toml::Value::try_from(&spec).expect("a fault always converts to TOML");
+        Ok(Self { key: "faults".into(), value, text: text.to_owned(), append: true })
+    }
+
+    /// Where the value came from, for error messages.
+    fn origin(&self) -> String {
+        if self.append { format!("--fault {}", self.text) } else { format!("--set {}", self.text) }
     }
 }
 
@@ -336,9 +361,9 @@ fn from_document(
 ) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
     let mut origins = Origins { file: origin.to_owned(), set_keys: BTreeMap::new() };
     for o in overrides {
-        set_dotted(&mut document, o)
-            .map_err(|message| LaunchError::new(format!("--set {}", o.text), Some(&o.key), message))?;
-        origins.set_keys.insert(o.key.clone(), o.text.clone());
+        let key =
+            set_dotted(&mut document, o).map_err(|message| LaunchError::new(o.origin(), Some(&o.key), message))?;
+        origins.set_keys.insert(key, o.origin());
     }
 
     let scenario_name = match document.get("scenario") {
@@ -377,12 +402,18 @@ fn from_document(
         duration_s: common.duration_s,
         seed: common.seed,
         sensors: common.sensors,
+        faults: common.faults,
+        supervision: common.supervision,
         document,
         entry,
         origins,
     };
     check_common(&config)?;
     check_sensors(&config)?;
+    config.supervision.check(&config)?;
+    for (i, fault) in config.faults.iter().enumerate() {
+        fault.check(&config, &format!("faults.{i}"))?;
+    }
     let scenario = (entry.build)(&config)?;
     Ok((config, scenario))
 }
@@ -505,34 +536,54 @@ pub fn merge(base: &mut toml::Table, over: toml::Table) {
     }
 }
 
-/// Sets a dotted key. An integer written where the defaults hold a float is taken as that float,
-/// so `--set duration_s=30` works.
-fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<(), String> {
+/// Sets a dotted key, or appends to the array at it; returns the key that was set (for an
+/// append, with the new element's index). A number in the path indexes an array
+/// (`faults.0.delay_ticks`). An integer written where the defaults hold a float is taken as that
+/// float, so `--set duration_s=30` works.
+fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<String, String> {
     let parts: Vec<&str> = o.key.split('.').collect();
     let (last, parents) = parts.split_last().expect("keys are checked to be non-empty");
-    let mut table = document;
-    for (i, part) in parents.iter().enumerate() {
-        let entry = table.entry(part.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
-        table = match entry {
-            toml::Value::Table(t) => t,
-            _ => {
-                return Err(format!(
-                    "`{}` is a value, not a table, so it has no key `{}`",
-                    parts[..=i].join("."),
-                    parts[i + 1]
-                ));
-            }
-        };
-    }
-    let value = match (table.get(*last), &o.value) {
-        (Some(toml::Value::Float(_)), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
-        (Some(toml::Value::Table(_)), v) if !v.is_table() => {
-            return Err(format!("`{}` is a table; set one of its keys instead", o.key));
+    let mut root = toml::Value::Table(std::mem::take(document));
+    let result = (|| {
+        let mut value = &mut root;
+        for (i, part) in parents.iter().enumerate() {
+            let path = parts[..i].join(".");
+            value = match value {
+                toml::Value::Table(t) => {
+                    t.entry(part.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                }
+                toml::Value::Array(items) => {
+                    let len = items.len();
+                    let index = part.parse::<usize>().ok().filter(|i| *i < len);
+                    index.and_then(|i| items.get_mut(i)).ok_or_else(|| {
+                        format!("`{path}` is a list of {len}; index it with 0 to {}", len.saturating_sub(1))
+                    })?
+                }
+                _ => return Err(format!("`{path}` is a value, not a table, so it has no key `{part}`")),
+            };
         }
-        (_, v) => v.clone(),
-    };
-    table.insert(last.to_string(), value);
-    Ok(())
+        let toml::Value::Table(table) = value else {
+            return Err(format!("`{}` is not a table, so it has no key `{last}`", parents.join(".")));
+        };
+        if o.append {
+            let items = table.entry(last.to_string()).or_insert_with(|| toml::Value::Array(vec![]));
+            let toml::Value::Array(items) = items else { return Err(format!("`{}` is not a list", o.key)) };
+            items.push(o.value.clone());
+            return Ok(format!("{}.{}", o.key, items.len() - 1));
+        }
+        let value = match (table.get(*last), &o.value) {
+            (Some(toml::Value::Float(_)), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
+            (Some(toml::Value::Table(_)), v) if !v.is_table() => {
+                return Err(format!("`{}` is a table; set one of its keys instead", o.key));
+            }
+            (_, v) => v.clone(),
+        };
+        table.insert(last.to_string(), value);
+        Ok(o.key.clone())
+    })();
+    let toml::Value::Table(table) = root else { unreachable!("the root stays a table") };
+    *document = table;
+    result
 }
 
 #[cfg(test)]

@@ -13,11 +13,15 @@ use clap::{Args, Parser, Subcommand};
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+use crate::clock::now_ns;
+use crate::faults::{FaultKind, Policy, Restart};
 use crate::ipc;
-use crate::launch::{self, LaunchConfig, Override};
+use crate::launch::{self, LaunchConfig, Mode, Override};
 use crate::monitor::MonitorReport;
 use crate::protocol::{ChildEvent, MonitorStatus, PlantReport, StageReport};
-use crate::report::{self, Jitter, Latency, MonitorCounts, ProcessInfo, SharedMemoryCheck, Summary};
+use crate::report::{
+    self, FaultReport, Jitter, Latency, MonitorCounts, ProcessInfo, SharedMemoryCheck, Summary, TimelineEntry,
+};
 use crate::scenarios::{self, Scenario};
 use crate::signals::StopFlag;
 
@@ -64,6 +68,49 @@ enum Command {
         /// The scenario (see `looplab list`)
         scenario: String,
     },
+    /// Run a scenario repeatedly in lockstep while one key varies; report the metrics per value
+    /// and, for a controller delay, the measured delay margin against theory
+    Sweep(SweepCli),
+}
+
+#[derive(Debug, Args)]
+#[command(after_help = "Example: the pendulum's delay margin, measured against its linearised model:\n  \
+looplab sweep pendulum --set sensors.encoder.quantum=0 --set sensors.wheel_speed.noise_std=0 \
+--fault \"delay controller by 0 ticks at 2s\" --param faults.0.delay_ticks --from 25 --to 35 --duration 20\n\
+A value is unstable when the swept fault's error (see `looplab show`, [limits]) passes the limit, or its peak in \
+the run's last second is larger than in the fault's first second: the disturbance grew instead of dying out. \
+Turn sensor noise and quantisation off to judge linear stability near the margin, as the theory does. \
+Writes sweep.json and one run folder per value.")]
+struct SweepCli {
+    /// A scenario name or a launch file
+    #[arg(default_value = "pendulum")]
+    target: String,
+    /// The dotted key to vary, as for --set; a number indexes a list (faults.0.delay_ticks)
+    #[arg(long, value_name = "KEY")]
+    param: String,
+    #[arg(long)]
+    from: f64,
+    #[arg(long)]
+    to: f64,
+    #[arg(long, default_value_t = 1.0)]
+    step: f64,
+    /// Simulated duration of each run, s
+    #[arg(long, value_name = "SECONDS")]
+    duration: Option<f64>,
+    #[arg(long)]
+    seed: Option<u64>,
+    /// As for `run`; repeatable
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// As for `run`; repeatable
+    #[arg(long = "fault", value_name = "FAULT")]
+    fault: Vec<String>,
+    /// Folder for sweep.json and the runs (default: runs/<time>-sweep-<scenario>)
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Runs at a time
+    #[arg(long, default_value_t = 2)]
+    jobs: usize,
 }
 
 #[derive(Debug, Args)]
@@ -96,6 +143,13 @@ struct RunArgs {
     /// --set sensors.encoder.bias=0.05 or --set estimator.kind=no-bias. Repeatable.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Inject a fault, added to the launch file's [[faults]]: KIND PROCESS [by AMOUNT]
+    /// [P%] [nan|inf|out-of-range] [at TIME] [for DURATION]. Kinds: kill, stop (SIGSTOP, then
+    /// SIGCONT), delay, drop, corrupt. Examples: "kill estimator at 3s", "stop controller at 2s
+    /// for 200ms", "delay controller by 3 ticks at 2s", "drop sensors 20% at 1s for 2s",
+    /// "corrupt controller nan at 4s for 100ms". Repeatable.
+    #[arg(long = "fault", value_name = "FAULT")]
+    fault: Vec<String>,
     /// The run folder to write (default: runs/<time>-<scenario>); created if missing, must be
     /// empty if it exists
     #[arg(long, value_name = "DIR")]
@@ -114,6 +168,7 @@ impl Default for RunArgs {
             rate: None,
             seed: None,
             set: vec![],
+            fault: vec![],
             out: None,
             quiet: false,
         }
@@ -135,6 +190,7 @@ pub fn main() -> ExitCode {
             None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", launch::scenario_names())),
         },
         Some(Command::Run(args)) => run(args),
+        Some(Command::Sweep(args)) => sweep(args),
         None => run(RunArgs::default()),
     }
 }
@@ -149,6 +205,33 @@ fn list() {
 fn bad_input(message: impl std::fmt::Display) -> ExitCode {
     eprintln!("error: {message}");
     ExitCode::from(EXIT_BAD_INPUT)
+}
+
+fn sweep(args: SweepCli) -> ExitCode {
+    let mut texts: Vec<String> = vec![];
+    if let Some(d) = args.duration {
+        texts.push(format!("duration_s={d:?}"));
+    }
+    if let Some(s) = args.seed {
+        texts.push(format!("seed={s}"));
+    }
+    texts.extend(args.set.iter().cloned());
+    let overrides: Result<Vec<Override>, _> =
+        texts.iter().map(|t| Override::parse(t)).chain(args.fault.iter().map(|f| Override::fault(f))).collect();
+    let overrides = match overrides {
+        Ok(o) => o,
+        Err(e) => return bad_input(e),
+    };
+    crate::sweep::run(crate::sweep::SweepArgs {
+        target: args.target,
+        param: args.param,
+        from: args.from,
+        to: args.to,
+        step: args.step,
+        overrides,
+        out: args.out,
+        jobs: args.jobs,
+    })
 }
 
 fn run(args: RunArgs) -> ExitCode {
@@ -166,7 +249,8 @@ fn run(args: RunArgs) -> ExitCode {
         texts.push(format!("seed={s}"));
     }
     texts.extend(args.set.iter().cloned());
-    let overrides: Result<Vec<Override>, _> = texts.iter().map(|t| Override::parse(t)).collect();
+    let overrides: Result<Vec<Override>, _> =
+        texts.iter().map(|t| Override::parse(t)).chain(args.fault.iter().map(|f| Override::fault(f))).collect();
     let resolved = overrides.and_then(|o| launch::resolve(&args.target, &o));
     let (config, scenario) = match resolved {
         Ok(r) => r,
@@ -207,7 +291,7 @@ fn run(args: RunArgs) -> ExitCode {
 }
 
 /// The five loop binaries, next to this one.
-fn locate_binaries() -> Result<BTreeMap<&'static str, PathBuf>> {
+pub(crate) fn locate_binaries() -> Result<BTreeMap<&'static str, PathBuf>> {
     let exe = std::env::current_exe().context("cannot find the looplab executable")?;
     let dir = exe.parent().ok_or_else(|| anyhow!("{} has no parent folder", exe.display()))?;
     build_siblings_under_cargo(dir)?;
@@ -249,7 +333,7 @@ fn build_siblings_under_cargo(exe_dir: &Path) -> Result<()> {
     Ok(())
 }
 
-fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
+pub(crate) fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     let dir = match out {
         Some(dir) => {
             if dir.exists() && std::fs::read_dir(dir).map(|mut d| d.next().is_some()).unwrap_or(true) {
@@ -285,36 +369,73 @@ fn new_run_id() -> String {
     format!("{:08x}", hash as u32)
 }
 
+/// Runs one launch configuration to its end in `run_dir` (which must exist, with `logs/`).
+pub(crate) fn run_once(
+    config: &LaunchConfig,
+    scenario: &dyn Scenario,
+    binaries: &BTreeMap<&'static str, PathBuf>,
+    run_dir: &Path,
+    quiet: bool,
+) -> Result<(Summary, Outcome)> {
+    Supervisor::run(config, scenario, binaries, run_dir, quiet)
+}
+
 pub enum Outcome {
     Completed,
     Interrupted,
     Failed(String),
 }
 
-struct Child {
-    name: &'static str,
+/// One start of a process.
+struct Incarnation {
     pid: u32,
-    stdin: Option<ChildStdin>,
     exit: Option<(String, bool)>,
     cpu_s: f64,
 }
 
-impl Child {
-    /// Reaps the child if it has exited (without blocking), with its CPU time.
+/// A process of the loop across its restarts.
+struct Process {
+    name: &'static str,
+    policy: Policy,
+    /// The running incarnation's number (index into `runs`).
+    incarnation: usize,
+    runs: Vec<Incarnation>,
+    stdin: Option<ChildStdin>,
+    /// Its ports are up (cleared when it dies or is killed).
+    ready: bool,
+    /// Set while it waits for its backoff before a restart.
+    restart_at: Option<Instant>,
+    /// SIGSTOPped by a fault and not continued yet.
+    stopped: bool,
+    /// It died and will not be restarted (the monitor may; the others end the run).
+    gone: bool,
+}
+
+impl Process {
+    fn current(&mut self) -> &mut Incarnation {
+        &mut self.runs[self.incarnation]
+    }
+
+    fn running(&self) -> bool {
+        self.runs.get(self.incarnation).is_some_and(|r| r.exit.is_none())
+    }
+
+    /// Reaps the running incarnation if it has exited (without blocking), with its CPU time.
     fn try_reap(&mut self) -> bool {
-        if self.exit.is_some() {
+        let Some(run) = self.runs.get_mut(self.incarnation) else { return true };
+        if run.exit.is_some() {
             return true;
         }
         let mut status = 0;
         // SAFETY: plain wait4 on our own child; rusage is a valid out-parameter.
         let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-        let pid = unsafe { libc::wait4(self.pid as i32, &mut status, libc::WNOHANG, &mut usage) };
-        if pid != self.pid as i32 {
+        let pid = unsafe { libc::wait4(run.pid as i32, &mut status, libc::WNOHANG, &mut usage) };
+        if pid != run.pid as i32 {
             return false;
         }
         let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-        self.cpu_s = secs(usage.ru_utime) + secs(usage.ru_stime);
-        self.exit = Some(if libc::WIFEXITED(status) {
+        run.cpu_s = secs(usage.ru_utime) + secs(usage.ru_stime);
+        run.exit = Some(if libc::WIFEXITED(status) {
             (libc::WEXITSTATUS(status).to_string(), libc::WEXITSTATUS(status) == 0)
         } else {
             (format!("signal {}", libc::WTERMSIG(status)), false)
@@ -323,42 +444,94 @@ impl Child {
     }
 
     fn signal(&self, signal: i32) {
-        if self.exit.is_none() {
+        if let Some(run) = self.runs.get(self.incarnation)
+            && run.exit.is_none()
+        {
             // SAFETY: the pid is our unreaped child, so it cannot have been reused.
-            unsafe { libc::kill(self.pid as i32, signal) };
+            unsafe { libc::kill(run.pid as i32, signal) };
         }
+    }
+
+    fn exit_text(&self) -> String {
+        match self.runs.get(self.incarnation).and_then(|r| r.exit.as_ref()) {
+            Some((status, _)) => format!("{} exited with status {status}", self.name),
+            None => format!("{} closed its output", self.name),
+        }
+    }
+
+    fn write_line(&mut self, line: &str) -> bool {
+        let written = self.stdin.as_mut().map(|s| s.write_all(format!("{line}\n").as_bytes()).and_then(|_| s.flush()));
+        matches!(written, Some(Ok(())))
     }
 }
 
-/// What a child's stdout reader passes on: an event, or None at end of output.
-type Event = (usize, Option<ChildEvent>);
+/// What a child's stdout reader passes on: (process, incarnation, event), or no event at end of
+/// output.
+type Event = (usize, usize, Option<ChildEvent>);
 
 #[derive(Default)]
 struct Reports {
     plant: Option<PlantReport>,
     monitor: Option<MonitorReport>,
-    stages: BTreeMap<&'static str, StageReport>,
+    /// Per stage, the reports of every incarnation that ended cleanly.
+    stages: BTreeMap<&'static str, Vec<StageReport>>,
 }
 
-struct Supervisor {
-    children: Vec<Child>,
+/// What the launcher saw of one injected fault (CLOCK_MONOTONIC, ns).
+#[derive(Default, Clone)]
+struct FaultSeen {
+    injected_ns: Option<u64>,
+    detected_ns: Option<u64>,
+    detected_by: Option<&'static str>,
+    restarted_ns: Option<u64>,
+    continued_ns: Option<u64>,
+    resumed_ns: Option<u64>,
+    /// A stop: when to send SIGCONT.
+    continue_at: Option<Instant>,
+}
+
+/// How long the monitor may stay silent (it reports ten times a second) before it counts as
+/// stalled.
+const MONITOR_SILENCE: Duration = Duration::from_millis(300);
+/// Longest wait between two looks at the fault schedule.
+const SUPERVISE_TICK: Duration = Duration::from_millis(2);
+/// Restart backoff doubles up to this.
+const MAX_BACKOFF: Duration = Duration::from_secs(1);
+
+struct Supervisor<'a> {
+    config: &'a LaunchConfig,
+    binaries: &'a BTreeMap<&'static str, PathBuf>,
+    launch_file: PathBuf,
+    run_id: String,
+    run_dir: PathBuf,
+    processes: Vec<Process>,
+    tx: crossbeam_channel::Sender<Event>,
     events: Receiver<Event>,
     readers: Vec<std::thread::JoinHandle<()>>,
     reports: Reports,
     progress: ProgressBar,
+    /// The plant's schedule once it started: tick 0 at this CLOCK_MONOTONIC time.
+    plant_start_ns: Option<u64>,
+    faults: Vec<FaultSeen>,
+    timeline: Vec<TimelineEntry>,
+    /// Lockstep: the plant is paused and waits for `go`.
+    paused: bool,
+    last_status: Instant,
+    removed_dead_nodes: u64,
+    /// Run stopping: deaths are expected, nothing is restarted.
+    stopping: bool,
 }
 
-impl Supervisor {
+impl<'a> Supervisor<'a> {
     fn run(
-        config: &LaunchConfig,
+        config: &'a LaunchConfig,
         scenario: &dyn Scenario,
-        binaries: &BTreeMap<&'static str, PathBuf>,
+        binaries: &'a BTreeMap<&'static str, PathBuf>,
         run_dir: &Path,
         quiet: bool,
     ) -> Result<(Summary, Outcome)> {
         let launch_file = run_dir.join("launch.toml");
         std::fs::write(&launch_file, config.to_toml()).with_context(|| format!("write {}", launch_file.display()))?;
-        let run_id = new_run_id();
         let stop = StopFlag::install()?;
         let started_at = chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true);
 
@@ -371,9 +544,42 @@ impl Supervisor {
             ProgressStyle::with_template("{spinner} {bar:16} {pos}/{len} loops · {msg}").expect("valid template"),
         );
         let (tx, events) = crossbeam_channel::unbounded();
-        let mut supervisor =
-            Supervisor { children: vec![], events, readers: vec![], reports: Reports::default(), progress };
-        let outcome = match supervisor.spawn_all(binaries, &launch_file, &run_id, run_dir, tx) {
+        let processes = START_ORDER
+            .iter()
+            .map(|&name| Process {
+                name,
+                policy: config.supervision.policy(name),
+                incarnation: 0,
+                runs: vec![],
+                stdin: None,
+                ready: false,
+                restart_at: None,
+                stopped: false,
+                gone: false,
+            })
+            .collect();
+        let mut supervisor = Supervisor {
+            config,
+            binaries,
+            launch_file,
+            run_id: new_run_id(),
+            run_dir: run_dir.to_path_buf(),
+            processes,
+            tx,
+            events,
+            readers: vec![],
+            reports: Reports::default(),
+            progress,
+            plant_start_ns: None,
+            faults: vec![FaultSeen::default(); config.faults.len()],
+            timeline: vec![],
+            paused: false,
+            last_status: Instant::now(),
+            removed_dead_nodes: 0,
+            stopping: false,
+        };
+        let spawned: Result<()> = (0..supervisor.processes.len()).try_for_each(|i| supervisor.spawn(i));
+        let outcome = match spawned {
             Ok(()) => supervisor.supervise(&stop),
             Err(e) => Outcome::Failed(format!("{e:#}")),
         };
@@ -383,130 +589,112 @@ impl Supervisor {
             Outcome::Completed => supervisor.check_ends(),
             other => other,
         };
+        let (tx, _) = crossbeam_channel::unbounded();
+        drop(std::mem::replace(&mut supervisor.tx, tx));
         for reader in supervisor.readers.drain(..) {
             let _ = reader.join();
         }
-        let cleanup = ipc::clean_up_run(&run_id)?;
-        let summary = supervisor.summary(config, scenario, &run_id, run_dir, started_at, &outcome, cleanup);
+        let cleanup = ipc::clean_up_run(&supervisor.run_id)?;
+        let summary = supervisor.summary(scenario, started_at, &outcome, cleanup);
         let path = run_dir.join("summary.json");
         std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n")
             .with_context(|| format!("write {}", path.display()))?;
         Ok((summary, outcome))
     }
 
-    fn spawn_all(
-        &mut self,
-        binaries: &BTreeMap<&'static str, PathBuf>,
-        launch_file: &Path,
-        run_id: &str,
-        run_dir: &Path,
-        tx: crossbeam_channel::Sender<Event>,
-    ) -> Result<()> {
-        for (index, name) in START_ORDER.into_iter().enumerate() {
-            let log_path = run_dir.join("logs").join(format!("{name}.log"));
-            let log = std::fs::File::create(&log_path).with_context(|| format!("create {}", log_path.display()))?;
-            let mut command = std::process::Command::new(&binaries[name]);
-            command
-                .arg("--launch")
-                .arg(launch_file)
-                .arg("--run-id")
-                .arg(run_id)
-                .arg("--run-dir")
-                .arg(run_dir)
-                .stdin(if name == "plant" { Stdio::piped() } else { Stdio::null() })
-                .stdout(Stdio::piped())
-                .stderr(log)
-                // Its own process group: a Ctrl-C in the terminal reaches only the launcher,
-                // which then stops the loop in order.
-                .process_group(0);
-            // SAFETY: prctl and getppid are async-signal-safe. If the launcher dies, the child
-            // is asked to stop, so nothing is orphaned; if it died before prctl took effect,
-            // the child does not start at all.
-            let launcher = std::process::id() as libc::pid_t;
-            unsafe {
-                command.pre_exec(move || {
-                    libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
-                    if libc::getppid() != launcher {
-                        return Err(std::io::Error::other("the launcher is gone"));
-                    }
-                    Ok(())
-                });
-            }
-            let mut child = command.spawn().with_context(|| format!("cannot start {}", binaries[name].display()))?;
-            let stdout = child.stdout.take().expect("stdout is piped");
-            let tx = tx.clone();
-            self.readers.push(std::thread::spawn(move || {
-                for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                    if let Ok(event) = serde_json::from_str::<ChildEvent>(&line) {
-                        let _ = tx.send((index, Some(event)));
-                    }
+    /// Starts the next incarnation of process `index`.
+    fn spawn(&mut self, index: usize) -> Result<()> {
+        let name = self.processes[index].name;
+        let incarnation = self.processes[index].runs.len();
+        let log_path = self.run_dir.join("logs").join(format!("{name}.log"));
+        // A restarted process appends to its log.
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&log_path)
+            .with_context(|| format!("create {}", log_path.display()))?;
+        let mut command = std::process::Command::new(&self.binaries[name]);
+        command
+            .arg("--launch")
+            .arg(&self.launch_file)
+            .arg("--run-id")
+            .arg(&self.run_id)
+            .arg("--run-dir")
+            .arg(&self.run_dir)
+            .arg("--incarnation")
+            .arg(incarnation.to_string())
+            .stdin(if name == "plant" { Stdio::piped() } else { Stdio::null() })
+            .stdout(Stdio::piped())
+            .stderr(log)
+            // Its own process group: a Ctrl-C in the terminal reaches only the launcher,
+            // which then stops the loop in order.
+            .process_group(0);
+        // SAFETY: prctl and getppid are async-signal-safe. If the launcher dies, the child
+        // is asked to stop, so nothing is orphaned; if it died before prctl took effect,
+        // the child does not start at all.
+        let launcher = std::process::id() as libc::pid_t;
+        unsafe {
+            command.pre_exec(move || {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                if libc::getppid() != launcher {
+                    return Err(std::io::Error::other("the launcher is gone"));
                 }
-                let _ = tx.send((index, None));
-            }));
-            self.children.push(Child { name, pid: child.id(), stdin: child.stdin.take(), exit: None, cpu_s: 0.0 });
+                Ok(())
+            });
         }
+        let mut child = command.spawn().with_context(|| format!("cannot start {}", self.binaries[name].display()))?;
+        let stdout = child.stdout.take().expect("stdout is piped");
+        let tx = self.tx.clone();
+        self.readers.push(std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if let Ok(event) = serde_json::from_str::<ChildEvent>(&line) {
+                    let _ = tx.send((index, incarnation, Some(event)));
+                }
+            }
+            let _ = tx.send((index, incarnation, None));
+        }));
+        let process = &mut self.processes[index];
+        process.runs.push(Incarnation { pid: child.id(), exit: None, cpu_s: 0.0 });
+        process.incarnation = incarnation;
+        process.stdin = child.stdin.take();
+        process.ready = false;
+        process.restart_at = None;
         Ok(())
     }
 
-    /// Files an event; returns the index of a child whose output ended.
-    fn handle(&mut self, (index, event): Event) -> Option<usize> {
-        let name = self.children[index].name;
-        match event {
-            None => {
-                // Its output ends when it exits: reap it (it may take a moment to go).
-                let until = Instant::now() + Duration::from_secs(2);
-                while !self.children[index].try_reap() && Instant::now() < until {
-                    std::thread::sleep(Duration::from_millis(1));
-                }
-                return Some(index);
-            }
-            Some(ChildEvent::Status(status)) => self.show(&status),
-            Some(ChildEvent::PlantReport(r)) => self.reports.plant = Some(r),
-            Some(ChildEvent::MonitorReport(r)) => self.reports.monitor = Some(*r),
-            Some(ChildEvent::StageReport(r)) => {
-                self.reports.stages.insert(name, r);
-            }
-            Some(ChildEvent::Ready) => {}
-        }
-        None
+    fn index_of(&self, name: &str) -> usize {
+        self.processes.iter().position(|p| p.name == name).expect("every process is known")
     }
 
-    fn show(&self, status: &MonitorStatus) {
-        self.progress.set_position(status.loops_recorded);
-        let p99 = status.end_to_end_p99_ns.map_or("-".into(), |ns| format!("{:.0} µs", ns as f64 / 1000.0));
-        self.progress.set_message(format!("end-to-end p99 {p99} · deadline misses {}", status.deadline_misses));
+    /// Milliseconds since tick 0, for the timeline.
+    fn since_start_ms(&self, ns: u64) -> f64 {
+        self.plant_start_ns.map_or(0.0, |start| (ns as f64 - start as f64) / 1e6)
     }
 
-    fn exit_text(&self, index: usize) -> String {
-        let child = &self.children[index];
-        match &child.exit {
-            Some((status, _)) => format!("{} exited with status {status}", child.name),
-            None => format!("{} closed its output", child.name),
-        }
+    fn note(&mut self, ns: u64, event: String) {
+        self.timeline.push(TimelineEntry { at_ms: self.since_start_ms(ns), event });
     }
 
     fn supervise(&mut self, stop: &StopFlag) -> Outcome {
         // Start-up: every process, the monitor included, has its ports before the first sample.
         let deadline = Instant::now() + READY_TIMEOUT;
-        let mut ready = vec![false; self.children.len()];
-        while !ready.iter().all(|r| *r) {
+        while !self.processes.iter().all(|p| p.ready) {
             if stop.requested() {
                 return Outcome::Interrupted;
             }
             match self.events.recv_timeout(Duration::from_millis(50)) {
-                Ok((index, Some(ChildEvent::Ready))) => ready[index] = true,
+                Ok((index, _, Some(ChildEvent::Ready))) => self.processes[index].ready = true,
                 Ok(event) => {
                     if let Some(index) = self.handle(event) {
                         return Outcome::Failed(format!(
                             "{} during start-up; see logs/{}.log",
-                            self.exit_text(index),
-                            self.children[index].name
+                            self.processes[index].exit_text(),
+                            self.processes[index].name
                         ));
                     }
                 }
                 Err(RecvTimeoutError::Timeout) if Instant::now() > deadline => {
-                    let late: Vec<_> =
-                        self.children.iter().zip(&ready).filter(|(_, r)| !**r).map(|(c, _)| c.name).collect();
+                    let late: Vec<_> = self.processes.iter().filter(|p| !p.ready).map(|p| p.name).collect();
                     return Outcome::Failed(format!(
                         "not ready after {} s: {}",
                         READY_TIMEOUT.as_secs(),
@@ -516,30 +704,26 @@ impl Supervisor {
                 Err(_) => {}
             }
         }
-        let plant = self.children.iter().position(|c| c.name == "plant").expect("every process was started");
-        let started = self.children[plant].stdin.as_mut().map(|s| s.write_all(b"start\n").and_then(|_| s.flush()));
-        if !matches!(started, Some(Ok(()))) {
+        let plant = self.index_of("plant");
+        if !self.processes[plant].write_line("start") {
             return Outcome::Failed("cannot tell the plant to start".into());
         }
+        self.last_status = Instant::now();
 
         loop {
             if stop.requested() {
                 return Outcome::Interrupted;
             }
-            match self.events.recv_timeout(Duration::from_millis(50)) {
+            self.due_actions();
+            if let Some(outcome) = self.release_pause() {
+                return outcome;
+            }
+            match self.events.recv_timeout(SUPERVISE_TICK) {
                 Ok(event) => {
-                    if let Some(index) = self.handle(event) {
-                        let child = &self.children[index];
-                        let clean_exit = child.exit.as_ref().is_some_and(|(_, ok)| *ok);
-                        return if index == plant && clean_exit && self.reports.plant.is_some() {
-                            Outcome::Completed
-                        } else {
-                            Outcome::Failed(format!(
-                                "{} during the run; see logs/{}.log",
-                                self.exit_text(index),
-                                child.name
-                            ))
-                        };
+                    if let Some(index) = self.handle(event)
+                        && let Some(outcome) = self.ended(index)
+                    {
+                        return outcome;
                     }
                 }
                 Err(RecvTimeoutError::Timeout) => {}
@@ -548,16 +732,270 @@ impl Supervisor {
         }
     }
 
+    /// Injects the faults that are due (real time), continues stopped processes, restarts the
+    /// dead ones whose backoff is over, and watches the monitor's heartbeat.
+    fn due_actions(&mut self) {
+        let now = Instant::now();
+        if self.config.mode == Mode::Realtime
+            && let Some(start) = self.plant_start_ns
+        {
+            for i in 0..self.config.faults.len() {
+                let fault = &self.config.faults[i];
+                let due = start + (fault.at_s * 1e9) as u64;
+                if fault.kind.from_outside() && self.faults[i].injected_ns.is_none() && now_ns() >= due {
+                    self.inject(i);
+                }
+            }
+        }
+        for i in 0..self.faults.len() {
+            if self.faults[i].continue_at.is_some_and(|at| now >= at) {
+                self.faults[i].continue_at = None;
+                let index = self.index_of(&self.config.faults[i].process);
+                self.processes[index].signal(libc::SIGCONT);
+                self.processes[index].stopped = false;
+                let ns = now_ns();
+                self.faults[i].continued_ns = Some(ns);
+                self.note(ns, format!("SIGCONT {}", self.processes[index].name));
+            }
+        }
+        for index in 0..self.processes.len() {
+            if self.processes[index].restart_at.is_some_and(|at| now >= at) {
+                let name = self.processes[index].name;
+                match self.spawn(index) {
+                    Ok(()) => {
+                        let n = self.processes[index].incarnation;
+                        self.note(now_ns(), format!("{name} restarted (incarnation {n})"));
+                    }
+                    Err(e) => {
+                        self.processes[index].restart_at = None;
+                        self.processes[index].gone = true;
+                        self.note(now_ns(), format!("{name} could not be restarted: {e:#}"));
+                    }
+                }
+            }
+        }
+        let monitor = self.index_of("monitor");
+        let silent = self.last_status.elapsed() > MONITOR_SILENCE;
+        if silent && self.processes[monitor].ready && self.processes[monitor].stopped {
+            // Only a stop fault on the monitor makes it silent while alive; note the detection.
+            for i in self.fault_indices("monitor", FaultKind::Stop) {
+                if self.faults[i].detected_ns.is_none() && self.faults[i].continued_ns.is_none() {
+                    let ns = now_ns();
+                    self.faults[i].detected_ns = Some(ns);
+                    self.faults[i].detected_by = Some("the monitor's heartbeat stopped");
+                    self.note(ns, "monitor silent: stalled".into());
+                }
+            }
+        }
+    }
+
+    /// The faults on `process` of `kind` that were injected, newest first.
+    fn fault_indices(&self, process: &str, kind: FaultKind) -> Vec<usize> {
+        let mut found: Vec<usize> = (0..self.faults.len())
+            .filter(|&i| {
+                let f = &self.config.faults[i];
+                f.process == process && f.kind == kind && self.faults[i].injected_ns.is_some()
+            })
+            .collect();
+        found.sort_by_key(|&i| std::cmp::Reverse(self.faults[i].injected_ns));
+        found
+    }
+
+    fn inject(&mut self, i: usize) {
+        let fault = self.config.faults[i].clone();
+        let index = self.index_of(&fault.process);
+        let ns = now_ns();
+        self.faults[i].injected_ns = Some(ns);
+        if !self.processes[index].running() {
+            self.note(ns, format!("{}: not injected, {} is not running", fault.describe(), fault.process));
+            return;
+        }
+        match fault.kind {
+            FaultKind::Kill => {
+                self.processes[index].signal(libc::SIGKILL);
+                self.processes[index].ready = false;
+            }
+            FaultKind::Stop => {
+                self.processes[index].signal(libc::SIGSTOP);
+                self.processes[index].stopped = true;
+                self.faults[i].continue_at =
+                    Some(Instant::now() + Duration::from_secs_f64(fault.duration_s.unwrap_or_default()));
+            }
+            _ => {}
+        }
+        self.note(ns, format!("inject: {}", fault.describe()));
+    }
+
+    /// Lockstep: once the faults due at the paused tick are in and every process is back up,
+    /// lets the plant go on.
+    fn release_pause(&mut self) -> Option<Outcome> {
+        if !self.paused || !self.processes.iter().all(|p| p.ready || p.gone) {
+            return None;
+        }
+        self.paused = false;
+        let plant = self.index_of("plant");
+        if !self.processes[plant].write_line("go") {
+            return Some(Outcome::Failed("cannot tell the plant to go on".into()));
+        }
+        None
+    }
+
+    /// Files an event; returns the index of a process whose output ended.
+    fn handle(&mut self, (index, incarnation, event): Event) -> Option<usize> {
+        let name = self.processes[index].name;
+        if incarnation != self.processes[index].incarnation {
+            // A report from an incarnation that has since been replaced.
+            if let Some(ChildEvent::StageReport(r)) = event {
+                self.reports.stages.entry(name).or_default().push(r);
+            }
+            return None;
+        }
+        match event {
+            None => {
+                // Its output ends when it exits: reap it (it may take a moment to go).
+                let until = Instant::now() + Duration::from_secs(2);
+                while !self.processes[index].try_reap() && Instant::now() < until {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                return Some(index);
+            }
+            Some(ChildEvent::Ready) => {
+                self.processes[index].ready = true;
+                if incarnation > 0 {
+                    let ns = now_ns();
+                    for i in self.fault_indices(name, FaultKind::Kill) {
+                        if self.faults[i].restarted_ns.is_none() {
+                            self.faults[i].restarted_ns = Some(ns);
+                        }
+                    }
+                    self.note(ns, format!("{name} ready again"));
+                    if name == "plant" && !self.processes[index].write_line("start") {
+                        self.note(ns, "cannot tell the restarted plant to start".into());
+                    }
+                }
+            }
+            Some(ChildEvent::Started { start_ns, .. }) => {
+                self.plant_start_ns.get_or_insert(start_ns);
+            }
+            Some(ChildEvent::Paused { k }) => {
+                let rate = self.config.rate_hz;
+                for i in 0..self.config.faults.len() {
+                    let fault = &self.config.faults[i];
+                    if fault.kind.from_outside() && fault.ticks(rate).0 == k && self.faults[i].injected_ns.is_none() {
+                        self.inject(i);
+                    }
+                }
+                self.paused = true;
+            }
+            Some(ChildEvent::Stall { process, since_ns, detected_ns }) => {
+                let kind_index = self.fault_indices(&process, FaultKind::Stop);
+                for i in kind_index {
+                    if self.faults[i].detected_ns.is_none() {
+                        self.faults[i].detected_ns = Some(detected_ns);
+                        self.faults[i].detected_by = Some("the monitor's input deadline");
+                    }
+                }
+                let waited = (detected_ns.saturating_sub(since_ns)) as f64 / 1e6;
+                self.note(detected_ns, format!("{process} stalled: its input has waited {waited:.1} ms"));
+            }
+            Some(ChildEvent::Resumed { process, at_ns }) => {
+                for i in self.fault_indices(&process, FaultKind::Stop) {
+                    if self.faults[i].resumed_ns.is_none() && self.faults[i].detected_ns.is_some() {
+                        self.faults[i].resumed_ns = Some(at_ns);
+                    }
+                }
+                self.note(at_ns, format!("{process} handles its input again"));
+            }
+            Some(ChildEvent::Status(status)) => {
+                self.last_status = Instant::now();
+                self.show(&status);
+            }
+            Some(ChildEvent::PlantReport(r)) => self.reports.plant = Some(r),
+            Some(ChildEvent::MonitorReport(r)) => self.reports.monitor = Some(*r),
+            Some(ChildEvent::StageReport(r)) => self.reports.stages.entry(name).or_default().push(r),
+        }
+        None
+    }
+
+    /// A process's output ended during the run: the run completed (the plant finished), or the
+    /// process is restarted, or the run fails. Returns the outcome if the run is over.
+    fn ended(&mut self, index: usize) -> Option<Outcome> {
+        let ns = now_ns();
+        let process = &mut self.processes[index];
+        let name = process.name;
+        process.ready = false;
+        process.stopped = false;
+        if name == "plant" {
+            // A pause belongs to the plant that asked; its successor asks again at the same tick.
+            self.paused = false;
+        }
+        let clean = process.current().exit.as_ref().is_some_and(|(_, ok)| *ok);
+        if name == "plant"
+            && clean
+            && let Some(report) = &self.reports.plant
+        {
+            return Some(match report.stalled_at {
+                Some(k) => Outcome::Failed(format!(
+                    "the loop stalled at loop {k}: no command within {} s (supervision.lockstep_stall_s)",
+                    self.config.supervision.lockstep_stall_s
+                )),
+                None => Outcome::Completed,
+            });
+        }
+        let exit = process.exit_text();
+        for i in self.fault_indices(name, FaultKind::Kill) {
+            if self.faults[i].detected_ns.is_none() {
+                self.faults[i].detected_ns = Some(ns);
+                self.faults[i].detected_by = Some("the process exited");
+            }
+        }
+        // Free what the dead process held in shared memory before its successor opens it.
+        if let Ok(removed) = ipc::remove_dead_nodes(&self.run_id) {
+            self.removed_dead_nodes += removed;
+        }
+        let process = &mut self.processes[index];
+        let restarts = process.runs.len() as u32 - 1;
+        let policy = process.policy;
+        let wanted = match policy.restart {
+            Restart::Never => false,
+            Restart::OnFailure => !clean,
+            Restart::Always => true,
+        };
+        if wanted && restarts < policy.max_restarts {
+            let backoff =
+                Duration::from_secs_f64(policy.backoff_s).saturating_mul(1 << restarts.min(20)).min(MAX_BACKOFF);
+            process.restart_at = Some(Instant::now() + backoff);
+            self.note(ns, format!("{exit}; restart in {:.0} ms", backoff.as_secs_f64() * 1e3));
+            return None;
+        }
+        let why = if wanted {
+            format!("{exit}; not restarted: it reached supervision max_restarts = {}", policy.max_restarts)
+        } else {
+            format!("{exit}; not restarted (restart = {})", restart_name(policy.restart))
+        };
+        process.gone = true;
+        self.note(ns, why.clone());
+        if name == "monitor" {
+            // The loop goes on without its recorder; the report says which loops have none.
+            return None;
+        }
+        Some(Outcome::Failed(format!("{why}; see logs/{name}.log")))
+    }
+
+    fn show(&self, status: &MonitorStatus) {
+        self.progress.set_position(status.loops_recorded);
+        let p99 = status.end_to_end_p99_ns.map_or("-".into(), |ns| format!("{:.0} µs", ns as f64 / 1000.0));
+        self.progress.set_message(format!("end-to-end p99 {p99} · deadline misses {}", status.deadline_misses));
+    }
+
     /// After a run whose plant finished: every other process must have ended cleanly too, and
     /// the monitor must have reported.
     fn check_ends(&self) -> Outcome {
         let failed: Vec<String> = self
-            .children
+            .processes
             .iter()
-            .filter(|c| !c.exit.as_ref().is_some_and(|(_, ok)| *ok))
-            .map(|c| {
-                format!("{} exited with status {}", c.name, c.exit.as_ref().map_or("unknown", |(s, _)| s.as_str()))
-            })
+            .filter(|p| !p.runs.last().and_then(|r| r.exit.as_ref()).is_some_and(|(_, ok)| *ok))
+            .map(|p| p.exit_text())
             .collect();
         if !failed.is_empty() {
             Outcome::Failed(format!("{}; see the logs folder", failed.join(", ")))
@@ -571,20 +1009,24 @@ impl Supervisor {
     /// Stops every process still running, in order, each with SIGTERM and then, past its
     /// timeout, SIGKILL; collects their reports on the way.
     fn stop_all(&mut self) {
+        self.stopping = true;
+        // A stopped process cannot act on SIGTERM.
+        for p in &self.processes {
+            p.signal(libc::SIGCONT);
+        }
         for name in STOP_ORDER {
-            // A start-up failure can leave some processes never started.
-            let Some(index) = self.children.iter().position(|c| c.name == name) else { continue };
-            if self.children[index].try_reap() {
+            let index = self.index_of(name);
+            if self.processes[index].try_reap() {
                 continue;
             }
-            self.children[index].signal(libc::SIGTERM);
+            self.processes[index].signal(libc::SIGTERM);
             let timeout = if name == "monitor" { MONITOR_STOP_TIMEOUT } else { STOP_TIMEOUT };
             let until = Instant::now() + timeout;
-            while !self.children[index].try_reap() {
+            while !self.processes[index].try_reap() {
                 if Instant::now() > until {
                     eprintln!("looplab: {name} did not stop within {} s; killing it", timeout.as_secs());
-                    self.children[index].signal(libc::SIGKILL);
-                    while !self.children[index].try_reap() {
+                    self.processes[index].signal(libc::SIGKILL);
+                    while !self.processes[index].try_reap() {
                         std::thread::sleep(Duration::from_millis(5));
                     }
                     break;
@@ -595,24 +1037,22 @@ impl Supervisor {
             }
         }
         // Every process has exited: read what is left in their pipes, until every reader is done.
-        while let Ok(event) = self.events.recv_timeout(Duration::from_secs(5)) {
+        while let Ok(event) = self.events.recv_timeout(Duration::from_millis(200)) {
             self.handle(event);
         }
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn summary(
         &self,
-        config: &LaunchConfig,
         scenario: &dyn Scenario,
-        run_id: &str,
-        run_dir: &Path,
         started_at: String,
         outcome: &Outcome,
         cleanup: ipc::Cleanup,
     ) -> Summary {
+        let config = self.config;
         let plant = self.reports.plant.clone().unwrap_or_default();
         let monitor = self.reports.monitor.clone().unwrap_or_default();
+        let counters = plant.counters;
         let wall_ns = plant.last_publish_ns.saturating_sub(plant.first_publish_ns);
         let wall_time_s = wall_ns as f64 * 1e-9;
         let stopped_because = match outcome {
@@ -626,6 +1066,47 @@ impl Supervisor {
             // Loops after the last one the monitor saw anything of.
             missing.push([monitor.loops_seen, plant.loops - 1]);
         }
+        let stage_total = |f: fn(&StageReport) -> u64| -> u64 { self.reports.stages.values().flatten().map(f).sum() };
+        let mut processes = vec![];
+        for p in &self.processes {
+            let reports = self.reports.stages.get(p.name);
+            for (n, run) in p.runs.iter().enumerate() {
+                processes.push(ProcessInfo {
+                    name: p.name.into(),
+                    incarnation: n as u32,
+                    pid: run.pid,
+                    exit: run.exit.as_ref().map_or("running".into(), |(s, _)| s.clone()),
+                    cpu_s: run.cpu_s,
+                    processed: reports.map(|r| r.iter().map(|r| r.processed).sum()),
+                    skipped: reports.map(|r| r.iter().map(|r| r.skipped).sum()),
+                });
+            }
+        }
+        let faults = config
+            .faults
+            .iter()
+            .zip(&self.faults)
+            .enumerate()
+            .map(|(i, (spec, seen))| {
+                let after = |ns: Option<u64>| match (seen.injected_ns, ns) {
+                    (Some(a), Some(b)) => Some((b as f64 - a as f64) / 1e6),
+                    _ => None,
+                };
+                FaultReport {
+                    fault: spec.describe(),
+                    kind: spec.kind.name().into(),
+                    process: spec.process.clone(),
+                    at_s: spec.at_s,
+                    injected_at_ms: seen.injected_ns.map(|ns| self.since_start_ms(ns)),
+                    detected_after_ms: after(seen.detected_ns),
+                    detected_by: seen.detected_by.map(str::to_owned),
+                    restarted_after_ms: after(seen.restarted_ns),
+                    continued_after_ms: after(seen.continued_ns),
+                    resumed_after_ms: after(seen.resumed_ns),
+                    effect: monitor.faults.get(i).cloned(),
+                }
+            })
+            .collect();
         Summary {
             scenario: config.scenario.clone(),
             title: scenario.title(),
@@ -633,31 +1114,27 @@ impl Supervisor {
             rate_hz: config.rate_hz,
             duration_s: config.duration_s,
             seed: config.seed,
-            run_id: run_id.into(),
-            run_dir: run_dir.display().to_string(),
+            run_id: self.run_id.clone(),
+            run_dir: self.run_dir.display().to_string(),
             started_at,
             loops: plant.loops,
             loops_planned: config.loops(),
             completed: matches!(outcome, Outcome::Completed) && !plant.stopped_early && plant.loops == config.loops(),
             stopped_because,
-            deadline_misses: plant.deadline_misses,
-            rejected_commands: plant.rejected_commands,
-            skipped_ticks: plant.skipped_ticks,
+            deadline_misses: counters.deadline_misses,
+            rejected_commands: counters.rejected_commands,
+            skipped_ticks: counters.skipped_ticks,
+            stale_ticks: counters.stale_ticks,
+            lost_commands: counters.lost_commands,
             loops_without_command: plant.published.saturating_sub(plant.commands),
             wall_time_s,
             loops_per_s: if wall_ns > 0 { plant.loops.saturating_sub(1) as f64 / wall_time_s } else { 0.0 },
-            processes: self
-                .children
+            restarts: self
+                .processes
                 .iter()
-                .map(|c| ProcessInfo {
-                    name: c.name.into(),
-                    pid: c.pid,
-                    exit: c.exit.as_ref().map_or("running".into(), |(s, _)| s.clone()),
-                    cpu_s: c.cpu_s,
-                    processed: self.reports.stages.get(c.name).map(|r| r.processed),
-                    skipped: self.reports.stages.get(c.name).map(|r| r.skipped),
-                })
+                .map(|p| (p.name.to_string(), p.runs.len().saturating_sub(1) as u32))
                 .collect(),
+            processes,
             latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
             jitter_ns: Jitter {
                 plant_tick: monitor.plant_tick_jitter.clone(),
@@ -670,15 +1147,26 @@ impl Supervisor {
                 missing,
                 received: monitor.received.clone(),
                 partial_rows: monitor.partial_rows,
-                loop_waits: plant.waited + self.reports.stages.values().map(|r| r.waited).sum::<u64>(),
-                dropped_for_monitor: plant.dropped + self.reports.stages.values().map(|r| r.dropped).sum::<u64>(),
+                loop_waits: plant.waited + stage_total(|r| r.waited),
+                dropped_for_monitor: plant.dropped + stage_total(|r| r.dropped),
             },
             metrics: monitor.metrics.clone(),
+            error_measure: scenario.error_measure().describe(),
+            faults,
+            timeline: self.timeline.clone(),
             shared_memory: SharedMemoryCheck {
                 clean: cleanup.leftover.is_empty(),
-                removed_dead_nodes: cleanup.removed_dead_nodes,
+                removed_dead_nodes: cleanup.removed_dead_nodes + self.removed_dead_nodes,
                 leftover: cleanup.leftover,
             },
         }
+    }
+}
+
+fn restart_name(r: Restart) -> &'static str {
+    match r {
+        Restart::Never => "never",
+        Restart::OnFailure => "on-failure",
+        Restart::Always => "always",
     }
 }

@@ -22,17 +22,19 @@ use hdrhistogram::serialization::interval_log::{IntervalLogWriterBuilder, Tag};
 use serde::{Deserialize, Serialize};
 
 use crate::clock::now_ns;
+use crate::faults::FaultKind;
 use crate::ipc::{MONITOR_BUFFER, Topic, TopicSubscriber};
 use crate::launch::Mode;
 use crate::msg::*;
 use crate::protocol::{ChildEvent, MonitorStatus, emit};
-use crate::scenarios::{Metrics, Row};
+use crate::scenarios::{ErrorMeasure, Metrics, Row};
 use crate::stages::Context;
 
 /// Sleep between drains when the queues were nearly empty.
 const POLL_PERIOD: Duration = Duration::from_millis(5);
-/// How often the live status goes to the launcher.
-const STATUS_PERIOD: Duration = Duration::from_millis(250);
+/// How often the live status goes to the launcher; it is also the monitor's heartbeat, and the
+/// files are flushed as often, so that a killed monitor loses little.
+const STATUS_PERIOD: Duration = Duration::from_millis(100);
 /// Length of one interval histogram in `latency.hlog`, in wall-clock time.
 const HLOG_INTERVAL_NS: u64 = 1_000_000_000;
 /// A loop still missing parts once this many newer loops have arrived is written as it is.
@@ -133,6 +135,230 @@ pub struct MonitorReport {
     /// Trajectory rows written with some part missing.
     pub partial_rows: u64,
     pub metrics: BTreeMap<String, f64>,
+    /// What each fault of the launch file did to the loop, in its order.
+    pub faults: Vec<FaultEffect>,
+}
+
+/// What one fault did to the loop and to the physical system, in simulation time.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct FaultEffect {
+    /// Ticks with no fresh command (none came, or it was late, rejected or lost) from the
+    /// injection until the first fresh one after the fault ended (after a kill: the first that
+    /// went through the restarted process).
+    pub outage_ticks: u64,
+    /// When fresh commands were back (None: not within the run).
+    pub commands_back_at_s: Option<f64>,
+    /// A killed process: the first loop its restarted incarnation handled.
+    pub rejoined_at_s: Option<f64>,
+    /// The scenario's error measure, worst value from the injection until fresh commands were
+    /// back, and after that until the next fault or the end of the run.
+    pub worst_error_during: Option<f64>,
+    pub worst_error_after: Option<f64>,
+    /// From the end of the fault (a kill: the injection) until the error is back within the
+    /// scenario's band for good; None if it did not come back before the next fault or the end.
+    pub recovery_s: Option<f64>,
+    /// The error stayed below the scenario's limit from the injection to the next fault or the end.
+    pub within_limits: bool,
+    /// The largest error in the first second from the injection and in the last second before
+    /// the next fault or the end: their ratio shows an oscillation growing (an unstable loop)
+    /// or dying out.
+    pub error_peak_first_s: Option<f64>,
+    pub error_peak_last_s: Option<f64>,
+}
+
+/// Follows one fault through the loops the monitor writes.
+struct FaultTracker {
+    /// The process's slot in `Header::incarnations`, if it has one.
+    slot: Option<usize>,
+    from: u64,
+    /// The first tick after the fault.
+    end: u64,
+    /// The first tick of the next fault, or the end of the run.
+    window_end: u64,
+    /// Ticks in a second.
+    second: u64,
+    incarnation_before: Option<u32>,
+    /// A kill: the fault is over once the restarted process is in the loop.
+    after_restart: bool,
+    back: Option<u64>,
+    rejoined: Option<u64>,
+    last_outside: Option<u64>,
+    effect: FaultEffect,
+}
+
+impl FaultTracker {
+    fn new(config: &crate::launch::LaunchConfig) -> Vec<Self> {
+        let loops = config.loops();
+        let starts: Vec<u64> = config.faults.iter().map(|f| f.ticks(config.rate_hz).0).collect();
+        config
+            .faults
+            .iter()
+            .zip(&starts)
+            .map(|(f, &from)| {
+                let end = match f.kind {
+                    FaultKind::Kill => from,
+                    // A stop lasts wall-clock time, which only passes for the loop in real time.
+                    FaultKind::Stop if config.mode == Mode::Lockstep => from,
+                    FaultKind::Stop => from + (f.duration_s.unwrap_or_default() * config.rate_hz).round() as u64,
+                    _ => f.ticks(config.rate_hz).1.unwrap_or(loops),
+                };
+                let window_end = starts.iter().copied().filter(|&s| s > from).min().unwrap_or(loops);
+                Self {
+                    slot: crate::faults::PROCESSES.iter().position(|p| *p == f.process).filter(|&i| i < 4),
+                    from,
+                    end,
+                    window_end,
+                    second: config.rate_hz.round() as u64,
+                    incarnation_before: None,
+                    after_restart: f.kind == FaultKind::Kill,
+                    back: None,
+                    rejoined: None,
+                    last_outside: None,
+                    effect: FaultEffect { within_limits: true, ..Default::default() },
+                }
+            })
+            .collect()
+    }
+
+    fn observe(&mut self, k: u64, part: &Partial, measure: &ErrorMeasure) {
+        let incarnation = self.slot.zip(part.record.as_ref()).map(|(i, r)| r.header.incarnations[i]);
+        if k < self.from {
+            self.incarnation_before = incarnation.or(self.incarnation_before);
+            return;
+        }
+        if k >= self.window_end {
+            return;
+        }
+        if self.rejoined.is_none()
+            && self.incarnation_before.is_some()
+            && incarnation.is_some_and(|i| Some(i) != self.incarnation_before)
+        {
+            self.rejoined = Some(k);
+        }
+        let fresh = part.record.as_ref().is_some_and(|r| r.deadline_miss == 0 && r.rejected == 0 && r.lost == 0);
+        // After a kill, commands are back once they carry the restarted process's work (a
+        // command or two may still come from before the kill landed).
+        let restarted = !self.after_restart || self.rejoined.is_some();
+        if self.back.is_none() {
+            if fresh && k >= self.end && restarted {
+                self.back = Some(k);
+            } else if !fresh {
+                self.effect.outage_ticks += 1;
+            }
+        }
+        if let Some(state) = &part.state {
+            let error = (measure.of_state)(&state.x);
+            let worst = if self.back.is_none() {
+                &mut self.effect.worst_error_during
+            } else {
+                &mut self.effect.worst_error_after
+            };
+            *worst = Some(worst.map_or(error, |w: f64| w.max(error)));
+            let peak = |p: &mut Option<f64>| *p = Some(p.map_or(error, |v: f64| v.max(error)));
+            if k < self.from + self.second {
+                peak(&mut self.effect.error_peak_first_s);
+            }
+            if k + self.second >= self.window_end {
+                peak(&mut self.effect.error_peak_last_s);
+            }
+            // NaN counts as outside.
+            if error.is_nan() || error >= measure.limit {
+                self.effect.within_limits = false;
+            }
+            if error.is_nan() || error > measure.recovery_band {
+                self.last_outside = Some(k);
+            }
+        }
+    }
+
+    fn finish(mut self, dt: f64) -> FaultEffect {
+        let at = |k: u64| k as f64 * dt;
+        self.effect.commands_back_at_s = self.back.map(at);
+        self.effect.rejoined_at_s = self.rejoined.map(at);
+        self.effect.recovery_s = match self.last_outside {
+            _ if self.end >= self.window_end => None,
+            None => Some(0.0),
+            Some(k) if k < self.end => Some(0.0),
+            Some(k) if k + 1 >= self.window_end => None,
+            Some(k) => Some(at(k + 1 - self.end)),
+        };
+        self.effect
+    }
+}
+
+/// Finds stalled processes from the data alone: a process whose newest input is newer than its
+/// newest output for longer than the stall timeout has stopped handling its input (iceoryx2
+/// reports a SIGSTOPped process as alive). In real time the plant must also publish every
+/// period. Checked each time the monitor drains its queues, so detection comes within one poll
+/// (5 ms) of the timeout.
+struct StallWatch {
+    timeout_ns: u64,
+    mode: Mode,
+    /// The plant's last tick: after it, silence is the end of the run.
+    last_tick: u64,
+    /// Newest k seen on state, measurements, estimate, command.
+    newest: [Option<u64>; 4],
+    /// When the monitor last saw a new state.
+    state_seen_ns: u64,
+    /// Per process (plant, sensors, estimator, controller): since when its input has waited.
+    waiting: [Option<u64>; 4],
+    stalled: [bool; 4],
+}
+
+impl StallWatch {
+    fn new(context: &Context) -> Self {
+        Self {
+            timeout_ns: (context.config.supervision.stall_timeout_s * 1e9) as u64,
+            mode: context.config.mode,
+            last_tick: context.config.loops().saturating_sub(1),
+            newest: [None; 4],
+            state_seen_ns: now_ns(),
+            waiting: [None; 4],
+            stalled: [false; 4],
+        }
+    }
+
+    fn saw(&mut self, topic: usize, k: u64) {
+        if topic == 0 && self.newest[0].is_none_or(|n| k > n) {
+            self.state_seen_ns = now_ns();
+        }
+        self.newest[topic] = self.newest[topic].max(Some(k));
+    }
+
+    /// Events for processes that stalled or came back since the last check.
+    fn check(&mut self) -> Vec<ChildEvent> {
+        let now = now_ns();
+        let mut events = vec![];
+        let plant_done = self.newest[0].is_some_and(|k| k >= self.last_tick);
+        for process in 0..4 {
+            let waiting = match process {
+                // The plant's input is the command for its newest state (lockstep), or its
+                // clock (real time).
+                0 => {
+                    !plant_done
+                        && match self.mode {
+                            Mode::Lockstep => self.newest[3].is_some() && self.newest[3] >= self.newest[0],
+                            Mode::Realtime => now.saturating_sub(self.state_seen_ns) > self.timeout_ns,
+                        }
+                }
+                p => self.newest[p - 1].is_some_and(|input| self.newest[p].is_none_or(|output| input > output)),
+            };
+            let name = crate::faults::PROCESSES[process].to_owned();
+            if !waiting {
+                self.waiting[process] = None;
+                if std::mem::take(&mut self.stalled[process]) {
+                    events.push(ChildEvent::Resumed { process: name, at_ns: now });
+                }
+                continue;
+            }
+            let since = *self.waiting[process].get_or_insert(now);
+            if !self.stalled[process] && now - since >= self.timeout_ns {
+                self.stalled[process] = true;
+                events.push(ChildEvent::Stall { process: name, since_ns: since, detected_ns: now });
+            }
+        }
+        events
+    }
 }
 
 /// A message from the receive loop to the writer. Samples are moved, not boxed: one copy per
@@ -213,22 +439,29 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     let (tx, rx) = crossbeam_channel::unbounded();
     let writer = std::thread::Builder::new().name("monitor-writer".into()).spawn(move || writer.run(rx))?;
 
-    let drain = || -> Result<usize> {
+    let mut watch = StallWatch::new(context);
+    let mut drain = || -> Result<usize> {
         let mut n = 0;
         macro_rules! take {
-            ($sub:expr, $variant:ident) => {
+            ($sub:expr, $variant:ident, $topic:expr) => {
                 while let Some(s) = $sub.receive()? {
                     n += 1;
+                    if let Some(topic) = $topic {
+                        watch.saw(topic, s.header.k);
+                    }
                     tx.send(Sample::$variant(s)).map_err(|_| anyhow!("the monitor's writer stopped"))?;
                 }
             };
         }
         // In the order data flows, so a loop's parts tend to arrive together.
-        take!(states, State);
-        take!(measurements, Measurements);
-        take!(estimates, Estimate);
-        take!(commands, Command);
-        take!(records, Record);
+        take!(states, State, Some(0));
+        take!(measurements, Measurements, Some(1));
+        take!(estimates, Estimate, Some(2));
+        take!(commands, Command, Some(3));
+        take!(records, Record, None::<usize>);
+        for event in watch.check() {
+            emit(&event)?;
+        }
         Ok(n)
     };
     while !context.stop.requested() {
@@ -271,11 +504,25 @@ struct Writer {
     last_counters: PlantCounters,
     report: MonitorReport,
     last_status: Instant,
+    measure: ErrorMeasure,
+    faults: Vec<FaultTracker>,
+    /// A restarted monitor starts at the first loop it sees; the first one starts at 0.
+    started: bool,
 }
 
-fn create(dir: &Path, name: &str) -> Result<BufWriter<File>> {
+/// Creates an output file, or, for a restarted monitor, appends to what the last one wrote;
+/// returns whether the file is new (and needs its header).
+fn create(dir: &Path, name: &str, restarted: bool) -> Result<(BufWriter<File>, bool)> {
     let path = dir.join(name);
-    Ok(BufWriter::new(File::create(&path).with_context(|| format!("create {}", path.display()))?))
+    let append = restarted && path.exists();
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .append(append)
+        .truncate(!append)
+        .open(&path)
+        .with_context(|| format!("create {}", path.display()))?;
+    Ok((BufWriter::new(file), !append))
 }
 
 impl Writer {
@@ -286,7 +533,8 @@ impl Writer {
         let sensor_names: Vec<String> = config.sensors.keys().cloned().collect();
         let sensor_dims: Vec<usize> = config.sensors.values().map(|s| config.signal_of(s).components.len()).collect();
 
-        let mut trajectory = create(dir, "trajectory.csv")?;
+        let restarted = context.incarnation > 0;
+        let (mut trajectory, new_trajectory) = create(dir, "trajectory.csv", restarted)?;
         let mut columns: Vec<String> = vec!["k".into(), "t".into()];
         columns.extend(scenario.state_names().iter().map(|n| n.to_string()));
         for (name, spec) in &config.sensors {
@@ -297,18 +545,22 @@ impl Writer {
         }
         columns.extend(scenario.estimate_names().iter().map(|n| format!("est.{n}")));
         columns.extend(scenario.input_names().iter().map(|n| format!("cmd.{n}")));
-        writeln!(trajectory, "{}", columns.join(","))?;
+        if new_trajectory {
+            writeln!(trajectory, "{}", columns.join(","))?;
+        }
 
-        let mut loops = create(dir, "loops.csv")?;
+        let (mut loops, new_loops) = create(dir, "loops.csv", restarted)?;
         let mut columns: Vec<String> = vec!["k".into(), "t".into()];
         columns.extend(LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")));
         columns.extend(
             ["end_to_end_ns", "deadline_miss", "rejected", "tick_scheduled_ns", "tick_wake_ns", "tick_period_ns"]
                 .map(String::from),
         );
-        writeln!(loops, "{}", columns.join(","))?;
+        if new_loops {
+            writeln!(loops, "{}", columns.join(","))?;
+        }
 
-        let hlog = create(dir, "latency.hlog")?;
+        let (hlog, new_hlog) = create(dir, "latency.hlog", restarted)?;
 
         Ok(Self {
             mode: config.mode,
@@ -335,10 +587,13 @@ impl Writer {
             wake: Recorder::new(),
             interval_start: None,
             first_publish: None,
-            hlog_started: false,
+            hlog_started: !new_hlog,
             last_counters: PlantCounters::default(),
             report: MonitorReport::default(),
             last_status: Instant::now(),
+            measure: scenario.error_measure(),
+            faults: FaultTracker::new(config),
+            started: context.incarnation == 0,
         })
     }
 
@@ -352,6 +607,9 @@ impl Writer {
             if self.last_status.elapsed() >= STATUS_PERIOD {
                 self.last_status = Instant::now();
                 self.status()?;
+                for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog] {
+                    file.flush().with_context(|| format!("write to {}", self.run_dir.display()))?;
+                }
             }
         }
         // Everything has arrived: write the loops still waiting for parts.
@@ -367,6 +625,14 @@ impl Writer {
 
     fn take(&mut self, sample: Sample) -> Result<()> {
         let (k, topic) = sample.key();
+        if !self.started {
+            // The loops before this one were the last monitor's; this report has no record of them.
+            self.started = true;
+            self.next_k = k;
+            if k > 0 {
+                self.report.missing_records.push([0, k - 1]);
+            }
+        }
         *self.report.received.entry(TOPICS[topic].name().to_owned()).or_default() += 1;
         if TOPICS[topic] == Topic::Loop {
             self.report.records += 1;
@@ -450,6 +716,9 @@ impl Writer {
             }
         }
 
+        for fault in &mut self.faults {
+            fault.observe(k, &part, &self.measure);
+        }
         self.write_loop_row(k, t, &part, end_to_end)?;
         self.write_trajectory_row(k, t, &part)
     }
@@ -575,6 +844,7 @@ impl Writer {
         report.plant_wake_latency = self.wake.stats();
         report.data_age = self.sensor_names.iter().cloned().zip(self.data_age.iter().map(Recorder::stats)).collect();
         report.metrics = self.metrics.finish();
+        report.faults = self.faults.into_iter().map(|f| f.finish(self.dt)).collect();
         Ok(report)
     }
 }

@@ -73,6 +73,14 @@ pub struct Header {
     /// Simulation time of tick k, in seconds.
     pub t: f64,
     pub trace: LoopTrace,
+    /// Which incarnation of the plant, sensors, estimator and controller (0 before the first
+    /// restart) handled this loop, so that downstream stages and the monitor see a restart in
+    /// the data itself.
+    pub incarnations: [u32; 4],
+    /// 1 if an upstream stage dropped this loop's output (a `drop` fault in lockstep mode): the
+    /// message only carries the loop on; stages pass it through and the plant holds its command.
+    pub lost: u32,
+    pub _reserved: u32,
 }
 
 /// How the plant's clock behaved at the tick that produced a state (real-time mode only;
@@ -91,7 +99,7 @@ pub struct TickTiming {
 
 /// Running totals kept by the plant, sent with every state so that the last state seen tells
 /// the monitor where the run stands.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
 #[type_name("looplab::PlantCounters")]
 #[repr(C)]
 pub struct PlantCounters {
@@ -99,8 +107,14 @@ pub struct PlantCounters {
     pub deadline_misses: u64,
     /// Commands rejected as non-finite or out of range (the last valid one is held).
     pub rejected_commands: u64,
-    /// Timer periods that passed with no wake-up at all (the plant process was held up).
+    /// Timer periods that passed with no wake-up at all (the plant process was held up, or
+    /// dead: the ticks it missed are integrated when it comes back).
     pub skipped_ticks: u64,
+    /// Ticks integrated with `on_stale` applied: the newest command was older than the
+    /// command timeout (real-time mode).
+    pub stale_ticks: u64,
+    /// Commands that arrived marked lost (lockstep `drop` faults); the last command was held.
+    pub lost_commands: u64,
 }
 
 /// The true state of the plant at tick k, published once per tick.
@@ -171,6 +185,9 @@ pub struct LoopRecord {
     pub deadline_miss: u32,
     /// 1 if the plant rejected the command (non-finite or out of range).
     pub rejected: u32,
+    /// 1 if the command arrived marked lost (lockstep `drop` fault); the plant held its last.
+    pub lost: u32,
+    pub _reserved: u32,
 }
 
 /// All-zero values: every message is plain numbers, so zero is a valid starting point.
@@ -195,10 +212,10 @@ mod tests {
     fn messages_are_fixed_size_and_small() {
         // Sizes are part of the contract between processes; a change here changes the wire
         // format (iceoryx2 also refuses mismatched layouts at connect time).
-        assert_eq!(std::mem::size_of::<Header>(), 80);
-        assert_eq!(std::mem::size_of::<PlantState>(), 80 + 8 * (MAX_STATE + MAX_INPUT) + 48);
+        assert_eq!(std::mem::size_of::<Header>(), 104);
+        assert_eq!(std::mem::size_of::<PlantState>(), 104 + 8 * (MAX_STATE + MAX_INPUT) + 64);
         assert_eq!(std::mem::size_of::<SensorReading>(), 8 * MAX_SENSOR_DIM + 24);
-        assert_eq!(std::mem::size_of::<Command>(), 80 + 8 * MAX_INPUT);
+        assert_eq!(std::mem::size_of::<Command>(), 104 + 8 * MAX_INPUT);
         assert!(std::mem::size_of::<Measurements>() < 1200);
     }
 

@@ -28,12 +28,39 @@ pub struct ProcessArgs {
     /// The run folder, where the monitor writes its files.
     #[arg(long)]
     pub run_dir: PathBuf,
+    /// 0 for the first start of this process in the run, then one more per restart.
+    #[arg(long, default_value_t = 0)]
+    pub incarnation: u32,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum ChildEvent {
     Ready,
+    /// The plant started ticking: tick `k` was at `start_ns` + k·`period_ns` (CLOCK_MONOTONIC;
+    /// period 0 in lockstep mode, which has no schedule).
+    Started {
+        start_ns: u64,
+        period_ns: u64,
+        k: u64,
+    },
+    /// Lockstep: the plant holds tick k before its state goes out, for a fault due there; it
+    /// goes on when the launcher writes `go`.
+    Paused {
+        k: u64,
+    },
+    /// The monitor saw a process stop handling its input (`since_ns`: the input it has not
+    /// handled arrived then) and noticed at `detected_ns`.
+    Stall {
+        process: String,
+        since_ns: u64,
+        detected_ns: u64,
+    },
+    /// ... and handle it again.
+    Resumed {
+        process: String,
+        at_ns: u64,
+    },
     Status(MonitorStatus),
     PlantReport(PlantReport),
     StageReport(StageReport),
@@ -56,9 +83,11 @@ pub struct PlantReport {
     pub published: u64,
     /// Commands received (in time or late).
     pub commands: u64,
-    pub deadline_misses: u64,
-    pub rejected_commands: u64,
-    pub skipped_ticks: u64,
+    pub counters: crate::msg::PlantCounters,
+    /// A restarted plant: the tick its snapshot held.
+    pub restored_at: Option<u64>,
+    /// Lockstep: the loop whose command never came (`supervision.lockstep_stall_s`).
+    pub stalled_at: Option<u64>,
     /// CLOCK_MONOTONIC of the first and last state published.
     pub first_publish_ns: u64,
     pub last_publish_ns: u64,
@@ -80,6 +109,10 @@ pub struct StageReport {
     pub waited: u64,
     /// Outputs dropped for a reader that stayed full past the lockstep limit.
     pub dropped: u64,
+    /// Outputs dropped by a `drop` fault.
+    pub dropped_by_fault: u64,
+    /// Times an upstream process was seen restarted (a new incarnation in the data).
+    pub upstream_restarts: u64,
 }
 
 /// Writes one event line on stdout for the launcher.
@@ -89,9 +122,9 @@ pub fn emit(event: &ChildEvent) -> Result<()> {
     writeln!(out, "{line}").and_then(|_| out.flush()).context("write event to the launcher")
 }
 
-/// Blocks until the launcher writes `start` on stdin. Returns false if a stop was requested or
-/// the launcher went away first.
-pub fn wait_for_start(stop: &StopFlag) -> Result<bool> {
+/// Blocks until the launcher writes `expected` as a line on stdin. Returns false if a stop was
+/// requested or the launcher went away first.
+pub fn wait_for_line(stop: &StopFlag, expected: &str) -> Result<bool> {
     let mut line = Vec::new();
     while !stop.requested() {
         let mut pfd = libc::pollfd { fd: 0, events: libc::POLLIN, revents: 0 };
@@ -107,7 +140,7 @@ pub fn wait_for_start(stop: &StopFlag) -> Result<bool> {
             return Ok(false);
         }
         if byte[0] == b'\n' {
-            if line == b"start" {
+            if line == expected.as_bytes() {
                 return Ok(true);
             }
             line.clear();

@@ -30,6 +30,10 @@ pub struct Summary {
     pub deadline_misses: u64,
     pub rejected_commands: u64,
     pub skipped_ticks: u64,
+    /// Ticks integrated with `supervision.on_stale` applied (real time: no fresh command).
+    pub stale_ticks: u64,
+    /// Commands that arrived marked lost (lockstep `drop` faults).
+    pub lost_commands: u64,
     /// Loops whose state went out but whose command never reached the plant: a stage was held
     /// up and a newer input replaced it (real-time mode; each is also a deadline miss).
     pub loops_without_command: u64,
@@ -37,6 +41,9 @@ pub struct Summary {
     pub wall_time_s: f64,
     /// Loops per wall-clock second over that time.
     pub loops_per_s: f64,
+    /// Restarts per process.
+    pub restarts: BTreeMap<String, u32>,
+    /// One entry per start of each process.
     pub processes: Vec<ProcessInfo>,
     pub latency_ns: Latency,
     pub jitter_ns: Jitter,
@@ -44,12 +51,59 @@ pub struct Summary {
     pub data_age_ns: BTreeMap<String, Stats>,
     pub monitor: MonitorCounts,
     pub metrics: BTreeMap<String, f64>,
+    /// What the fault report's errors measure, the band a recovery must reach and the limit
+    /// the physical system must stay within.
+    pub error_measure: ErrorMeasureInfo,
+    pub faults: Vec<FaultReport>,
+    /// What the launcher saw, in order: injections, exits, restarts, stalls.
+    pub timeline: Vec<TimelineEntry>,
     pub shared_memory: SharedMemoryCheck,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct ErrorMeasureInfo {
+    pub name: String,
+    pub recovery_band: f64,
+    pub limit: f64,
+}
+
+/// One injected fault: what the launcher saw (wall-clock, from the injection) and what it did
+/// to the loop and the physical system (simulation time, from the monitor).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct FaultReport {
+    /// In the `--fault` form.
+    pub fault: String,
+    pub kind: String,
+    pub process: String,
+    /// Simulation time of the injection.
+    pub at_s: f64,
+    /// When the launcher injected it (kill, stop), ms after tick 0 in wall-clock time.
+    pub injected_at_ms: Option<f64>,
+    /// Kill: until the launcher saw the process exit. Stop: until the monitor's input deadline
+    /// (or, for the monitor itself, its silent heartbeat) flagged it.
+    pub detected_after_ms: Option<f64>,
+    pub detected_by: Option<String>,
+    /// Kill: until the restarted process reported its ports up.
+    pub restarted_after_ms: Option<f64>,
+    /// Stop: until SIGCONT was sent, and until the monitor saw the process handle input again.
+    pub continued_after_ms: Option<f64>,
+    pub resumed_after_ms: Option<f64>,
+    /// None when the monitor has no record of the fault's loops.
+    pub effect: Option<crate::monitor::FaultEffect>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TimelineEntry {
+    /// Wall-clock ms after tick 0.
+    pub at_ms: f64,
+    pub event: String,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ProcessInfo {
     pub name: String,
+    /// 0 for the first start, then one more per restart.
+    pub incarnation: u32,
     pub pid: u32,
     /// Exit status as text: "0", "1", "signal 9", or "running" if it never ended.
     pub exit: String,
@@ -178,6 +232,8 @@ pub fn render(s: &Summary) -> String {
         stats_row(&mut out, &format!("data age: {sensor}"), stats);
     }
 
+    render_faults(&mut out, s);
+
     let _ = writeln!(out, "\n  metrics");
     for (name, value) in &s.metrics {
         let _ = writeln!(out, "    {name:<34}{value:>14.6}");
@@ -187,7 +243,10 @@ pub fn render(s: &Summary) -> String {
         "\n  processes: {}",
         s.processes
             .iter()
-            .map(|p| format!("{} (pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s))
+            .map(|p| {
+                let again = if p.incarnation > 0 { format!(" restart {}", p.incarnation) } else { String::new() };
+                format!("{}{again} (pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s)
+            })
             .collect::<Vec<_>>()
             .join(", ")
     );
@@ -198,4 +257,56 @@ pub fn render(s: &Summary) -> String {
     };
     let _ = writeln!(out, "  run folder: {}", s.run_dir);
     out
+}
+
+fn ms(value: Option<f64>) -> String {
+    value.map_or("-".into(), |v| format!("{v:.1}"))
+}
+
+/// The faults table and the timeline.
+fn render_faults(out: &mut String, s: &Summary) {
+    if s.faults.is_empty() {
+        return;
+    }
+    let m = &s.error_measure;
+    let _ = writeln!(
+        out,
+        "\n  faults (wall-clock ms from the injection; error = {}, recovery band {}, limit {})",
+        m.name, m.recovery_band, m.limit
+    );
+    let _ = writeln!(
+        out,
+        "  {:<40}{:>10}{:>10}{:>9}{:>12}{:>12}{:>11}  limits",
+        "fault", "detected", "restarted", "outage", "worst in", "worst after", "recovery"
+    );
+    for f in &s.faults {
+        let back = f.restarted_after_ms.or(f.resumed_after_ms);
+        let (outage, during, after, recovery, limits) = match &f.effect {
+            Some(e) => (
+                format!("{} ticks", e.outage_ticks),
+                e.worst_error_during.map_or("-".into(), |v| format!("{v:.4}")),
+                e.worst_error_after.map_or("-".into(), |v| format!("{v:.4}")),
+                e.recovery_s.map_or("never".into(), |v| format!("{v:.3} s")),
+                if e.within_limits { "kept" } else { "EXCEEDED" },
+            ),
+            None => ("-".into(), "-".into(), "-".into(), "-".into(), "no record"),
+        };
+        let _ = writeln!(
+            out,
+            "  {:<40}{:>10}{:>10}{:>9}{:>12}{:>12}{:>11}  {limits}",
+            f.fault,
+            ms(f.detected_after_ms),
+            ms(back),
+            outage,
+            during,
+            after,
+            recovery
+        );
+    }
+    if !s.timeline.is_empty() {
+        let _ = writeln!(out, "\n  timeline (wall-clock ms after tick 0)");
+        for entry in &s.timeline {
+            let _ = writeln!(out, "  {:>10.1}  {}", entry.at_ms, entry.event);
+        }
+    }
 }

@@ -40,7 +40,7 @@ pub struct SensorEmulator {
 }
 
 /// FNV-1a: a fixed, documented hash, so seeds do not depend on the standard library's hasher.
-fn fnv1a(text: &str) -> u64 {
+pub(crate) fn fnv1a(text: &str) -> u64 {
     text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
 }
 

@@ -46,7 +46,7 @@ pub struct Signal {
 }
 
 /// A configured scenario: the names of its vectors and factories for its loop stages.
-pub trait Scenario: Send {
+pub trait Scenario: Send + Sync {
     /// One line for reports, for example "reaction-wheel pendulum, bias-observer".
     fn title(&self) -> String;
     fn state_names(&self) -> &'static [&'static str];
@@ -58,6 +58,46 @@ pub trait Scenario: Send {
     fn estimator(&self) -> Box<dyn Estimator>;
     fn controller(&self) -> Box<dyn Controller>;
     fn metrics(&self) -> Box<dyn Metrics>;
+    /// How fault reports judge the physical system.
+    fn error_measure(&self) -> ErrorMeasure;
+    /// The loop's delay margin from the linearised model: the smallest extra controller delay,
+    /// in ticks, at which the sampled loop is unstable. None if the scenario has no such model.
+    fn delay_margin(&self, _config: &LaunchConfig) -> Option<TheoreticalMargin> {
+        None
+    }
+}
+
+/// A delay margin from theory, for `looplab sweep` to print next to the measured one.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct TheoreticalMargin {
+    /// Exact, from the spectral radius of the linearised sampled loop.
+    pub ticks: u32,
+    /// Continuous-time estimate: phase margin over crossover frequency, in ticks.
+    pub continuous_ticks: f64,
+    /// The same with the delays that sampling adds on each path (command hold, sensor holds).
+    pub lagged_ticks: f64,
+    pub crossover_rad_s: f64,
+    pub phase_margin_deg: f64,
+    /// Per-tick spectral radius one tick below the margin and at it.
+    pub radius_before: f64,
+    pub radius_at_margin: f64,
+}
+
+/// How far the physical system is from where it should be, for fault reports: the worst value
+/// during and after a fault, the band it must come back within (recovery), and the limit it
+/// must never pass (for the pendulum: the angle at which it has fallen).
+#[derive(Debug, Clone, Copy)]
+pub struct ErrorMeasure {
+    pub name: &'static str,
+    pub of_state: fn(&[f64]) -> f64,
+    pub recovery_band: f64,
+    pub limit: f64,
+}
+
+impl ErrorMeasure {
+    pub fn describe(&self) -> crate::report::ErrorMeasureInfo {
+        crate::report::ErrorMeasureInfo { name: self.name.into(), recovery_band: self.recovery_band, limit: self.limit }
+    }
 }
 
 /// The physical model: the truth.
@@ -65,13 +105,25 @@ pub trait Plant {
     fn state(&self) -> &[f64];
     /// Advances one loop period with the input held constant (zero-order hold).
     fn step(&mut self, u: &[f64], dt: f64);
+    /// Sets the state, for a restarted plant going on from its snapshot.
+    fn restore(&mut self, state: &[f64]);
 }
 
 pub trait Estimator {
     /// Takes every sensor's held reading at simulation time `t` and the input the actuator
     /// applied over the last interval; writes the estimate.
     fn update(&mut self, t: f64, readings: &[SensorReading], u_applied: &[f64], estimate: &mut [f64]);
+    /// Slow states worth keeping across a restart, such as a calibrated sensor bias; the fast
+    /// ones start again from the current measurements. None: nothing to keep (yet).
+    fn calibration(&self) -> Option<Calibration> {
+        None
+    }
+    /// A restarted estimator gets its predecessor's calibration before its first update.
+    fn resume(&mut self, _calibration: &Calibration) {}
 }
+
+/// Up to eight numbers an estimator keeps across restarts.
+pub type Calibration = [f64; 8];
 
 pub trait Controller {
     fn update(&mut self, t: f64, estimate: &[f64], command: &mut [f64]);

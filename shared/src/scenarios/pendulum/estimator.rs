@@ -36,7 +36,7 @@ use crate::scenarios::Estimator;
 
 /// RK4 steps per loop interval: the fastest default error pole (about −200 s⁻¹ in the
 /// bias observer's l₁) stays far inside RK4's stability region at 1 kHz.
-const SUBSTEPS: u32 = 4;
+pub(super) const SUBSTEPS: u32 = 4;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -75,6 +75,8 @@ pub struct PendulumEstimator {
     wheel_speed: usize,
     /// (θ̂, θ̂̇, δ̂) and the time it holds for; None until the first encoder reading.
     state: Option<(Vector3<f64>, f64)>,
+    /// A restarted bias observer: its predecessor's bias estimate, to start from.
+    resumed_bias: f64,
 }
 
 impl PendulumEstimator {
@@ -86,7 +88,17 @@ impl PendulumEstimator {
         encoder: usize,
         wheel_speed: usize,
     ) -> Self {
-        Self { kind, a: model.a(), b: model.b(), bias_gains, no_bias_gains, encoder, wheel_speed, state: None }
+        Self {
+            kind,
+            a: model.a(),
+            b: model.b(),
+            bias_gains,
+            no_bias_gains,
+            encoder,
+            wheel_speed,
+            state: None,
+            resumed_bias: 0.0,
+        }
     }
 
     fn propagate(&self, x: Vector3<f64>, y: f64, current: f64, h: f64) -> Vector3<f64> {
@@ -124,8 +136,9 @@ impl Estimator for PendulumEstimator {
         if encoder.valid != 0 {
             let y = encoder.value[0];
             self.state = Some(match self.state {
-                // Start from the reading, at rest, with no bias: all the observer knows.
-                None => (Vector3::new(y, 0.0, 0.0), t),
+                // Start from the reading, at rest, with the bias known so far (none at the start
+                // of a run): all the observer knows.
+                None => (Vector3::new(y - self.resumed_bias, 0.0, self.resumed_bias), t),
                 Some((x, t_last)) => (self.propagate(x, y, u_applied[0], t - t_last), t),
             });
         }
@@ -134,6 +147,24 @@ impl Estimator for PendulumEstimator {
         estimate[1] = x[1];
         estimate[2] = if speed.valid != 0 { speed.value[0] } else { 0.0 };
         estimate[3] = x[2];
+    }
+
+    /// The bias estimate: it takes the observer about 0.4 s to find, and a restarted observer
+    /// that starts from zero commands the full current limit the wrong way meanwhile (the
+    /// pendulum falls), so it outlives the process.
+    fn calibration(&self) -> Option<crate::scenarios::Calibration> {
+        let (x, _) = self.state?;
+        (self.kind == Kind::BiasObserver).then(|| {
+            let mut c = [0.0; 8];
+            c[0] = x[2];
+            c
+        })
+    }
+
+    fn resume(&mut self, calibration: &crate::scenarios::Calibration) {
+        if self.kind == Kind::BiasObserver {
+            self.resumed_bias = calibration[0];
+        }
     }
 }
 

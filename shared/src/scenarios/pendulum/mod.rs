@@ -8,6 +8,7 @@
 
 pub mod controller;
 pub mod estimator;
+pub mod margin;
 pub mod plant;
 pub mod sensors;
 
@@ -19,7 +20,7 @@ use serde::Deserialize;
 use self::controller::StateFeedback;
 use self::estimator::{Kind, PendulumEstimator};
 use self::plant::{Model, PendulumPlant};
-use super::{Controller, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry};
+use super::{Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry, TheoreticalMargin};
 use crate::launch::{LaunchConfig, LaunchError};
 
 pub const ENTRY: ScenarioEntry = ScenarioEntry {
@@ -27,7 +28,7 @@ pub const ENTRY: ScenarioEntry = ScenarioEntry {
     description: "reaction-wheel inverted pendulum with a biased encoder, LQR and a bias observer (paper 003)",
     file: "launch/pendulum.toml",
     text: include_str!("../../../../launch/pendulum.toml"),
-    sections: &["model", "plant", "estimator", "controller"],
+    sections: &["model", "plant", "estimator", "controller", "limits"],
     signals: sensors::SIGNALS,
     build,
 };
@@ -69,6 +70,16 @@ struct ObserverSection<const N: usize> {
     gains: Option<[f64; N]>,
 }
 
+/// How fault reports judge the pendulum.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LimitsSection {
+    /// |θ| beyond which the pendulum has fallen, rad.
+    fall_angle_rad: f64,
+    /// |θ| within which it counts as recovered, rad.
+    recovery_band_rad: f64,
+}
+
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ControllerSection {
@@ -101,6 +112,7 @@ pub struct Pendulum {
     bias_gains: Vector3<f64>,
     no_bias_gains: nalgebra::Vector2<f64>,
     controller: ControllerSection,
+    limits: LimitsSection,
     encoder: usize,
     wheel_speed: usize,
     bias_true: f64,
@@ -108,58 +120,72 @@ pub struct Pendulum {
 }
 
 fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
-    let model: Model = c.section("model")?;
-    for (key, value) in [
-        ("m_p", model.m_p),
-        ("l_p", model.l_p),
-        ("j_p", model.j_p),
-        ("m_r", model.m_r),
-        ("l_r", model.l_r),
-        ("j_r", model.j_r),
-        ("g", model.g),
-        ("torque_constant", model.torque_constant),
-        ("current_limit_a", model.current_limit_a),
-    ] {
-        if !(value.is_finite() && value > 0.0) {
-            return Err(c.error(&format!("model.{key}"), format!("must be a positive number, got {value}")));
+    Ok(Box::new(Pendulum::from_config(c)?))
+}
+
+impl Pendulum {
+    pub fn from_config(c: &LaunchConfig) -> Result<Self, LaunchError> {
+        let model: Model = c.section("model")?;
+        for (key, value) in [
+            ("m_p", model.m_p),
+            ("l_p", model.l_p),
+            ("j_p", model.j_p),
+            ("m_r", model.m_r),
+            ("l_r", model.l_r),
+            ("j_r", model.j_r),
+            ("g", model.g),
+            ("torque_constant", model.torque_constant),
+            ("current_limit_a", model.current_limit_a),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(c.error(&format!("model.{key}"), format!("must be a positive number, got {value}")));
+            }
         }
+        let plant: PlantSection = c.section("plant")?;
+        if plant.substeps == 0 {
+            return Err(c.error("plant.substeps", "must be at least 1"));
+        }
+        let estimator: EstimatorSection = c.section("estimator")?;
+        let poles_key = |kind: &str| format!("estimator.{kind}.poles");
+        if estimator.bias_observer.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
+            return Err(c.error(&poles_key("bias-observer"), "every pole must be a negative number (a stable error)"));
+        }
+        if estimator.no_bias.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
+            return Err(c.error(&poles_key("no-bias"), "every pole must be a negative number (a stable error)"));
+        }
+        let bias_gains = match estimator.bias_observer.gains {
+            Some(g) => Vector3::from(g),
+            None => estimator::bias_observer_gains(model.a(), estimator.bias_observer.poles),
+        };
+        let no_bias_gains = match estimator.no_bias.gains {
+            Some(g) => nalgebra::Vector2::from(g),
+            None => estimator::no_bias_gains(estimator.no_bias.poles),
+        };
+        let controller: ControllerSection = c.section("controller")?;
+        let limits: LimitsSection = c.section("limits")?;
+        for (key, value) in [("fall_angle_rad", limits.fall_angle_rad), ("recovery_band_rad", limits.recovery_band_rad)]
+        {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(c.error(&format!("limits.{key}"), format!("must be a positive angle, got {value}")));
+            }
+        }
+        let (encoder, _, encoder_spec) = c.sensor_for("theta")?;
+        let (wheel_speed, _, _) = c.sensor_for("wheel_speed")?;
+        let bias_true = encoder_spec.bias.expand(1)[0];
+        Ok(Pendulum {
+            model,
+            plant,
+            estimator,
+            bias_gains,
+            no_bias_gains,
+            controller,
+            limits,
+            encoder,
+            wheel_speed,
+            bias_true,
+            dt: c.dt(),
+        })
     }
-    let plant: PlantSection = c.section("plant")?;
-    if plant.substeps == 0 {
-        return Err(c.error("plant.substeps", "must be at least 1"));
-    }
-    let estimator: EstimatorSection = c.section("estimator")?;
-    let poles_key = |kind: &str| format!("estimator.{kind}.poles");
-    if estimator.bias_observer.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
-        return Err(c.error(&poles_key("bias-observer"), "every pole must be a negative number (a stable error)"));
-    }
-    if estimator.no_bias.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
-        return Err(c.error(&poles_key("no-bias"), "every pole must be a negative number (a stable error)"));
-    }
-    let bias_gains = match estimator.bias_observer.gains {
-        Some(g) => Vector3::from(g),
-        None => estimator::bias_observer_gains(model.a(), estimator.bias_observer.poles),
-    };
-    let no_bias_gains = match estimator.no_bias.gains {
-        Some(g) => nalgebra::Vector2::from(g),
-        None => estimator::no_bias_gains(estimator.no_bias.poles),
-    };
-    let controller: ControllerSection = c.section("controller")?;
-    let (encoder, _, encoder_spec) = c.sensor_for("theta")?;
-    let (wheel_speed, _, _) = c.sensor_for("wheel_speed")?;
-    let bias_true = encoder_spec.bias.expand(1)[0];
-    Ok(Box::new(Pendulum {
-        model,
-        plant,
-        estimator,
-        bias_gains,
-        no_bias_gains,
-        controller,
-        encoder,
-        wheel_speed,
-        bias_true,
-        dt: c.dt(),
-    }))
 }
 
 impl Scenario for Pendulum {
@@ -211,6 +237,28 @@ impl Scenario for Pendulum {
         Box::new(StateFeedback {
             gains: RowVector3::from(self.controller.gains),
             current_limit: self.model.current_limit_a,
+        })
+    }
+
+    fn error_measure(&self) -> ErrorMeasure {
+        ErrorMeasure {
+            name: "|theta| rad",
+            of_state: |x| x[0].abs(),
+            recovery_band: self.limits.recovery_band_rad,
+            limit: self.limits.fall_angle_rad,
+        }
+    }
+
+    fn delay_margin(&self, config: &LaunchConfig) -> Option<TheoreticalMargin> {
+        let m = margin::delay_margin(self, config);
+        Some(TheoreticalMargin {
+            ticks: m.ticks,
+            continuous_ticks: m.continuous_ticks,
+            lagged_ticks: m.lagged_ticks,
+            crossover_rad_s: m.crossover_rad_s,
+            phase_margin_deg: m.phase_margin_deg,
+            radius_before: m.radius_before,
+            radius_at_margin: m.radius_at_margin,
         })
     }
 

@@ -100,6 +100,10 @@ impl Plant for PendulumPlant {
         self.x.as_slice()
     }
 
+    fn restore(&mut self, state: &[f64]) {
+        self.x = Vector3::from_column_slice(state);
+    }
+
     fn step(&mut self, u: &[f64], dt: f64) {
         let current = u[0];
         self.x = rk4(&|x: &Vector3<f64>| self.model.derivative(x, current), &self.x, dt, self.substeps);

@@ -1,0 +1,361 @@
+//! The plant process: the truth of the loop. It integrates the scenario's model tick by tick
+//! with the command in effect (zero-order hold), publishes the state, and turns each command
+//! that reaches it into the loop's record.
+//!
+//! Fail-safes:
+//! - a command that is not finite or out of the input's range is rejected and the last valid
+//!   one held (counted);
+//! - real time: once the newest command is older than `supervision.command_timeout_s`, the
+//!   plant applies `supervision.on_stale` (hold or zero) and counts the ticks;
+//! - lockstep: if command k has not come after `supervision.lockstep_stall_s`, the run ends as
+//!   stalled instead of hanging.
+//!
+//! The physical system does not stop when its simulator dies. After each tick the plant writes
+//! a snapshot (state, command in effect, counters, schedule) to a small shared-memory file; a
+//! restarted plant reads it back and, in real time, integrates the ticks it missed with the
+//! command that was in effect (or `on_stale`), then goes on at the same schedule.
+
+use std::collections::{BTreeSet, VecDeque};
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, anyhow};
+
+use crate::clock::{TickTimer, now_ns};
+use crate::faults::OnStale;
+use crate::ipc::{Topic, TopicPublisher, TopicSubscriber};
+use crate::launch::Mode;
+use crate::msg::*;
+use crate::protocol::{ChildEvent, PlantReport, emit, wait_for_line};
+use crate::snapshot::Snapshot;
+use crate::stages::{Context, wait, waitset};
+
+/// Real-time mode: after the last tick, how long the plant still waits for late commands, so
+/// that their latency is recorded.
+const LATE_COMMAND_GRACE: Duration = Duration::from_millis(50);
+
+/// The plant's state between ticks: the truth, the commands, and the counters.
+struct PlantLoop {
+    plant: Box<dyn crate::scenarios::Plant>,
+    limits: Vec<(f64, f64)>,
+    dt: f64,
+    incarnation: u32,
+    /// Real-time mode: when tick 0 was and the period (ns); tick j is due at start + j·period.
+    /// None in lockstep mode, where every command is in time by construction.
+    schedule: Option<(u64, u64)>,
+    /// The command in effect (zero-order hold): the last valid one that has taken effect.
+    held: [f64; MAX_INPUT],
+    /// When the command in effect arrived (real time; 0: none yet).
+    held_arrived: u64,
+    command_timeout_ns: u64,
+    on_stale: OnStale,
+    /// Valid commands that arrived but have not taken effect yet: (arrival, command).
+    queued: VecDeque<(u64, [f64; MAX_INPUT])>,
+    /// The newest loop whose command arrived in time (valid or not).
+    in_time_k: Option<u64>,
+    /// The newest tick whose state was published.
+    published_k: Option<u64>,
+    state_out: TopicPublisher<PlantState>,
+    loop_out: TopicPublisher<LoopRecord>,
+    counters: PlantCounters,
+    report: PlantReport,
+    snapshot: Snapshot<SnapshotData>,
+    /// The current tick: the plant's state is at t = k·dt.
+    k: u64,
+}
+
+impl PlantLoop {
+    /// When tick `tick` is due (real-time mode).
+    fn due(&self, tick: u64) -> Option<u64> {
+        self.schedule.map(|(start, period)| start + tick * period)
+    }
+
+    /// Publishes the state at tick k, with the command that was held over the last period.
+    fn publish_state(&mut self, timing: TickTiming) -> Result<()> {
+        let mut msg = PlantState {
+            header: Header { k: self.k, t: self.k as f64 * self.dt, ..Default::default() },
+            u_applied: self.held,
+            timing,
+            counters: self.counters,
+            ..Default::default()
+        };
+        msg.header.incarnations[0] = self.incarnation;
+        let x = self.plant.state();
+        msg.x[..x.len()].copy_from_slice(x);
+        msg.header.trace.plant_publish = now_ns();
+        self.state_out.send(&msg)?;
+        self.published_k = Some(self.k);
+        if self.report.published == 0 {
+            self.report.first_publish_ns = msg.header.trace.plant_publish;
+        }
+        self.report.last_publish_ns = msg.header.trace.plant_publish;
+        self.report.published += 1;
+        self.save();
+        Ok(())
+    }
+
+    /// Takes one command: stamps its arrival, queues it if valid, publishes the loop record.
+    /// The command of loop k is in time if it arrives before tick k+1 is due.
+    fn accept(&mut self, command: &Command) -> Result<()> {
+        let arrived = now_ns();
+        let k = command.header.k;
+        let m = self.limits.len();
+        let lost = command.header.lost != 0;
+        let valid = command.u[..m].iter().zip(&self.limits).all(|(u, (lo, hi))| u.is_finite() && lo <= u && u <= hi);
+        let in_time = self.due(k + 1).is_none_or(|due| arrived <= due);
+        if lost {
+            self.counters.lost_commands += 1;
+        } else if valid {
+            self.queued.push_back((arrived, command.u));
+        } else {
+            self.counters.rejected_commands += 1;
+        }
+        if in_time {
+            self.in_time_k = self.in_time_k.max(Some(k));
+        }
+        self.report.commands += 1;
+        let mut record = LoopRecord {
+            header: command.header,
+            deadline_miss: u32::from(!in_time),
+            rejected: u32::from(!lost && !valid),
+            lost: u32::from(lost),
+            _reserved: 0,
+        };
+        record.header.trace.plant_receive = arrived;
+        self.loop_out.send(&record)
+    }
+
+    /// Integrates one period, tick k → k+1, with the newest valid command that had arrived
+    /// when tick k+1 was due (zero-order hold), or `on_stale` once that command is older than
+    /// the timeout. If tick k's state went out and command k was not in by then, loop k missed
+    /// its deadline.
+    fn advance(&mut self) {
+        let due = self.due(self.k + 1);
+        while let Some(&(arrived, u)) = self.queued.front() {
+            if due.is_some_and(|due| arrived > due) {
+                break;
+            }
+            self.held = u;
+            self.held_arrived = arrived;
+            self.queued.pop_front();
+        }
+        if self.published_k == Some(self.k) && self.in_time_k.is_none_or(|k| k < self.k) {
+            self.counters.deadline_misses += 1;
+        }
+        let m = self.limits.len();
+        let stale = due.is_some_and(|due| due.saturating_sub(self.held_arrived) > self.command_timeout_ns);
+        if stale {
+            self.counters.stale_ticks += 1;
+            if self.on_stale == OnStale::Zero {
+                self.held = [0.0; MAX_INPUT];
+            }
+        }
+        self.plant.step(&self.held[..m], self.dt);
+        self.k += 1;
+        self.save();
+    }
+
+    fn drain(&mut self, commands: &TopicSubscriber<Command>) -> Result<()> {
+        commands.clear_wakeups()?;
+        while let Some(command) = commands.receive()? {
+            self.accept(&command)?;
+        }
+        Ok(())
+    }
+
+    fn save(&mut self) {
+        let mut s = SnapshotData {
+            k: self.k,
+            held: self.held,
+            held_arrived: self.held_arrived,
+            schedule: self.schedule.map_or([0, 0], |(a, b)| [a, b]),
+            in_time_k: self.in_time_k.map_or(-1, |k| k as i64),
+            published_k: self.published_k.map_or(-1, |k| k as i64),
+            counters: self.counters,
+            published: self.report.published,
+            commands: self.report.commands,
+            first_publish_ns: self.report.first_publish_ns,
+            last_publish_ns: self.report.last_publish_ns,
+            ..Default::default()
+        };
+        let x = self.plant.state();
+        s.x[..x.len()].copy_from_slice(x);
+        self.snapshot.write(&s);
+    }
+
+    fn restore(&mut self, s: &SnapshotData) {
+        self.k = s.k;
+        self.held = s.held;
+        self.held_arrived = s.held_arrived;
+        self.schedule = (s.schedule[1] > 0).then_some((s.schedule[0], s.schedule[1]));
+        self.in_time_k = u64::try_from(s.in_time_k).ok();
+        self.published_k = u64::try_from(s.published_k).ok();
+        self.counters = s.counters;
+        self.report.published = s.published;
+        self.report.commands = s.commands;
+        self.report.first_publish_ns = s.first_publish_ns;
+        self.report.last_publish_ns = s.last_publish_ns;
+        let n = self.plant.state().len();
+        self.plant.restore(&s.x[..n]);
+    }
+}
+
+pub fn run(context: &Context) -> Result<ChildEvent> {
+    let commands: TopicSubscriber<Command> = context.ipc.stage_subscriber(Topic::Command)?;
+    let supervision = &context.config.supervision;
+    let snapshot = Snapshot::open(&context.run_id, "plant")?;
+    let mut p = PlantLoop {
+        plant: context.scenario.plant(),
+        limits: context.scenario.input_limits(),
+        dt: context.config.dt(),
+        incarnation: context.incarnation,
+        schedule: None,
+        held: [0.0; MAX_INPUT],
+        held_arrived: 0,
+        command_timeout_ns: (supervision.command_timeout_s * 1e9) as u64,
+        on_stale: supervision.on_stale,
+        queued: VecDeque::new(),
+        in_time_k: None,
+        published_k: None,
+        state_out: context.ipc.publisher(Topic::State, true)?,
+        loop_out: context.ipc.publisher(Topic::Loop, false)?,
+        counters: PlantCounters::default(),
+        report: PlantReport::default(),
+        snapshot,
+        k: 0,
+    };
+    let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.restore(&s)).is_some();
+    p.report.restored_at = restored.then_some(p.k);
+    let ws = waitset()?;
+    let _wake = ws
+        .attach_notification(commands.listener().expect("stage subscribers have a listener"))
+        .map_err(|e| anyhow!("cannot attach the command listener: {e:?}"))?;
+    commands.connect(&context.stop)?;
+    emit(&ChildEvent::Ready)?;
+    if !wait_for_line(&context.stop, "start")? {
+        p.report.stopped_early = true;
+        return Ok(ChildEvent::PlantReport(p.report));
+    }
+
+    let loops = context.config.loops();
+    match context.config.mode {
+        Mode::Lockstep => {
+            // The launcher injects a kill or stop with the loop held before the tick's state goes
+            // out, so that the fault lands at the same loop every run.
+            let pauses: BTreeSet<u64> = context
+                .config
+                .faults
+                .iter()
+                .filter(|f| f.kind.from_outside())
+                .map(|f| f.ticks(context.config.rate_hz).0)
+                .collect();
+            let stall_limit = Duration::from_secs_f64(supervision.lockstep_stall_s);
+            emit(&ChildEvent::Started { start_ns: now_ns(), period_ns: 0, k: p.k })?;
+            p.save();
+            'ticks: while p.k < loops && !context.stop.requested() {
+                if pauses.contains(&p.k) {
+                    emit(&ChildEvent::Paused { k: p.k })?;
+                    if !wait_for_line(&context.stop, "go")? {
+                        break;
+                    }
+                }
+                p.publish_state(TickTiming::default())?;
+                let published = Instant::now();
+                // Tick k → k+1 only once command k is in (if it was rejected, the last valid
+                // one is held).
+                while p.in_time_k != Some(p.k) {
+                    if context.stop.requested() {
+                        break 'ticks;
+                    }
+                    if published.elapsed() > stall_limit {
+                        p.report.stalled_at = Some(p.k);
+                        break 'ticks;
+                    }
+                    wait(&ws)?;
+                    p.drain(&commands)?;
+                }
+                p.advance();
+            }
+        }
+        Mode::Realtime => {
+            let period_ns = (p.dt * 1e9).round() as u64;
+            let (start_ns, _) = *p.schedule.get_or_insert((now_ns(), period_ns));
+            emit(&ChildEvent::Started { start_ns, period_ns, k: p.k })?;
+            // A restarted plant catches up with the ticks that passed while it was down: the
+            // pendulum kept moving under the command in effect (or `on_stale`).
+            let woke = now_ns();
+            let current = ((woke - start_ns) / period_ns).min(loops.saturating_sub(1));
+            if current > p.k {
+                // Every tick from here to `current` goes without a state, this one too if the
+                // last plant died before publishing it.
+                let unpublished_now = u64::from(p.published_k != Some(p.k));
+                p.counters.skipped_ticks += current - p.k - 1 + unpublished_now;
+                while p.k < current {
+                    p.advance();
+                }
+            }
+            let timer = TickTimer::new(start_ns + (p.k + 1) * period_ns, period_ns)?;
+            let _tick = ws.attach_notification(&timer).map_err(|e| anyhow!("cannot attach the tick timer: {e:?}"))?;
+            let mut previous_wake = woke;
+            let first = TickTiming { scheduled_ns: start_ns + p.k * period_ns, wake_ns: woke, period_ns: 0 };
+            p.publish_state(first)?;
+            while p.k < loops && !context.stop.requested() {
+                wait(&ws)?;
+                let woke = now_ns();
+                p.drain(&commands)?;
+                let expired = timer.expirations();
+                let mut advanced = 0;
+                while advanced < expired && p.k < loops {
+                    p.advance();
+                    advanced += 1;
+                }
+                if advanced == 0 {
+                    continue;
+                }
+                // Only the newest state goes out; the ticks passed over have none.
+                p.counters.skipped_ticks += advanced - 1;
+                if p.k < loops {
+                    let timing = TickTiming {
+                        scheduled_ns: start_ns + p.k * period_ns,
+                        wake_ns: woke,
+                        period_ns: woke - previous_wake,
+                    };
+                    previous_wake = woke;
+                    p.publish_state(timing)?;
+                }
+            }
+            // Record the last commands even when they come late.
+            let grace_end = now_ns() + LATE_COMMAND_GRACE.as_nanos() as u64;
+            while p.report.commands < p.report.published && now_ns() < grace_end && !context.stop.requested() {
+                wait(&ws)?;
+                p.drain(&commands)?;
+            }
+        }
+    }
+    p.report.stopped_early = p.k < loops;
+    p.report.counters = p.counters;
+    p.report.loops = p.report.published + p.counters.skipped_ticks;
+    let (state_waited, state_dropped) = p.state_out.backpressure();
+    let (loop_waited, loop_dropped) = p.loop_out.backpressure();
+    (p.report.waited, p.report.dropped) = (state_waited + loop_waited, state_dropped + loop_dropped);
+    Ok(ChildEvent::PlantReport(p.report))
+}
+
+/// What a restarted plant needs to go on where the last one stopped.
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C)]
+struct SnapshotData {
+    k: u64,
+    x: [f64; MAX_STATE],
+    held: [f64; MAX_INPUT],
+    held_arrived: u64,
+    /// Real time: [start, period] in ns; [0, 0] in lockstep.
+    schedule: [u64; 2],
+    /// The newest loop whose command came in time, and the newest tick published; −1 for none.
+    in_time_k: i64,
+    published_k: i64,
+    counters: PlantCounters,
+    published: u64,
+    commands: u64,
+    first_publish_ns: u64,
+    last_publish_ns: u64,
+}

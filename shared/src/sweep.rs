@@ -1,0 +1,277 @@
+//! `looplab sweep`: runs a scenario again and again in lockstep mode while one launch-file key
+//! varies, and reports the scenario's metrics and what the swept fault did at each value. For a
+//! controller delay it finds the smallest delay at which the loop goes unstable and prints it
+//! next to the delay margin the scenario's linearised model predicts.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context as _, Result};
+use serde::Serialize;
+
+use crate::launch::{self, LaunchConfig, Override};
+use crate::launcher::{Outcome, run_once};
+use crate::report::Summary;
+use crate::scenarios::{Scenario, TheoreticalMargin};
+
+/// The error's peak in the last second over its peak in the first second of the fault above
+/// which the loop counts as unstable: the disturbance the fault caused grew instead of dying
+/// out. This judges the loop's linear stability where the fault's disturbance stands above the
+/// sensors' noise and quantisation: sweep a delay margin with them off, as the theory assumes
+/// (with them on, the noise floor and the actuator limit blur the verdict near the margin).
+pub const UNSTABLE_GROWTH: f64 = 1.0;
+
+pub struct SweepArgs {
+    pub target: String,
+    pub param: String,
+    pub from: f64,
+    pub to: f64,
+    pub step: f64,
+    /// --set, --fault, --duration and --seed, already as overrides.
+    pub overrides: Vec<Override>,
+    pub out: Option<PathBuf>,
+    pub jobs: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct SweepPoint {
+    pub value: f64,
+    pub completed: bool,
+    pub stopped_because: Option<String>,
+    /// stable | unstable | failed (the run did not complete) | no fault (nothing to judge)
+    pub verdict: String,
+    /// The swept fault's error peak, last second over first second.
+    pub growth: Option<f64>,
+    pub worst_error: Option<f64>,
+    pub within_limits: Option<bool>,
+    pub metrics: BTreeMap<String, f64>,
+    pub run_dir: String,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct SweepReport {
+    pub scenario: String,
+    pub param: String,
+    pub points: Vec<SweepPoint>,
+    /// The smallest swept value whose loop went unstable.
+    pub first_unstable: Option<f64>,
+    /// For a controller delay in ticks: the scenario's theory.
+    pub theory: Option<TheoreticalMargin>,
+}
+
+fn value_text(v: f64) -> String {
+    if v.fract() == 0.0 && v.abs() < 1e15 { format!("{}", v as i64) } else { format!("{v}") }
+}
+
+/// The swept values, from `from` to `to` inclusive.
+fn values(from: f64, to: f64, step: f64) -> Vec<f64> {
+    let n = ((to - from) / step + 1e-9).floor() as i64;
+    (0..=n.max(0)).map(|i| from + i as f64 * step).collect()
+}
+
+/// The index of the fault a `faults.N.…` key belongs to.
+fn swept_fault(param: &str) -> Option<usize> {
+    param.strip_prefix("faults.")?.split('.').next()?.parse().ok()
+}
+
+pub fn run(args: SweepArgs) -> ExitCode {
+    let bad = |message: String| {
+        eprintln!("error: {message}");
+        ExitCode::from(2)
+    };
+    if !(args.step.is_finite() && args.step > 0.0 && args.from.is_finite() && args.to.is_finite()) {
+        return bad(format!("--from, --to and --step must be numbers with --step > 0 (got step {})", args.step));
+    }
+    if args.to < args.from {
+        return bad(format!("--to ({}) is below --from ({})", args.to, args.from));
+    }
+    let values = values(args.from, args.to, args.step);
+    // Check every value's launch file before running any.
+    let mut configs: Vec<(f64, LaunchConfig, Box<dyn Scenario>)> = vec![];
+    for &value in &values {
+        let mut overrides = vec![Override::parse("mode=lockstep").expect("valid")];
+        overrides.extend(args.overrides.iter().cloned());
+        match Override::parse(&format!("{}={}", args.param, value_text(value))) {
+            Ok(o) => overrides.push(o),
+            Err(e) => return bad(e.to_string()),
+        }
+        match launch::resolve(&args.target, &overrides) {
+            Ok((config, scenario)) => configs.push((value, config, scenario)),
+            Err(e) => return bad(e.to_string()),
+        }
+    }
+    let fault_index = swept_fault(&args.param).or((!configs[0].1.faults.is_empty()).then_some(0));
+    let binaries = match crate::launcher::locate_binaries() {
+        Ok(b) => b,
+        Err(e) => return bad(format!("{e:#}")),
+    };
+    let out = args.out.clone().unwrap_or_else(|| {
+        let stamp = chrono::Local::now().format("%Y%m%d-%H%M%S");
+        PathBuf::from("runs").join(format!("{stamp}-sweep-{}", configs[0].1.scenario))
+    });
+    if out.exists() && std::fs::read_dir(&out).map(|mut d| d.next().is_some()).unwrap_or(true) {
+        return bad(format!("--out {}: the folder exists and is not empty; give a new or empty folder", out.display()));
+    }
+
+    eprintln!("sweeping {} over {} values, {} at a time, in lockstep mode", args.param, values.len(), args.jobs);
+    let results = run_all(&configs, &binaries, &out, &args.param, args.jobs.max(1));
+    let mut points = vec![];
+    for ((value, _, _), result) in configs.iter().zip(results) {
+        match result {
+            Ok((summary, outcome)) => points.push(point(*value, &summary, &outcome, fault_index)),
+            Err(e) => {
+                eprintln!("error: the run for {} = {} failed: {e:#}", args.param, value_text(*value));
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+    let first_unstable = points.iter().find(|p| p.verdict == "unstable").map(|p| p.value);
+    let (_, config, scenario) = &configs[0];
+    let controller_delay = fault_index
+        .and_then(|i| config.faults.get(i))
+        .is_some_and(|f| f.kind == crate::faults::FaultKind::Delay && f.process == "controller")
+        && args.param.ends_with(".delay_ticks");
+    let theory = if controller_delay { scenario.delay_margin(config) } else { None };
+    let report =
+        SweepReport { scenario: config.scenario.clone(), param: args.param.clone(), points, first_unstable, theory };
+    print!("{}", render(&report));
+    let path = out.join("sweep.json");
+    let written = serde_json::to_string_pretty(&report)
+        .map_err(anyhow::Error::from)
+        .and_then(|text| std::fs::write(&path, text + "\n").with_context(|| format!("write {}", path.display())));
+    if let Err(e) = written {
+        eprintln!("error: {e:#}");
+        return ExitCode::FAILURE;
+    }
+    if report.points.iter().any(|p| p.verdict == "failed") { ExitCode::FAILURE } else { ExitCode::SUCCESS }
+}
+
+/// Runs every value, `jobs` at a time; results in the order of `configs`.
+fn run_all(
+    configs: &[(f64, LaunchConfig, Box<dyn Scenario>)],
+    binaries: &BTreeMap<&'static str, PathBuf>,
+    out: &Path,
+    param: &str,
+    jobs: usize,
+) -> Vec<Result<(Summary, Outcome)>> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    type Slot = std::sync::Mutex<Option<Result<(Summary, Outcome)>>>;
+    let results: Vec<Slot> = configs.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.min(configs.len()) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some((value, config, scenario)) = configs.get(i) else { break };
+                    let dir = out.join(format!("{param}={}", value_text(*value)));
+                    let result = crate::launcher::create_run_dir(Some(&dir), &config.scenario)
+                        .and_then(|dir| run_once(config, scenario.as_ref(), binaries, &dir, true));
+                    if let Ok((summary, _)) = &result {
+                        eprintln!("  {param} = {}: {} loops", value_text(*value), summary.loops);
+                    }
+                    *results[i].lock().expect("not poisoned") = Some(result);
+                }
+            });
+        }
+    });
+    results.into_iter().map(|r| r.into_inner().expect("not poisoned").expect("every value ran")).collect()
+}
+
+fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>) -> SweepPoint {
+    let effect = fault.and_then(|i| summary.faults.get(i)).and_then(|f| f.effect.clone());
+    let growth = effect.as_ref().and_then(|e| match (e.error_peak_first_s, e.error_peak_last_s) {
+        (Some(first), Some(last)) if first > 0.0 => Some(last / first),
+        _ => None,
+    });
+    let within_limits = effect.as_ref().map(|e| e.within_limits);
+    let verdict = if !summary.completed || !matches!(outcome, Outcome::Completed) {
+        "failed"
+    } else if effect.is_none() {
+        "no fault"
+    } else if within_limits == Some(false) || growth.is_some_and(|g| g > UNSTABLE_GROWTH) {
+        "unstable"
+    } else {
+        "stable"
+    };
+    SweepPoint {
+        value,
+        completed: summary.completed,
+        stopped_because: summary.stopped_because.clone(),
+        verdict: verdict.into(),
+        growth,
+        worst_error: effect
+            .as_ref()
+            .and_then(|e| [e.worst_error_during, e.worst_error_after].into_iter().flatten().reduce(f64::max)),
+        within_limits,
+        metrics: summary.metrics.clone(),
+        run_dir: summary.run_dir.clone(),
+    }
+}
+
+fn render(r: &SweepReport) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "\nLoopLab sweep · {} · {} (lockstep)", r.scenario, r.param);
+    let _ = writeln!(out, "  {:>10}  {:<9}{:>12}{:>14}  within limits", "value", "verdict", "growth", "worst error");
+    for p in &r.points {
+        let _ = writeln!(
+            out,
+            "  {:>10}  {:<9}{:>12}{:>14}  {}",
+            value_text(p.value),
+            p.verdict,
+            p.growth.map_or("-".into(), |g| format!("{g:.3}")),
+            p.worst_error.map_or("-".into(), |e| format!("{e:.5}")),
+            p.within_limits.map_or("-", |w| if w { "yes" } else { "NO" })
+        );
+    }
+    let _ = writeln!(
+        out,
+        "  growth: the error's peak in the fault's last second over its first; above {UNSTABLE_GROWTH} the loop is unstable"
+    );
+    match r.first_unstable {
+        Some(v) => {
+            let _ = writeln!(out, "\n  measured: the loop goes unstable at {} = {}", r.param, value_text(v));
+        }
+        None => {
+            let _ = writeln!(out, "\n  measured: the loop stayed stable over the whole sweep");
+        }
+    }
+    if let Some(t) = &r.theory {
+        let _ = writeln!(
+            out,
+            "  theory:   the linearised sampled loop goes unstable at {} ticks (per-tick spectral radius {:.6} at {}, {:.6} at {})",
+            t.ticks,
+            t.radius_before,
+            t.ticks.saturating_sub(1),
+            t.radius_at_margin,
+            t.ticks
+        );
+        let _ = writeln!(
+            out,
+            "            continuous estimate: phase margin {:.1}° at {:.1} rad/s = {:.1} ticks; with the lags sampling adds, {:.1} ticks",
+            t.phase_margin_deg, t.crossover_rad_s, t.continuous_ticks, t.lagged_ticks
+        );
+        if let Some(v) = r.first_unstable {
+            let diff = v - f64::from(t.ticks);
+            let verdict = if diff.abs() <= 1.0 { "agree within one tick" } else { "DISAGREE by more than one tick" };
+            let _ = writeln!(out, "  measured and theory {verdict} ({diff:+} ticks)");
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn swept_values_include_both_ends() {
+        assert_eq!(values(0.0, 3.0, 1.0), [0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(values(0.0, 0.3, 0.1).len(), 4);
+        assert_eq!(swept_fault("faults.2.delay_ticks"), Some(2));
+        assert_eq!(swept_fault("sensors.encoder.bias"), None);
+        assert_eq!(value_text(31.0), "31");
+        assert_eq!(value_text(0.25), "0.25");
+    }
+}

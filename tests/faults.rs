@@ -1,0 +1,332 @@
+//! Fault injection, supervision and the delay margin, with the real processes over real
+//! iceoryx2 shared memory. Numbers come from lockstep runs, which are deterministic; real-time
+//! runs are checked for what happened, never for how fast.
+
+mod common;
+
+use common::*;
+
+fn assert_clean(s: &serde_json::Value) {
+    assert_eq!(s["shared_memory"]["clean"], true, "{}", s["shared_memory"]);
+    let left = looplab_shared::ipc::files_of_run(s["run_id"].as_str().unwrap()).unwrap();
+    assert!(left.is_empty(), "files left behind: {left:?}");
+    for p in s["processes"].as_array().unwrap() {
+        assert!(!alive(p["pid"].as_i64().unwrap()), "{p} is still running");
+    }
+}
+
+fn fault(s: &serde_json::Value, i: usize) -> &serde_json::Value {
+    &s["faults"][i]
+}
+
+/// Every process's last incarnation ended cleanly.
+fn assert_every_process_ended_alive(s: &serde_json::Value) {
+    let mut last = std::collections::BTreeMap::new();
+    for p in s["processes"].as_array().unwrap() {
+        last.insert(p["name"].as_str().unwrap().to_owned(), p["exit"].clone());
+    }
+    assert_eq!(last.len(), 5);
+    for (name, exit) in last {
+        assert_eq!(exit, "0", "{name}'s last incarnation: {}", s["processes"]);
+    }
+}
+
+#[test]
+fn each_loop_process_killed_in_lockstep_restarts_where_it_died_and_the_pendulum_stays_up() {
+    let r = run(
+        "kill-lockstep",
+        &[
+            "--mode",
+            "lockstep",
+            "--duration",
+            "6",
+            "--fault",
+            "kill plant at 1.5s",
+            "--fault",
+            "kill sensors at 2.5s",
+            "--fault",
+            "kill estimator at 3.5s",
+            "--fault",
+            "kill controller at 4.5s",
+        ],
+    );
+    let s = &r.summary;
+    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
+    assert_eq!(s["loops"], 6000);
+    for (i, (process, at)) in
+        [("plant", 1.5), ("sensors", 2.5), ("estimator", 3.5), ("controller", 4.5)].iter().enumerate()
+    {
+        assert_eq!(s["restarts"][process], 1, "{process}");
+        let f = fault(s, i);
+        assert_eq!(f["detected_by"], "the process exited", "{f}");
+        assert!(f["detected_after_ms"].as_f64().is_some() && f["restarted_after_ms"].as_f64().is_some(), "{f}");
+        let e = &f["effect"];
+        // Lockstep holds the loop while the process is replaced: the restarted one handles the
+        // very loop at which its predecessor was killed, and not one command is missed.
+        assert_eq!(e["rejoined_at_s"].as_f64(), Some(*at), "{process}: {e}");
+        assert_eq!(e["outage_ticks"], 0, "{process}: {e}");
+        assert_eq!(e["within_limits"], true, "{process}: {e}");
+        assert_eq!(e["recovery_s"].as_f64(), Some(0.0), "{process}: {e}");
+    }
+    // Every loop has its record: the restarted plant went on from its snapshot.
+    assert_eq!(s["monitor"]["records"], 6000);
+    assert!(r.metric("theta_max_abs_rad") < 0.1);
+    assert!((r.metric("bias_estimate_final_rad") - 0.1).abs() < 0.002, "the estimator kept its calibration");
+    assert_every_process_ended_alive(s);
+    assert_clean(s);
+}
+
+#[test]
+fn each_loop_process_killed_in_real_time_restarts_and_the_loop_goes_on() {
+    let r = run(
+        "kill-realtime",
+        &[
+            "--duration",
+            "3.5",
+            "--fault",
+            "kill plant at 1s",
+            "--fault",
+            "kill sensors at 1.5s",
+            "--fault",
+            "kill estimator at 2s",
+            "--fault",
+            "kill controller at 2.5s",
+        ],
+    );
+    let s = &r.summary;
+    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
+    assert_eq!(s["loops"], 3500, "the restarted plant keeps the schedule: ticks it missed are integrated");
+    for (i, process) in ["plant", "sensors", "estimator", "controller"].iter().enumerate() {
+        assert_eq!(s["restarts"][process], 1);
+        let f = fault(s, i);
+        let e = &f["effect"];
+        assert!(f["restarted_after_ms"].as_f64().is_some(), "{f}");
+        assert!(e["rejoined_at_s"].as_f64().is_some(), "{process}: the restarted process never handled a loop: {e}");
+        assert!(e["outage_ticks"].as_u64().unwrap() > 0, "a real outage has missed commands: {e}");
+        assert_eq!(e["within_limits"], true, "{process}: {e}");
+    }
+    let timeline: Vec<&str> = s["timeline"].as_array().unwrap().iter().map(|t| t["event"].as_str().unwrap()).collect();
+    assert!(timeline.contains(&"inject: kill estimator at 2s"), "{timeline:?}");
+    assert!(timeline.contains(&"estimator ready again"), "{timeline:?}");
+    assert!(r.stdout().contains("timeline"), "the printed report has the timeline");
+    assert_every_process_ended_alive(s);
+    assert_clean(s);
+}
+
+#[test]
+fn a_stopped_controller_is_detected_by_its_input_deadline_and_the_plant_applies_on_stale() {
+    let r = run(
+        "stop",
+        &["--duration", "2", "--set", "supervision.on_stale=zero", "--fault", "stop controller at 1s for 150ms"],
+    );
+    let s = &r.summary;
+    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
+    let f = fault(s, 0);
+    assert_eq!(f["detected_by"], "the monitor's input deadline", "{f}");
+    let detected = f["detected_after_ms"].as_f64().unwrap();
+    let resumed = f["resumed_after_ms"].as_f64().unwrap();
+    assert!(detected < resumed, "detected while stopped: {f}");
+    assert!(f["continued_after_ms"].as_f64().unwrap() <= resumed, "{f}");
+    // 150 ms without commands with a 20 ms command timeout: the plant applied zero current for
+    // the rest of the stop.
+    assert!(s["stale_ticks"].as_u64().unwrap() > 50, "{}", s["stale_ticks"]);
+    assert!(f["effect"]["outage_ticks"].as_u64().unwrap() >= 100, "{f}");
+    assert_eq!(s["restarts"]["controller"], 0, "a stopped process is not restarted");
+    assert_clean(s);
+}
+
+#[test]
+fn corrupt_commands_are_rejected_and_never_reach_the_plants_state() {
+    let r = run(
+        "corrupt",
+        &[
+            "--mode",
+            "lockstep",
+            "--duration",
+            "4",
+            "--fault",
+            "corrupt controller nan at 2s for 100ms",
+            "--fault",
+            "corrupt controller out-of-range at 3s for 50ms",
+        ],
+    );
+    let s = &r.summary;
+    assert_eq!(s["rejected_commands"], 150);
+    assert_eq!(fault(s, 0)["effect"]["outage_ticks"], 100);
+    assert_eq!(fault(s, 1)["effect"]["outage_ticks"], 50);
+    let trajectory = r.trajectory();
+    for column in ["theta", "theta_dot", "wheel_speed"] {
+        let values = trajectory.col(column);
+        assert_eq!(values.len(), 4000);
+        assert!(values.iter().all(|v| v.is_finite()), "a non-finite {column} reached the plant");
+    }
+    // The commands themselves were corrupt: the monitor saw them.
+    let commands = trajectory.col("cmd.current");
+    assert!(commands[2000..2100].iter().all(|u| u.is_nan()));
+    assert!(commands[3000..3050].iter().all(|u| *u == 50.0));
+    assert!(fault(s, 0)["effect"]["within_limits"] == true && fault(s, 1)["effect"]["within_limits"] == true);
+}
+
+#[test]
+fn drops_and_delays_in_lockstep_are_deterministic() {
+    let args = [
+        "--mode",
+        "lockstep",
+        "--duration",
+        "3",
+        "--fault",
+        "drop sensors 30% at 1s for 1s",
+        "--fault",
+        "delay estimator by 4 ticks at 2s",
+    ];
+    let a = run("drop-a", &args);
+    let b = run("drop-b", &args);
+    let lost = a.summary["lost_commands"].as_u64().unwrap();
+    assert!((200..400).contains(&lost), "about 30% of 1000 loops: {lost}");
+    assert_eq!(a.summary["lost_commands"], b.summary["lost_commands"]);
+    assert_eq!(a.summary["faults"][0]["effect"]["outage_ticks"], lost);
+    assert!(a.trajectory().rows == b.trajectory().rows, "two lockstep runs with the same faults differ");
+}
+
+#[test]
+fn a_random_storm_of_kills_and_stops_leaves_every_process_alive_and_nothing_behind() {
+    // 20 faults at seeded random times over a 30 s run, on every process, the monitor too.
+    let processes = ["plant", "sensors", "estimator", "controller", "monitor"];
+    let mut state: u64 = 0x9e37_79b9_7f4a_7c15;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        state >> 33
+    };
+    let mut ticks: Vec<u64> = vec![];
+    while ticks.len() < 20 {
+        let tick = 500 + next() % 29_000;
+        if !ticks.contains(&tick) {
+            ticks.push(tick);
+        }
+    }
+    ticks.sort();
+    let faults: Vec<String> = ticks
+        .iter()
+        .map(|tick| {
+            let process = processes[(next() % 5) as usize];
+            let at = *tick as f64 / 1000.0;
+            if next() % 2 == 0 {
+                format!("kill {process} at {at}s")
+            } else {
+                format!("stop {process} at {at}s for {}ms", 20 + next() % 100)
+            }
+        })
+        .collect();
+    let mut args = vec!["--mode", "lockstep", "--duration", "30"];
+    for f in &faults {
+        args.extend(["--fault", f.as_str()]);
+    }
+    let r = run("storm", &args);
+    let s = &r.summary;
+    assert_eq!(s["completed"], true, "{}: {faults:?}", s["stopped_because"]);
+    assert_eq!(s["loops"], 30_000);
+    assert_every_process_ended_alive(s);
+    let missing: u64 = s["monitor"]["missing"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r[1].as_u64().unwrap() - r[0].as_u64().unwrap() + 1)
+        .sum();
+    assert_eq!(s["monitor"]["records"].as_u64().unwrap(), 30_000 - missing, "{}", s["monitor"]);
+    let kills = faults.iter().filter(|f| f.starts_with("kill")).count() as u64;
+    let restarts: u64 = s["restarts"].as_object().unwrap().values().map(|v| v.as_u64().unwrap()).sum();
+    assert_eq!(restarts, kills, "{faults:?}");
+    assert_clean(s);
+}
+
+#[test]
+fn a_process_that_may_not_restart_ends_the_run_and_a_lockstep_stall_is_reported_not_hung() {
+    let dir = fresh_dir("never");
+    let output = looplab()
+        .args(["run", "--mode", "lockstep", "--duration", "3", "-q", "--fault", "kill controller at 1s"])
+        .args(["--set", "supervision.controller.restart=never", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1));
+    let s = read_summary(&dir);
+    let why = s["stopped_because"].as_str().unwrap();
+    assert!(why.contains("controller exited with status signal 9; not restarted (restart = never)"), "{why}");
+    assert_clean(&s);
+    std::fs::remove_dir_all(&dir).unwrap();
+
+    let dir = fresh_dir("stall");
+    let output = looplab()
+        .args(["run", "--mode", "lockstep", "--duration", "3", "-q", "--fault", "stop estimator at 1s for 3s"])
+        .args(["--set", "supervision.lockstep_stall_s=0.3", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1));
+    let s = read_summary(&dir);
+    let why = s["stopped_because"].as_str().unwrap();
+    assert!(why.contains("the loop stalled at loop 1000"), "{why}");
+    assert_eq!(fault(&s, 0)["detected_by"], "the monitor's input deadline");
+    assert_clean(&s);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_faults_name_the_key_and_what_is_allowed() {
+    let cases = [
+        (
+            vec!["--fault", "explode plant at 1s"],
+            "unknown fault kind \"explode\"; allowed: kill, stop, delay, drop, corrupt",
+        ),
+        (
+            vec!["--fault", "delay plant by 3 ticks"],
+            "key `faults.0.process`: a delay fault cannot target \"plant\"; allowed: sensors, estimator, controller",
+        ),
+        (vec!["--fault", "stop sensors at 1s"], "key `faults.0.duration_s`: a stop needs the seconds it lasts"),
+        (vec!["--fault", "kill plant at 20s"], "key `faults.0.at_s`: must be a time within the run"),
+        (vec!["--set", "supervision.restart=sometimes"], "key `supervision.restart`"),
+    ];
+    for (args, expected) in cases {
+        let output = looplab().arg("run").args(&args).output().unwrap();
+        assert_eq!(output.status.code(), Some(2), "{args:?}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn the_measured_delay_margin_agrees_with_the_linearised_loop() {
+    let dir = fresh_dir("sweep");
+    let output = looplab()
+        .args([
+            "sweep",
+            "pendulum",
+            "--duration",
+            "20",
+            "--param",
+            "faults.0.delay_ticks",
+            "--from",
+            "29",
+            "--to",
+            "32",
+        ])
+        .args(["--set", "sensors.encoder.quantum=0", "--set", "sensors.wheel_speed.noise_std=0"])
+        .args(["--fault", "delay controller by 0 ticks at 2s", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("sweep.json")).unwrap()).unwrap();
+    let theory = report["theory"]["ticks"].as_u64().unwrap();
+    let measured = report["first_unstable"].as_f64().unwrap() as u64;
+    assert_eq!(theory, 31, "{}", report["theory"]);
+    assert!(measured.abs_diff(theory) <= 1, "measured {measured}, theory {theory}");
+    let verdicts: Vec<&str> =
+        report["points"].as_array().unwrap().iter().map(|p| p["verdict"].as_str().unwrap()).collect();
+    assert_eq!(verdicts[..2], ["stable", "stable"], "{verdicts:?}");
+    assert_eq!(verdicts[3], "unstable", "{verdicts:?}");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("agree within one tick"), "{stdout}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
