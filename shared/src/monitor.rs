@@ -298,8 +298,9 @@ struct StallWatch {
     last_tick: u64,
     /// Newest k seen on state, measurements, estimate, command.
     newest: [Option<u64>; 4],
-    /// When the monitor last saw a new state.
+    /// When the monitor last saw a new state, and the loop period.
     state_seen_ns: u64,
+    period_ns: u64,
     /// Per process (plant, sensors, estimator, controller): since when its input has waited.
     waiting: [Option<u64>; 4],
     stalled: [bool; 4],
@@ -313,6 +314,7 @@ impl StallWatch {
             last_tick: context.config.loops().saturating_sub(1),
             newest: [None; 4],
             state_seen_ns: now_ns(),
+            period_ns: (context.config.dt() * 1e9) as u64,
             waiting: [None; 4],
             stalled: [false; 4],
         }
@@ -331,17 +333,16 @@ impl StallWatch {
         let mut events = vec![];
         let plant_done = self.newest[0].is_some_and(|k| k >= self.last_tick);
         for process in 0..4 {
-            let waiting = match process {
+            // Whether the process's input waits, and since when if the data tells.
+            let (waiting, since) = match process {
                 // The plant's input is the command for its newest state (lockstep), or its
-                // clock (real time).
-                0 => {
-                    !plant_done
-                        && match self.mode {
-                            Mode::Lockstep => self.newest[3].is_some() && self.newest[3] >= self.newest[0],
-                            Mode::Realtime => now.saturating_sub(self.state_seen_ns) > self.timeout_ns,
-                        }
-                }
-                p => self.newest[p - 1].is_some_and(|input| self.newest[p].is_none_or(|output| input > output)),
+                // clock (real time): a state is due every period, so silence dates from the last.
+                0 if plant_done => (false, None),
+                0 => match self.mode {
+                    Mode::Lockstep => (self.newest[3].is_some() && self.newest[3] >= self.newest[0], None),
+                    Mode::Realtime => (now > self.state_seen_ns + self.period_ns, Some(self.state_seen_ns)),
+                },
+                p => (self.newest[p - 1].is_some_and(|input| self.newest[p].is_none_or(|output| input > output)), None),
             };
             let name = crate::faults::PROCESSES[process].to_owned();
             if !waiting {
@@ -351,7 +352,7 @@ impl StallWatch {
                 }
                 continue;
             }
-            let since = *self.waiting[process].get_or_insert(now);
+            let since = *self.waiting[process].get_or_insert(since.unwrap_or(now));
             if !self.stalled[process] && now - since >= self.timeout_ns {
                 self.stalled[process] = true;
                 events.push(ChildEvent::Stall { process: name, since_ns: since, detected_ns: now });
