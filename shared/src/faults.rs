@@ -361,13 +361,7 @@ pub struct Policy {
 
 impl Supervision {
     pub fn policy(&self, process: &str) -> Policy {
-        let own = match process {
-            "plant" => &self.plant,
-            "sensors" => &self.sensors,
-            "estimator" => &self.estimator,
-            "controller" => &self.controller,
-            _ => &self.monitor,
-        };
+        let own = self.policy_of(process);
         Policy {
             restart: own.restart.unwrap_or(self.restart),
             max_restarts: own.max_restarts.unwrap_or(self.max_restarts),

@@ -208,17 +208,7 @@ fn bad_input(message: impl std::fmt::Display) -> ExitCode {
 }
 
 fn sweep(args: SweepCli) -> ExitCode {
-    let mut texts: Vec<String> = vec![];
-    if let Some(d) = args.duration {
-        texts.push(format!("duration_s={d:?}"));
-    }
-    if let Some(s) = args.seed {
-        texts.push(format!("seed={s}"));
-    }
-    texts.extend(args.set.iter().cloned());
-    let overrides: Result<Vec<Override>, _> =
-        texts.iter().map(|t| Override::parse(t)).chain(args.fault.iter().map(|f| Override::fault(f))).collect();
-    let overrides = match overrides {
+    let overrides = match overrides(None, args.duration, None, args.seed, &args.set, &args.fault) {
         Ok(o) => o,
         Err(e) => return bad_input(e),
     };
@@ -234,23 +224,35 @@ fn sweep(args: SweepCli) -> ExitCode {
     })
 }
 
-fn run(args: RunArgs) -> ExitCode {
+/// The launch-file overrides the command line gives, in the order they apply: the options,
+/// then each --set, then each --fault.
+fn overrides(
+    mode: Option<&str>,
+    duration: Option<f64>,
+    rate: Option<f64>,
+    seed: Option<u64>,
+    set: &[String],
+    fault: &[String],
+) -> Result<Vec<Override>, launch::LaunchError> {
     let mut texts: Vec<String> = Vec::new();
-    if let Some(mode) = &args.mode {
+    if let Some(mode) = mode {
         texts.push(format!("mode={mode}"));
     }
-    if let Some(d) = args.duration {
+    if let Some(d) = duration {
         texts.push(format!("duration_s={d:?}"));
     }
-    if let Some(r) = args.rate {
+    if let Some(r) = rate {
         texts.push(format!("rate_hz={r:?}"));
     }
-    if let Some(s) = args.seed {
+    if let Some(s) = seed {
         texts.push(format!("seed={s}"));
     }
-    texts.extend(args.set.iter().cloned());
-    let overrides: Result<Vec<Override>, _> =
-        texts.iter().map(|t| Override::parse(t)).chain(args.fault.iter().map(|f| Override::fault(f))).collect();
+    texts.extend(set.iter().cloned());
+    texts.iter().map(|t| Override::parse(t)).chain(fault.iter().map(|f| Override::fault(f))).collect()
+}
+
+fn run(args: RunArgs) -> ExitCode {
+    let overrides = overrides(args.mode.as_deref(), args.duration, args.rate, args.seed, &args.set, &args.fault);
     let resolved = overrides.and_then(|o| launch::resolve(&args.target, &o));
     let (config, scenario) = match resolved {
         Ok(r) => r,
