@@ -94,17 +94,8 @@ struct SweepCli {
     to: f64,
     #[arg(long, default_value_t = 1.0)]
     step: f64,
-    /// Simulated duration of each run, s
-    #[arg(long, value_name = "SECONDS")]
-    duration: Option<f64>,
-    #[arg(long)]
-    seed: Option<u64>,
-    /// As for `run`; repeatable
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    set: Vec<String>,
-    /// As for `run`; repeatable
-    #[arg(long = "fault", value_name = "FAULT")]
-    fault: Vec<String>,
+    #[command(flatten)]
+    launch: LaunchArgs,
     /// Folder for sweep.json and the runs (default: runs/<time>-sweep-<scenario>)
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
@@ -113,23 +104,9 @@ struct SweepCli {
     jobs: usize,
 }
 
-#[derive(Debug, Args)]
-#[command(
-    after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
-and meaning; --set takes any of them.\n\
-Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, launch.toml (resolved), logs/.\n\
-Exit codes: 0 completed, 1 the run failed (a process died, or files were left in shared memory), \
-2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
-)]
-struct RunArgs {
-    /// A scenario name (see `looplab list`) or the path of a launch file (.toml). A launch file
-    /// overrides its scenario's defaults key by key.
-    #[arg(default_value = "pendulum")]
-    target: String,
-    /// realtime: the plant ticks on a timer and counts deadline misses; lockstep: the plant
-    /// waits for each command, deterministic and as fast as the loop allows
-    #[arg(long, value_parser = ["realtime", "lockstep"])]
-    mode: Option<String>,
+/// The options `run` and `sweep` share: each becomes a launch-file override.
+#[derive(Debug, Default, Args)]
+struct LaunchArgs {
     /// Simulated duration in seconds (same as --set duration_s=S)
     #[arg(long, value_name = "SECONDS")]
     duration: Option<f64>,
@@ -150,6 +127,27 @@ struct RunArgs {
     /// "corrupt controller nan at 4s for 100ms". Repeatable.
     #[arg(long = "fault", value_name = "FAULT")]
     fault: Vec<String>,
+}
+
+#[derive(Debug, Args)]
+#[command(
+    after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
+and meaning; --set takes any of them.\n\
+Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, launch.toml (resolved), logs/.\n\
+Exit codes: 0 completed, 1 the run failed (a process died, or files were left in shared memory), \
+2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
+)]
+struct RunArgs {
+    /// A scenario name (see `looplab list`) or the path of a launch file (.toml). A launch file
+    /// overrides its scenario's defaults key by key.
+    #[arg(default_value = "pendulum")]
+    target: String,
+    /// realtime: the plant ticks on a timer and counts deadline misses; lockstep: the plant
+    /// waits for each command, deterministic and as fast as the loop allows
+    #[arg(long, value_parser = ["realtime", "lockstep"])]
+    mode: Option<String>,
+    #[command(flatten)]
+    launch: LaunchArgs,
     /// The run folder to write (default: runs/<time>-<scenario>); created if missing, must be
     /// empty if it exists
     #[arg(long, value_name = "DIR")]
@@ -161,17 +159,7 @@ struct RunArgs {
 
 impl Default for RunArgs {
     fn default() -> Self {
-        Self {
-            target: "pendulum".into(),
-            mode: None,
-            duration: None,
-            rate: None,
-            seed: None,
-            set: vec![],
-            fault: vec![],
-            out: None,
-            quiet: false,
-        }
+        Self { target: "pendulum".into(), mode: None, launch: LaunchArgs::default(), out: None, quiet: false }
     }
 }
 
@@ -208,7 +196,7 @@ fn bad_input(message: impl std::fmt::Display) -> ExitCode {
 }
 
 fn sweep(args: SweepCli) -> ExitCode {
-    let overrides = match overrides(None, args.duration, None, args.seed, &args.set, &args.fault) {
+    let overrides = match overrides(None, &args.launch) {
         Ok(o) => o,
         Err(e) => return bad_input(e),
     };
@@ -226,33 +214,26 @@ fn sweep(args: SweepCli) -> ExitCode {
 
 /// The launch-file overrides the command line gives, in the order they apply: the options,
 /// then each --set, then each --fault.
-fn overrides(
-    mode: Option<&str>,
-    duration: Option<f64>,
-    rate: Option<f64>,
-    seed: Option<u64>,
-    set: &[String],
-    fault: &[String],
-) -> Result<Vec<Override>, launch::LaunchError> {
+fn overrides(mode: Option<&str>, launch: &LaunchArgs) -> Result<Vec<Override>, launch::LaunchError> {
     let mut texts: Vec<String> = Vec::new();
     if let Some(mode) = mode {
         texts.push(format!("mode={mode}"));
     }
-    if let Some(d) = duration {
+    if let Some(d) = launch.duration {
         texts.push(format!("duration_s={d:?}"));
     }
-    if let Some(r) = rate {
+    if let Some(r) = launch.rate {
         texts.push(format!("rate_hz={r:?}"));
     }
-    if let Some(s) = seed {
+    if let Some(s) = launch.seed {
         texts.push(format!("seed={s}"));
     }
-    texts.extend(set.iter().cloned());
-    texts.iter().map(|t| Override::parse(t)).chain(fault.iter().map(|f| Override::fault(f))).collect()
+    texts.extend(launch.set.iter().cloned());
+    texts.iter().map(|t| Override::parse(t)).chain(launch.fault.iter().map(|f| Override::fault(f))).collect()
 }
 
 fn run(args: RunArgs) -> ExitCode {
-    let overrides = overrides(args.mode.as_deref(), args.duration, args.rate, args.seed, &args.set, &args.fault);
+    let overrides = overrides(args.mode.as_deref(), &args.launch);
     let resolved = overrides.and_then(|o| launch::resolve(&args.target, &o));
     let (config, scenario) = match resolved {
         Ok(r) => r,
