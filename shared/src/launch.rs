@@ -109,6 +109,13 @@ pub struct SensorSpec {
     /// Transport delay, in loop ticks, between sampling and delivery.
     #[serde(default)]
     pub delay_ticks: u32,
+    /// false removes a sensor the scenario's defaults have (the lab has no rate sensors).
+    #[serde(default = "enabled")]
+    pub enabled: bool,
+}
+
+fn enabled() -> bool {
+    true
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -401,7 +408,7 @@ fn from_document(
         rate_hz: common.rate_hz,
         duration_s: common.duration_s,
         seed: common.seed,
-        sensors: common.sensors,
+        sensors: common.sensors.into_iter().filter(|(_, s)| s.enabled).collect(),
         faults: common.faults,
         supervision: common.supervision,
         document,

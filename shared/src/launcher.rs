@@ -1134,6 +1134,7 @@ impl<'a> Supervisor<'a> {
                 dropped_for_monitor: plant.dropped + stage_total(|r| r.dropped),
             },
             metrics: monitor.metrics.clone(),
+            notes: monitor.notes.clone(),
             error_measure: scenario.error_measure().describe(),
             faults,
             timeline: self.timeline.clone(),

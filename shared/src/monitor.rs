@@ -135,6 +135,8 @@ pub struct MonitorReport {
     /// Trajectory rows written with some part missing.
     pub partial_rows: u64,
     pub metrics: BTreeMap<String, f64>,
+    /// The scenario's findings in words.
+    pub notes: Vec<String>,
     /// What each fault of the launch file did to the loop, in its order.
     pub faults: Vec<FaultEffect>,
 }
@@ -247,7 +249,7 @@ impl FaultTracker {
             }
         }
         if let Some(state) = &part.state {
-            let error = (measure.of_state)(&state.x);
+            let error = (measure.of_state)(state.header.t, &state.x);
             let worst = if self.back.is_none() {
                 &mut self.effect.worst_error_during
             } else {
@@ -845,6 +847,7 @@ impl Writer {
         report.plant_wake_latency = self.wake.stats();
         report.data_age = self.sensor_names.iter().cloned().zip(self.data_age.iter().map(Recorder::stats)).collect();
         report.metrics = self.metrics.finish();
+        report.notes = self.metrics.notes();
         report.faults = self.faults.into_iter().map(|f| f.finish(self.dt)).collect();
         Ok(report)
     }

@@ -44,6 +44,9 @@ struct PlantLoop {
     schedule: Option<(u64, u64)>,
     /// The command in effect (zero-order hold): the last valid one that has taken effect.
     held: [f64; MAX_INPUT],
+    /// What the actuator applied over the last period: the held command, or what the
+    /// scenario's actuator made of it.
+    applied: [f64; MAX_INPUT],
     /// When the command in effect arrived (real time; 0: none yet).
     held_arrived: u64,
     command_timeout_ns: u64,
@@ -73,7 +76,7 @@ impl PlantLoop {
     fn publish_state(&mut self, timing: TickTiming) -> Result<()> {
         let mut msg = PlantState {
             header: Header { k: self.k, t: self.k as f64 * self.dt, ..Default::default() },
-            u_applied: self.held,
+            u_applied: self.applied,
             timing,
             counters: self.counters,
             ..Default::default()
@@ -149,7 +152,12 @@ impl PlantLoop {
                 self.held = [0.0; MAX_INPUT];
             }
         }
-        self.plant.step(&self.held[..m], self.dt);
+        self.plant.step(self.k as f64 * self.dt, &self.held[..m], self.dt);
+        if let Some(applied) = self.plant.applied_input() {
+            self.applied[..m].copy_from_slice(applied);
+        } else {
+            self.applied = self.held;
+        }
         self.k += 1;
         self.save();
     }
@@ -185,6 +193,7 @@ impl PlantLoop {
     fn restore(&mut self, s: &SnapshotData) {
         self.k = s.k;
         self.held = s.held;
+        self.applied = s.held;
         self.held_arrived = s.held_arrived;
         self.schedule = (s.schedule[1] > 0).then_some((s.schedule[0], s.schedule[1]));
         self.in_time_k = u64::try_from(s.in_time_k).ok();
@@ -210,6 +219,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
         incarnation: context.incarnation,
         schedule: None,
         held: [0.0; MAX_INPUT],
+        applied: [0.0; MAX_INPUT],
         held_arrived: 0,
         command_timeout_ns: (supervision.command_timeout_s * 1e9) as u64,
         on_stale: supervision.on_stale,

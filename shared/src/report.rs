@@ -51,6 +51,10 @@ pub struct Summary {
     pub data_age_ns: BTreeMap<String, Stats>,
     pub monitor: MonitorCounts,
     pub metrics: BTreeMap<String, f64>,
+    /// What the scenario's metrics mean, in words (for example a parameter that could not be
+    /// identified).
+    #[serde(default)]
+    pub notes: Vec<String>,
     /// What the fault report's errors measure, the band a recovery must reach and the limit
     /// the physical system must stay within.
     pub error_measure: ErrorMeasureInfo,
@@ -237,6 +241,9 @@ pub fn render(s: &Summary) -> String {
     let _ = writeln!(out, "\n  metrics");
     for (name, value) in &s.metrics {
         let _ = writeln!(out, "    {name:<34}{value:>14.6}");
+    }
+    for note in &s.notes {
+        let _ = writeln!(out, "    note: {note}");
     }
     let _ = writeln!(
         out,

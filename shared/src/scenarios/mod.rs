@@ -3,6 +3,7 @@
 //! processes stay scenario-agnostic.
 
 pub mod pendulum;
+pub mod quadcopter;
 
 use std::collections::BTreeMap;
 
@@ -35,7 +36,7 @@ impl ScenarioEntry {
     }
 }
 
-pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY];
+pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY];
 
 /// Something a sensor can measure: named components read from the true state.
 pub struct Signal {
@@ -86,10 +87,11 @@ pub struct TheoreticalMargin {
 /// How far the physical system is from where it should be, for fault reports: the worst value
 /// during and after a fault, the band it must come back within (recovery), and the limit it
 /// must never pass (for the pendulum: the angle at which it has fallen).
-#[derive(Debug, Clone, Copy)]
+#[derive(Clone)]
 pub struct ErrorMeasure {
     pub name: &'static str,
-    pub of_state: fn(&[f64]) -> f64,
+    /// The error at simulation time t in true state x.
+    pub of_state: std::sync::Arc<dyn Fn(f64, &[f64]) -> f64 + Send + Sync>,
     pub recovery_band: f64,
     pub limit: f64,
 }
@@ -103,10 +105,16 @@ impl ErrorMeasure {
 /// The physical model: the truth.
 pub trait Plant {
     fn state(&self) -> &[f64];
-    /// Advances one loop period with the input held constant (zero-order hold).
-    fn step(&mut self, u: &[f64], dt: f64);
+    /// Advances one loop period from simulation time `t` with the input held constant
+    /// (zero-order hold).
+    fn step(&mut self, t: f64, u: &[f64], dt: f64);
     /// Sets the state, for a restarted plant going on from its snapshot.
     fn restore(&mut self, state: &[f64]);
+    /// What the actuator applied over the last step, where it differs from the command (a
+    /// command link that samples the commands): the estimator predicts with it.
+    fn applied_input(&self) -> Option<&[f64]> {
+        None
+    }
 }
 
 pub trait Estimator {
@@ -143,4 +151,8 @@ pub struct Row<'a> {
 pub trait Metrics: Send {
     fn observe(&mut self, row: &Row);
     fn finish(&self) -> BTreeMap<String, f64>;
+    /// Findings the numbers alone do not say.
+    fn notes(&self) -> Vec<String> {
+        Vec::new()
+    }
 }

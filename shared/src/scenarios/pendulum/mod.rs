@@ -243,7 +243,7 @@ impl Scenario for Pendulum {
     fn error_measure(&self) -> ErrorMeasure {
         ErrorMeasure {
             name: "|theta| rad",
-            of_state: |x| x[0].abs(),
+            of_state: std::sync::Arc::new(|_, x| x[0].abs()),
             recovery_band: self.limits.recovery_band_rad,
             limit: self.limits.fall_angle_rad,
         }

@@ -1,0 +1,456 @@
+//! Quadcopter with a Kalman-Bucy parameter estimator and backstepping tracking (paper 001;
+//! note `../shared/papers/001-quadcopter-kbf.md`).
+//!
+//! - `plant`: the rigid body (21) on SO(3), torque or rate-loop actuation, command link;
+//! - `sensors`: motion-capture pose, body velocity, body rate;
+//! - `estimator`: the 16-state KBF for ξ and the cascaded filters for m and J;
+//! - `controller`: the backstepping thrust (56) and torque (57);
+//! - `reference`: hover, the lemniscate (as meant and as printed), γ(t).
+//!
+//! The cases of the paper are launch files in `launch/quadcopter/`.
+
+pub mod controller;
+pub mod estimator;
+pub mod plant;
+pub mod reference;
+pub mod sensors;
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+
+use nalgebra::Vector3;
+use serde::Deserialize;
+
+use self::controller::{Backstepping, ControllerSection, Parameters};
+use self::estimator::{EstimatorSection, Inputs, ParameterEstimator};
+use self::plant::{Actuation, Model, PlantSection, QuadcopterPlant};
+use self::reference::{Reference, ReferenceSection};
+use super::{Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry};
+use crate::launch::{LaunchConfig, LaunchError};
+
+pub const ENTRY: ScenarioEntry = ScenarioEntry {
+    name: "quadcopter",
+    description: "quadcopter, backstepping tracking with a Kalman-Bucy parameter estimator (paper 001)",
+    file: "launch/quadcopter.toml",
+    text: include_str!("../../../../launch/quadcopter.toml"),
+    sections: &["model", "plant", "estimator", "controller", "reference", "limits", "metrics"],
+    signals: sensors::SIGNALS,
+    build,
+};
+
+/// The true state: p, R (row-major), v, ω, m.
+pub const STATE_LEN: usize = 19;
+/// The command: T, τ, and the body-rate command of a rate-loop vehicle.
+pub const INPUTS: usize = 7;
+
+/// Where things are in the estimate vector: the measured motion the controller uses, then
+/// the estimator's own output.
+pub mod layout {
+    use std::ops::Range;
+    pub const POSE: Range<usize> = 0..12;
+    pub const VELOCITY: Range<usize> = 12..15;
+    pub const RATE: Range<usize> = 15..18;
+    /// ξ̂ = (ξ₁, ξ₂, ξ₃, ξ₄).
+    pub const XI: Range<usize> = 18..28;
+    pub const XI2_RATE: Range<usize> = 28..31;
+    pub const MASS: usize = 31;
+    pub const INERTIA: Range<usize> = 32..35;
+    /// (60): the largest singular value of the filter's continuous-time gain.
+    pub const SNR: usize = 35;
+    pub const LEN: usize = 36;
+}
+
+const STATE_NAMES: [&str; STATE_LEN] = [
+    "p_x", "p_y", "p_z", "R_11", "R_12", "R_13", "R_21", "R_22", "R_23", "R_31", "R_32", "R_33", "v_x", "v_y", "v_z",
+    "w_x", "w_y", "w_z", "mass",
+];
+
+const ESTIMATE_NAMES: [&str; layout::LEN] = [
+    "p_x", "p_y", "p_z", "R_11", "R_12", "R_13", "R_21", "R_22", "R_23", "R_31", "R_32", "R_33", "v_x", "v_y", "v_z",
+    "w_x", "w_y", "w_z", "xi_1", "xi_2x", "xi_2y", "xi_2z", "xi_3x", "xi_3y", "xi_3z", "xi_4x", "xi_4y", "xi_4z",
+    "xi_2x_rate", "xi_2y_rate", "xi_2z_rate", "mass", "j_x", "j_y", "j_z", "snr",
+];
+
+/// How fault reports judge the flight: the distance from the reference.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LimitsSection {
+    /// ‖z₁‖ beyond which the vehicle counts as lost, m.
+    position_error_limit_m: f64,
+    /// ‖z₁‖ within which it counts as recovered, m.
+    recovery_band_m: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MetricsSection {
+    /// Steady state starts here: `z1_rms_m` and `snr_mean` are taken from this time on.
+    steady_from_s: f64,
+}
+
+pub struct Quadcopter {
+    model: Model,
+    plant: PlantSection,
+    estimator: EstimatorSection,
+    controller: ControllerSection,
+    reference: ReferenceSection,
+    limits: LimitsSection,
+    metrics: MetricsSection,
+    inputs: Inputs,
+    seed: u64,
+}
+
+fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+    Ok(Box::new(Quadcopter::from_config(c)?))
+}
+
+/// An error unless `value` is finite and positive.
+fn positive(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be a positive number, got {value}")))
+    }
+}
+
+/// An error unless `value` is finite and not negative.
+fn not_negative(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be 0 or a positive number, got {value}")))
+    }
+}
+
+impl Quadcopter {
+    pub fn from_config(c: &LaunchConfig) -> Result<Self, LaunchError> {
+        let model: Model = c.section("model")?;
+        positive(c, "model.mass_kg", model.mass_kg)?;
+        for (i, j) in model.inertia_kg_m2.iter().enumerate() {
+            positive(c, &format!("model.inertia_kg_m2.{i}"), *j)?;
+        }
+        positive(c, "model.g", model.g)?;
+        positive(c, "model.rate_loop_time_constant_s", model.rate_loop_time_constant_s)?;
+        not_negative(c, "model.command_period_s", model.command_period_s)?;
+        positive(c, "model.thrust_max_n", model.thrust_max_n)?;
+        positive(c, "model.torque_max_nm", model.torque_max_nm)?;
+        positive(c, "model.rate_max_rad_s", model.rate_max_rad_s)?;
+
+        let plant: PlantSection = c.section("plant")?;
+        if plant.substeps == 0 {
+            return Err(c.error("plant.substeps", "must be at least 1"));
+        }
+        for (i, std) in plant.process_noise_std.iter().enumerate() {
+            not_negative(c, &format!("plant.process_noise_std.{i}"), *std)?;
+        }
+        if plant.mass_step_kg <= -model.mass_kg {
+            return Err(c.error("plant.mass_step_kg", "must leave a positive mass"));
+        }
+
+        let estimator: EstimatorSection = c.section("estimator")?;
+        positive(c, "estimator.r", estimator.r)?;
+        positive(c, "estimator.r_scale", estimator.r_scale)?;
+        positive(c, "estimator.q_scale", estimator.q_scale)?;
+        for (name, blocks) in [("q", estimator.q), ("p0", estimator.p0)] {
+            for (i, value) in blocks.iter().enumerate() {
+                positive(c, &format!("estimator.{name}.{i}"), *value)?;
+            }
+        }
+        for (name, [r, q]) in [("mass_filter", estimator.mass_filter), ("inertia_filter", estimator.inertia_filter)] {
+            positive(c, &format!("estimator.{name}.0"), r)?;
+            positive(c, &format!("estimator.{name}.1"), q)?;
+        }
+        positive(c, "estimator.initial_mass_inertia_factor", estimator.initial_mass_inertia_factor)?;
+
+        let controller: ControllerSection = c.section("controller")?;
+        for (i, k) in controller.gains.iter().enumerate() {
+            positive(c, &format!("controller.gains.{i}"), *k)?;
+        }
+        positive(c, "controller.beta", controller.beta)?;
+        if !(controller.delta[2].is_finite() && controller.delta[2] != 0.0) {
+            return Err(c.error("controller.delta", "δ₃ (the third component) must not be 0 (Lemma 4.1)"));
+        }
+
+        let reference: ReferenceSection = c.section("reference")?;
+        positive(c, "reference.lemniscate_size_m", reference.lemniscate_size_m)?;
+        not_negative(c, "reference.lemniscate_speed_m_s", reference.lemniscate_speed_m_s)?;
+        let limits: LimitsSection = c.section("limits")?;
+        positive(c, "limits.position_error_limit_m", limits.position_error_limit_m)?;
+        positive(c, "limits.recovery_band_m", limits.recovery_band_m)?;
+        let metrics: MetricsSection = c.section("metrics")?;
+        not_negative(c, "metrics.steady_from_s", metrics.steady_from_s)?;
+
+        let (pose, _, _) = c.sensor_for("pose")?;
+        let find = |signal: &str| c.sensors.values().position(|s| s.signal == signal);
+        let rates = match (find("velocity"), find("angular_rate")) {
+            (Some(_), Some(_)) => Some((c.sensor_for("velocity")?.0, c.sensor_for("angular_rate")?.0)),
+            (None, None) => None,
+            _ => {
+                return Err(c.error(
+                    "sensors",
+                    "the quadcopter needs both a velocity and an angular_rate sensor, or neither \
+                     (then both come from differencing the pose)",
+                ));
+            }
+        };
+        Ok(Self {
+            model,
+            plant,
+            estimator,
+            controller,
+            reference,
+            limits,
+            metrics,
+            inputs: Inputs { pose, rates },
+            seed: c.seed,
+        })
+    }
+}
+
+impl Scenario for Quadcopter {
+    fn title(&self) -> String {
+        let parameters = match self.controller.parameters {
+            Parameters::Nominal => "true parameters",
+            Parameters::Estimated => "estimated parameters",
+        };
+        let actuation = match self.model.actuation {
+            Actuation::Torque => "torque",
+            Actuation::RateLoop => "rate loop",
+        };
+        let sensing = if self.inputs.rates.is_some() { "full state" } else { "pose only" };
+        format!("quadcopter, {:?} reference, {parameters}, {actuation}, {sensing}", self.reference.kind)
+    }
+
+    fn state_names(&self) -> &'static [&'static str] {
+        &STATE_NAMES
+    }
+
+    fn input_names(&self) -> &'static [&'static str] {
+        &["thrust", "tau_x", "tau_y", "tau_z", "rate_cmd_x", "rate_cmd_y", "rate_cmd_z"]
+    }
+
+    fn estimate_names(&self) -> &'static [&'static str] {
+        &ESTIMATE_NAMES
+    }
+
+    fn input_limits(&self) -> Vec<(f64, f64)> {
+        let m = &self.model;
+        let mut limits = vec![(0.0, m.thrust_max_n)];
+        limits.extend([(-m.torque_max_nm, m.torque_max_nm); 3]);
+        limits.extend([(-m.rate_max_rad_s, m.rate_max_rad_s); 3]);
+        limits
+    }
+
+    fn plant(&self) -> Box<dyn Plant> {
+        Box::new(QuadcopterPlant::new(self.model.clone(), self.plant.clone(), self.seed))
+    }
+
+    fn estimator(&self) -> Box<dyn Estimator> {
+        Box::new(ParameterEstimator::new(&self.estimator, &self.model, self.inputs))
+    }
+
+    fn controller(&self) -> Box<dyn Controller> {
+        Box::new(Backstepping::new(&self.controller, &self.model, &self.reference))
+    }
+
+    fn error_measure(&self) -> ErrorMeasure {
+        let reference = Mutex::new(Reference::new(&self.reference));
+        ErrorMeasure {
+            name: "|p - p_d| m",
+            of_state: Arc::new(move |t, x| {
+                let target = reference.lock().expect("reference lock").at(t).p;
+                (Vector3::from_column_slice(&x[..3]) - target).norm()
+            }),
+            recovery_band: self.limits.recovery_band_m,
+            limit: self.limits.position_error_limit_m,
+        }
+    }
+
+    fn metrics(&self) -> Box<dyn Metrics> {
+        Box::new(QuadcopterMetrics {
+            reference: Some(Reference::new(&self.reference)),
+            model: Some(self.model.clone()),
+            plant: Some(self.plant.clone()),
+            steady_from_s: self.metrics.steady_from_s,
+            ..Default::default()
+        })
+    }
+}
+
+/// Running sums of one quantity.
+#[derive(Default, Clone, Copy)]
+struct Mean {
+    sum: f64,
+    sum_sq: f64,
+    n: u64,
+}
+
+impl Mean {
+    fn add(&mut self, x: f64) {
+        self.sum += x;
+        self.sum_sq += x * x;
+        self.n += 1;
+    }
+    fn mean(&self) -> Option<f64> {
+        (self.n > 0).then(|| self.sum / self.n as f64)
+    }
+    fn rms(&self) -> Option<f64> {
+        (self.n > 0).then(|| (self.sum_sq / self.n as f64).sqrt())
+    }
+}
+
+/// Seconds before the mass step, and at the end of the run, over which the mass estimate is
+/// averaged.
+const MASS_WINDOW_S: f64 = 5.0;
+
+#[derive(Default)]
+struct QuadcopterMetrics {
+    reference: Option<Reference>,
+    model: Option<Model>,
+    plant: Option<PlantSection>,
+    steady_from_s: f64,
+    z1_steady: Mean,
+    z1_max_after_5s: f64,
+    z1_last: f64,
+    snr_steady: Mean,
+    t_last: f64,
+    xi_initial: Option<[f64; 10]>,
+    /// Largest relative change of ξ̂₃ and ξ̂₄ from their initial estimates.
+    xi3_change: f64,
+    xi4_change: f64,
+    xi_last: [f64; 10],
+    xi_true_last: [f64; 10],
+    mass_last: f64,
+    mass_true_last: f64,
+    /// Around the mass step: m̂ before it, m̂ over the last seconds (t, m̂), ‖z₁‖ before and after.
+    mass_before: Mean,
+    mass_recent: std::collections::VecDeque<(f64, f64)>,
+    z1_before_step: Mean,
+    z1_after_step: Mean,
+    z1_max_after_step: f64,
+}
+
+impl QuadcopterMetrics {
+    fn step_at(&self) -> Option<f64> {
+        self.plant.as_ref().filter(|p| p.mass_step_kg != 0.0).map(|p| p.mass_step_at_s)
+    }
+}
+
+/// |x̂ − x|/|x|, or |x̂ − x| where x = 0.
+fn relative_error(estimate: f64, truth: f64) -> f64 {
+    let error = (estimate - truth).abs();
+    if truth == 0.0 { error } else { error / truth.abs() }
+}
+
+fn block_change(now: &[f64], initial: &[f64]) -> f64 {
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let diff: Vec<f64> = now.iter().zip(initial).map(|(a, b)| a - b).collect();
+    norm(&diff) / norm(initial).max(f64::MIN_POSITIVE)
+}
+
+impl Metrics for QuadcopterMetrics {
+    fn observe(&mut self, row: &Row) {
+        let t = row.t;
+        let target = self.reference.as_mut().expect("built with a reference").at(t).p;
+        let z1 = (Vector3::from_column_slice(&row.state[..3]) - target).norm();
+        if t >= self.steady_from_s {
+            self.z1_steady.add(z1);
+            self.snr_steady.add(row.estimate[layout::SNR]);
+        }
+        if t >= 5.0 {
+            self.z1_max_after_5s = self.z1_max_after_5s.max(z1);
+        }
+        self.z1_last = z1;
+        self.t_last = t;
+
+        let mut xi = [0.0; 10];
+        xi.copy_from_slice(&row.estimate[layout::XI]);
+        let initial = *self.xi_initial.get_or_insert(xi);
+        self.xi3_change = self.xi3_change.max(block_change(&xi[4..7], &initial[4..7]));
+        self.xi4_change = self.xi4_change.max(block_change(&xi[7..10], &initial[7..10]));
+        self.xi_last = xi;
+        let mass_true = row.state[18];
+        self.xi_true_last = self.model.as_ref().expect("built with a model").xi(mass_true);
+        self.mass_last = row.estimate[layout::MASS];
+        self.mass_true_last = mass_true;
+
+        if let Some(at) = self.step_at() {
+            if t < at {
+                self.z1_before_step.add(z1);
+                if t >= at - MASS_WINDOW_S {
+                    self.mass_before.add(self.mass_last);
+                }
+            } else {
+                self.z1_after_step.add(z1);
+                self.z1_max_after_step = self.z1_max_after_step.max(z1);
+            }
+        }
+        self.mass_recent.push_back((t, self.mass_last));
+        while self.mass_recent.front().is_some_and(|(s, _)| *s <= t - MASS_WINDOW_S) {
+            self.mass_recent.pop_front();
+        }
+    }
+
+    fn finish(&self) -> BTreeMap<String, f64> {
+        let mut m = BTreeMap::new();
+        if self.xi_initial.is_none() {
+            return m;
+        }
+        let mut put = |name: &str, value: Option<f64>| {
+            if let Some(v) = value {
+                m.insert(name.to_string(), v);
+            }
+        };
+        put("z1_rms_m", self.z1_steady.rms());
+        put("z1_max_after_5s_m", (self.t_last >= 5.0).then_some(self.z1_max_after_5s));
+        put("z1_final_m", Some(self.z1_last));
+        put("mass_estimate_final_kg", Some(self.mass_last));
+        put("mass_true_kg", Some(self.mass_true_last));
+        let (xi, truth) = (&self.xi_last, &self.xi_true_last);
+        let errors: Vec<f64> = xi.iter().zip(truth).map(|(e, t)| relative_error(*e, *t)).collect();
+        put("param_rel_error_max_final", errors.iter().copied().reduce(f64::max));
+        put("xi1_rel_error_final", Some(errors[0]));
+        put("xi2_error_final_m_s2", errors[1..4].iter().copied().reduce(f64::max));
+        put("xi3_rel_error_max_final", errors[4..7].iter().copied().reduce(f64::max));
+        put("xi4_rel_error_max_final", errors[7..10].iter().copied().reduce(f64::max));
+        put("xi3_change_max_rel", Some(self.xi3_change));
+        put("xi4_change_max_rel", Some(self.xi4_change));
+        // b = ξ₂/ξ₁.
+        for (i, axis) in ["x", "y", "z"].iter().enumerate() {
+            put(&format!("disturbance_estimate_{axis}_n"), Some(xi[1 + i] / xi[0]));
+        }
+        let b_true = self.model.as_ref().map(|m| m.disturbance_n).unwrap_or_default();
+        let b_error = (0..3).map(|i| (xi[1 + i] / xi[0] - b_true[i]).powi(2)).sum::<f64>().sqrt();
+        put("disturbance_error_n", Some(b_error));
+        put("snr_mean", self.snr_steady.mean());
+        if self.step_at().is_some() {
+            let before = self.mass_before.mean();
+            let n = self.mass_recent.len() as f64;
+            let after = (n > 0.0).then(|| self.mass_recent.iter().map(|(_, m)| m).sum::<f64>() / n);
+            put("mass_estimate_before_step_kg", before);
+            put("mass_estimate_after_step_kg", after);
+            put("mass_estimate_rise_kg", before.zip(after).map(|(b, a)| a - b));
+            let (lo, hi) = self.mass_recent.iter().fold((f64::MAX, f64::MIN), |(lo, hi), (_, m)| (lo.min(*m), hi.max(*m)));
+            put("mass_estimate_spread_last_5s_kg", (n > 0.0).then_some(hi - lo));
+            put("z1_rms_before_step_m", self.z1_before_step.rms());
+            put("z1_rms_after_step_m", self.z1_after_step.rms());
+            put("z1_max_after_step_m", (self.z1_after_step.n > 0).then_some(self.z1_max_after_step));
+        }
+        m
+    }
+
+    fn notes(&self) -> Vec<String> {
+        // A block that never moved from its initial estimate was not identified: nothing in
+        // the run excited it (with γ = 0, ω and τ stay 0, so Ω(ω) and U(τ) of A_ξ are 0).
+        let mut notes = Vec::new();
+        for (name, change) in [("xi_3", self.xi3_change), ("xi_4", self.xi4_change)] {
+            if self.xi_initial.is_some() && change < 1e-9 {
+                notes.push(format!(
+                    "{name} stayed at its initial estimate (relative change {change:.1e}): it is unobservable \
+                     in this run, nothing excited it"
+                ));
+            }
+        }
+        notes
+    }
+}
