@@ -155,6 +155,11 @@ fn hover_mass_step_in_the_lab_profile() {
     assert!(spread < 0.01, "m̂ still moves by {spread} kg over the last 5 s");
     let worst = r.metric("z1_max_after_step_m");
     assert!(worst < 1.0, "‖z₁‖ reaches {worst} m after the step");
+    // The link holds each command 54 ticks: the vehicle acts on a command up to 53 ticks old,
+    // computed from a pose up to 8 ticks older still (sampled every 10 ticks; 54k mod 10 ≤ 8).
+    let ticks = |seconds: f64| (seconds * 1200.0 * 1e6).round() / 1e6;
+    assert_eq!(ticks(r.metric("command_hold_max_s")), 53.0);
+    assert_eq!(ticks(r.metric("actuation_data_age_max_s")), 61.0);
     // The pose is the only sensor, sampled every 10 ticks at 1200 Hz.
     let age = &r.summary["data_age_ns"]["pose"];
     assert_eq!(age["max"].as_f64().unwrap().round(), (9.0 / 1200.0 * 1e9f64).round(), "{age}");
@@ -164,7 +169,10 @@ fn hover_mass_step_in_the_lab_profile() {
 fn bad_quadcopter_settings_name_the_key() {
     for (set, expected) in [
         ("controller.delta=[0.1, 0.0, 0.0]", "key `controller.delta`: δ₃ (the third component) must not be 0"),
-        ("sensors.angular_rate.enabled=false", "key `sensors`: the quadcopter needs both a velocity and an angular_rate sensor"),
+        (
+            "sensors.angular_rate.enabled=false",
+            "key `sensors`: the quadcopter needs both a velocity and an angular_rate sensor",
+        ),
         ("controller.parameters=true", "key `controller.parameters`"),
         ("model.inertia_kg_m2=[1e-3, 0.0, 1e-3]", "key `model.inertia_kg_m2.1`: must be a positive number, got 0"),
     ] {

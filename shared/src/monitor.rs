@@ -771,6 +771,7 @@ impl Writer {
                 readings: &m.readings[..sensor_dims.len()],
                 estimate: &e.x[..*n_est],
                 command: &c.u[..*n_input],
+                applied: &s.u_applied[..*n_input],
             }),
             _ => self.report.partial_rows += 1,
         }

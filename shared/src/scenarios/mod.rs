@@ -87,11 +87,13 @@ pub struct TheoreticalMargin {
 /// How far the physical system is from where it should be, for fault reports: the worst value
 /// during and after a fault, the band it must come back within (recovery), and the limit it
 /// must never pass (for the pendulum: the angle at which it has fallen).
+/// The error at simulation time t in true state x.
+pub type ErrorOfState = std::sync::Arc<dyn Fn(f64, &[f64]) -> f64 + Send + Sync>;
+
 #[derive(Clone)]
 pub struct ErrorMeasure {
     pub name: &'static str,
-    /// The error at simulation time t in true state x.
-    pub of_state: std::sync::Arc<dyn Fn(f64, &[f64]) -> f64 + Send + Sync>,
+    pub of_state: ErrorOfState,
     pub recovery_band: f64,
     pub limit: f64,
 }
@@ -145,6 +147,8 @@ pub struct Row<'a> {
     pub readings: &'a [SensorReading],
     pub estimate: &'a [f64],
     pub command: &'a [f64],
+    /// What the actuator applied over the period that ended at tick k.
+    pub applied: &'a [f64],
 }
 
 /// The scenario's control metrics, fed every loop in order.

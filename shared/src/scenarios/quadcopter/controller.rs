@@ -95,7 +95,8 @@ impl Backstepping {
     fn belief(&self, e: &[f64]) -> Belief {
         let v3 = |range: std::ops::Range<usize>| Vector3::from_column_slice(&e[range]);
         let pose = &e[layout::POSE];
-        let (p, r, v, w) = (Vector3::from_column_slice(&pose[..3]), rotation(&pose[3..12]), v3(layout::VELOCITY), v3(layout::RATE));
+        let (p, r, v, w) =
+            (Vector3::from_column_slice(&pose[..3]), rotation(&pose[3..12]), v3(layout::VELOCITY), v3(layout::RATE));
         match self.parameters {
             Parameters::Nominal => {
                 let xi = self.model.xi(self.model.mass_kg);

@@ -242,7 +242,11 @@ impl ParameterEstimator {
             if v.valid == 0 || w.valid == 0 {
                 return None;
             }
-            let sample = Sample { r, v: Vector3::from_column_slice(&v.value[..3]), w: Vector3::from_column_slice(&w.value[..3]) };
+            let sample = Sample {
+                r,
+                v: Vector3::from_column_slice(&v.value[..3]),
+                w: Vector3::from_column_slice(&w.value[..3]),
+            };
             let fresh = v.fresh != 0 || w.fresh != 0;
             let interval = t - self.last_corrected.unwrap_or(t);
             if fresh {
@@ -291,12 +295,14 @@ impl Estimator for ParameterEstimator {
                         filter.step(self.zeta[13 + i], h);
                     }
                 }
+                // ξ̂ has no drift term (the ξ rows of A_ζ are zero): its rate is the gain times
+                // the innovation, which the controller's ω̇_d needs. A correction takes in what
+                // was measured over `interval`, so that is the time the change is spread over;
+                // between measurements the rate is held.
                 if fresh && interval > 0.0 {
                     self.correct(&y, interval);
+                    self.xi2_rate = (self.zeta.fixed_rows::<3>(7) - xi2_before) / interval;
                 }
-                // ξ̂ has no drift term (the ξ rows of A_ζ are zero): its rate is the gain times
-                // the innovation, which the controller's ω̇_d needs.
-                self.xi2_rate = if h > 0.0 { (self.zeta.fixed_rows::<3>(7) - xi2_before) / h } else { Vector3::zeros() };
             }
         }
         self.snr = self.snr();
@@ -318,5 +324,37 @@ impl ParameterEstimator {
             estimate[layout::INERTIA.start + i] = self.inertia[i].estimate;
         }
         estimate[layout::SNR] = self.snr;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The closed-form step against a fine RK4 integration of ṗ = q − (ξ²/r)p² and
+    /// m̂̇ = (ξp/r)(1 − ξm̂), over one long step with p(0) far from its steady state.
+    #[test]
+    fn inverse_filter_step_is_the_exact_solution() {
+        let (xi, r, q) = (5.0, 1.0, 1.0);
+        let mut exact = InverseFilter { estimate: 0.1, p: 1.0, r, q };
+        exact.step(xi, 0.3);
+        let f = |s: &nalgebra::Vector2<f64>| {
+            nalgebra::Vector2::new(xi * s[1] / r * (1.0 - xi * s[0]), q - xi * xi / r * s[1] * s[1])
+        };
+        let fine = crate::integrate::rk4(&f, &nalgebra::Vector2::new(0.1, 1.0), 0.3, 30_000);
+        assert!((exact.estimate - fine[0]).abs() < 1e-12 && (exact.p - fine[1]).abs() < 1e-12, "{exact:?} vs {fine}");
+        // It settles at m = 1/ξ with p = √(qr)/ξ.
+        for _ in 0..100 {
+            exact.step(xi, 0.1);
+        }
+        assert!((exact.estimate - 0.2).abs() < 1e-12 && (exact.p - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn log_so3_inverts_the_exponential() {
+        for w in [Vector3::new(0.3, -0.2, 0.5), Vector3::new(1e-10, 0.0, 0.0), Vector3::new(0.0, 2.5, 1.0)] {
+            let r = nalgebra::Rotation3::from_scaled_axis(w).into_inner();
+            assert!((log_so3(&r) - w).norm() < 1e-9, "{w}");
+        }
     }
 }

@@ -66,9 +66,42 @@ const STATE_NAMES: [&str; STATE_LEN] = [
 ];
 
 const ESTIMATE_NAMES: [&str; layout::LEN] = [
-    "p_x", "p_y", "p_z", "R_11", "R_12", "R_13", "R_21", "R_22", "R_23", "R_31", "R_32", "R_33", "v_x", "v_y", "v_z",
-    "w_x", "w_y", "w_z", "xi_1", "xi_2x", "xi_2y", "xi_2z", "xi_3x", "xi_3y", "xi_3z", "xi_4x", "xi_4y", "xi_4z",
-    "xi_2x_rate", "xi_2y_rate", "xi_2z_rate", "mass", "j_x", "j_y", "j_z", "snr",
+    "p_x",
+    "p_y",
+    "p_z",
+    "R_11",
+    "R_12",
+    "R_13",
+    "R_21",
+    "R_22",
+    "R_23",
+    "R_31",
+    "R_32",
+    "R_33",
+    "v_x",
+    "v_y",
+    "v_z",
+    "w_x",
+    "w_y",
+    "w_z",
+    "xi_1",
+    "xi_2x",
+    "xi_2y",
+    "xi_2z",
+    "xi_3x",
+    "xi_3y",
+    "xi_3z",
+    "xi_4x",
+    "xi_4y",
+    "xi_4z",
+    "xi_2x_rate",
+    "xi_2y_rate",
+    "xi_2z_rate",
+    "mass",
+    "j_x",
+    "j_y",
+    "j_z",
+    "snr",
 ];
 
 /// How fault reports judge the flight: the distance from the reference.
@@ -328,9 +361,46 @@ struct QuadcopterMetrics {
     z1_before_step: Mean,
     z1_after_step: Mean,
     z1_max_after_step: f64,
+    /// The last loops' (t, command, oldest sample time behind it), to find the loop whose command the
+    /// vehicle is acting on.
+    recent_commands: std::collections::VecDeque<(f64, [f64; INPUTS], f64)>,
+    /// How long the command in effect had been held, and how old the oldest sample behind it
+    /// was, when each period began.
+    command_hold: Mean,
+    command_hold_max: f64,
+    actuation_age: Mean,
+    actuation_age_max: f64,
 }
 
+/// Loops kept to match applied commands: longer than any command link's hold.
+const COMMANDS_KEPT: usize = 512;
+
 impl QuadcopterMetrics {
+    /// Finds the loop whose command the actuator applied over the period that ended now (the
+    /// newest one with exactly that command) and records how long it had been held and how old
+    /// its data were when the period began.
+    fn observe_actuation(&mut self, row: &Row) {
+        let began = self.recent_commands.back().map(|(t, _, _)| *t);
+        if let Some(began) = began {
+            let found = self.recent_commands.iter().rev().find(|(_, command, _)| command[..] == row.applied[..INPUTS]);
+            if let Some((computed_at, _, pose_time)) = found {
+                let (hold, age) = (began - computed_at, began - pose_time);
+                self.command_hold.add(hold);
+                self.command_hold_max = self.command_hold_max.max(hold);
+                self.actuation_age.add(age);
+                self.actuation_age_max = self.actuation_age_max.max(age);
+            }
+        }
+        let mut command = [0.0; INPUTS];
+        command.copy_from_slice(&row.command[..INPUTS]);
+        // The oldest sample the command was computed from.
+        let pose_time = row.readings.iter().filter(|r| r.valid != 0).map(|r| r.sample_time).fold(row.t, f64::min);
+        self.recent_commands.push_back((row.t, command, pose_time));
+        if self.recent_commands.len() > COMMANDS_KEPT {
+            self.recent_commands.pop_front();
+        }
+    }
+
     fn step_at(&self) -> Option<f64> {
         self.plant.as_ref().filter(|p| p.mass_step_kg != 0.0).map(|p| p.mass_step_at_s)
     }
@@ -385,6 +455,7 @@ impl Metrics for QuadcopterMetrics {
                 self.z1_max_after_step = self.z1_max_after_step.max(z1);
             }
         }
+        self.observe_actuation(row);
         self.mass_recent.push_back((t, self.mass_last));
         while self.mass_recent.front().is_some_and(|(s, _)| *s <= t - MASS_WINDOW_S) {
             self.mass_recent.pop_front();
@@ -423,6 +494,10 @@ impl Metrics for QuadcopterMetrics {
         let b_error = (0..3).map(|i| (xi[1 + i] / xi[0] - b_true[i]).powi(2)).sum::<f64>().sqrt();
         put("disturbance_error_n", Some(b_error));
         put("snr_mean", self.snr_steady.mean());
+        put("command_hold_mean_s", self.command_hold.mean());
+        put("command_hold_max_s", (self.command_hold.n > 0).then_some(self.command_hold_max));
+        put("actuation_data_age_mean_s", self.actuation_age.mean());
+        put("actuation_data_age_max_s", (self.actuation_age.n > 0).then_some(self.actuation_age_max));
         if self.step_at().is_some() {
             let before = self.mass_before.mean();
             let n = self.mass_recent.len() as f64;
@@ -430,7 +505,8 @@ impl Metrics for QuadcopterMetrics {
             put("mass_estimate_before_step_kg", before);
             put("mass_estimate_after_step_kg", after);
             put("mass_estimate_rise_kg", before.zip(after).map(|(b, a)| a - b));
-            let (lo, hi) = self.mass_recent.iter().fold((f64::MAX, f64::MIN), |(lo, hi), (_, m)| (lo.min(*m), hi.max(*m)));
+            let (lo, hi) =
+                self.mass_recent.iter().fold((f64::MAX, f64::MIN), |(lo, hi), (_, m)| (lo.min(*m), hi.max(*m)));
             put("mass_estimate_spread_last_5s_kg", (n > 0.0).then_some(hi - lo));
             put("z1_rms_before_step_m", self.z1_before_step.rms());
             put("z1_rms_after_step_m", self.z1_after_step.rms());

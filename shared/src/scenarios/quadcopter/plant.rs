@@ -229,7 +229,9 @@ impl Plant for QuadcopterPlant {
         };
         let [std_v, std_w] = self.section.process_noise_std;
         let mut draw = |std: f64| {
-            Vector3::from_fn(|_, _| if std > 0.0 { std * Distribution::<f64>::sample(&StandardNormal, &mut self.rng) } else { 0.0 })
+            Vector3::from_fn(|_, _| {
+                if std > 0.0 { std * Distribution::<f64>::sample(&StandardNormal, &mut self.rng) } else { 0.0 }
+            })
         };
         let noise = (draw(std_v), draw(std_w));
         // The mass in effect over the tick is the one at its start; a step lands on a tick.
@@ -296,7 +298,9 @@ mod tests {
         let j = Vector3::from(model.inertia_kg_m2);
         let mut plant = QuadcopterPlant::new(model, section, 1);
         let momentum = |x: &[f64]| rotation(&x[3..12]) * j.component_mul(&Vector3::new(x[15], x[16], x[17]));
-        let energy = |x: &[f64]| 0.5 * Vector3::new(x[15], x[16], x[17]).dot(&j.component_mul(&Vector3::new(x[15], x[16], x[17])));
+        let energy = |x: &[f64]| {
+            0.5 * Vector3::new(x[15], x[16], x[17]).dot(&j.component_mul(&Vector3::new(x[15], x[16], x[17])))
+        };
         let (l0, e0) = (momentum(plant.state()), energy(plant.state()));
         // Hover thrust so that the translational part stays tame.
         let u = [0.2 * 9.8, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];

@@ -130,10 +130,7 @@ impl Reference {
         let l = s.lemniscate_size_m;
         let (sin, cos) = (psi_jet.sin(), psi_jet.cos());
         let (x, y) = match s.kind {
-            Kind::LemniscatePrinted => (
-                (sin * cos * l).div(&((cos * cos) + 1.0)),
-                (sin * l).div(&((sin * sin) + 1.0)),
-            ),
+            Kind::LemniscatePrinted => ((sin * cos * l).div(&((cos * cos) + 1.0)), (sin * l).div(&((sin * sin) + 1.0))),
             _ => {
                 let denominator = (cos * cos) + 1.0;
                 ((sin * cos * l).div(&denominator), (sin * l).div(&denominator))

@@ -12,7 +12,15 @@ pub const SIGNALS: &[Signal] = &[
         read: |x, out| out[..12].copy_from_slice(&x[..12]),
     },
     // Linear velocity in the body frame.
-    Signal { name: "velocity", components: &["v_x", "v_y", "v_z"], read: |x, out| out[..3].copy_from_slice(&x[12..15]) },
+    Signal {
+        name: "velocity",
+        components: &["v_x", "v_y", "v_z"],
+        read: |x, out| out[..3].copy_from_slice(&x[12..15]),
+    },
     // Body angular velocity.
-    Signal { name: "angular_rate", components: &["w_x", "w_y", "w_z"], read: |x, out| out[..3].copy_from_slice(&x[15..18]) },
+    Signal {
+        name: "angular_rate",
+        components: &["w_x", "w_y", "w_z"],
+        read: |x, out| out[..3].copy_from_slice(&x[15..18]),
+    },
 ];
