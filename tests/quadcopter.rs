@@ -182,3 +182,17 @@ fn bad_quadcopter_settings_name_the_key() {
         assert!(stderr.contains(&format!("--set {set}")) && stderr.contains(expected), "{set}: {stderr}");
     }
 }
+
+/// A killed estimator comes back with what it had learnt (ξ̂, m̂, ĵ and their variances): in the
+/// closed loop of case 4, ‖z₁‖ stays within the paper's ball through the restart, and the
+/// estimates end as accurate as without the fault.
+#[test]
+fn a_restarted_estimator_keeps_its_parameter_estimates() {
+    let r = run("quad-kill", &[&case("4-closed-loop"), "--fault", "kill estimator at 15"]);
+    let fault = &r.summary["faults"][0];
+    assert_eq!(fault["effect"]["outage_ticks"], 0, "{fault}");
+    let worst = fault["effect"]["worst_error_after"].as_f64().unwrap();
+    assert!(worst <= 0.09, "‖z₁‖ reached {worst} m after the restart");
+    assert_eq!(r.summary["restarts"]["estimator"], 1);
+    assert!(r.metric("param_rel_error_max_final") < 0.01);
+}

@@ -132,8 +132,8 @@ pub trait Estimator {
     fn resume(&mut self, _calibration: &Calibration) {}
 }
 
-/// Up to eight numbers an estimator keeps across restarts.
-pub type Calibration = [f64; 8];
+/// Up to 32 numbers an estimator keeps across restarts.
+pub type Calibration = [f64; 32];
 
 pub trait Controller {
     fn update(&mut self, t: f64, estimate: &[f64], command: &mut [f64]);

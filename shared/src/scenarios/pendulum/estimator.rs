@@ -155,7 +155,7 @@ impl Estimator for PendulumEstimator {
     fn calibration(&self) -> Option<crate::scenarios::Calibration> {
         let (x, _) = self.state?;
         (self.kind == Kind::BiasObserver).then(|| {
-            let mut c = [0.0; 8];
+            let mut c = [0.0; 32];
             c[0] = x[2];
             c
         })

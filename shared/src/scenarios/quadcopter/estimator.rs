@@ -25,7 +25,7 @@ use serde::Deserialize;
 use super::layout;
 use super::plant::{Model, orthonormalise, rotation};
 use crate::msg::SensorReading;
-use crate::scenarios::Estimator;
+use crate::scenarios::{Calibration, Estimator};
 
 type Vector16 = SVector<f64, 16>;
 type Matrix16 = SMatrix<f64, 16, 16>;
@@ -308,6 +308,34 @@ impl Estimator for ParameterEstimator {
         self.snr = self.snr();
         self.last = Some((t, sample));
         self.write(estimate, Some(&sample));
+    }
+
+    /// The parameter estimates are what took the filter seconds of excitation to learn: they
+    /// outlive a restart, with their variances (ξ̂ and the diagonal of its covariance block, m̂,
+    /// ĵ and their filters' p). The fast states start again from the measurements.
+    fn calibration(&self) -> Option<Calibration> {
+        self.last?;
+        let mut c = [0.0; 32];
+        for i in 0..10 {
+            c[i] = self.zeta[6 + i];
+            c[10 + i] = self.p[(6 + i, 6 + i)];
+        }
+        for (i, filter) in std::iter::once(&self.mass).chain(&self.inertia).enumerate() {
+            c[20 + 2 * i] = filter.estimate;
+            c[21 + 2 * i] = filter.p;
+        }
+        Some(c)
+    }
+
+    fn resume(&mut self, c: &Calibration) {
+        for i in 0..10 {
+            self.zeta[6 + i] = c[i];
+            self.p[(6 + i, 6 + i)] = c[10 + i];
+        }
+        for (i, filter) in std::iter::once(&mut self.mass).chain(&mut self.inertia).enumerate() {
+            filter.estimate = c[20 + 2 * i];
+            filter.p = c[21 + 2 * i];
+        }
     }
 }
 
