@@ -307,6 +307,27 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
         Ok(self.subscriber.receive().context("receive")?.map(|sample| *sample))
     }
 
+    /// The next queued sample. Once the queue is empty it consumes the pending wake-ups and
+    /// looks once more, so that a sample landing later leaves a wake-up behind and a blocking
+    /// wait cannot miss it; consuming them after the data keeps that syscall off the latency.
+    /// `cleared` starts false for each drain.
+    pub fn next(&self, cleared: &mut bool) -> Result<Option<T>> {
+        if let Some(sample) = self.receive()? {
+            return Ok(Some(sample));
+        }
+        if *cleared {
+            return Ok(None);
+        }
+        self.clear_wakeups()?;
+        *cleared = true;
+        self.receive()
+    }
+
+    /// Whether a sample is queued (without taking it).
+    pub fn has_samples(&self) -> Result<bool> {
+        self.subscriber.has_samples().map_err(|e| anyhow!("{}: {e:?}", self.topic.name()))
+    }
+
     pub fn listener(&self) -> Option<&Listener<ipc::Service>> {
         self.listener.as_ref()
     }

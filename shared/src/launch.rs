@@ -13,12 +13,13 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::faults::{FaultSpec, Supervision};
+use crate::wait::WaitSettings;
 use crate::msg::{MAX_SENSOR_DIM, MAX_SENSORS};
 use crate::scenarios::{self, Scenario, ScenarioEntry, Signal};
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-const COMMON_KEYS: [&str; 8] =
-    ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision"];
+const COMMON_KEYS: [&str; 9] =
+    ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision", "wait"];
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LaunchError {
@@ -132,6 +133,8 @@ struct CommonKeys {
     faults: Vec<FaultSpec>,
     #[serde(default)]
     supervision: Supervision,
+    #[serde(default)]
+    wait: WaitSettings,
 }
 
 /// A checked launch configuration: the keys every scenario shares, plus the scenario's own
@@ -148,6 +151,8 @@ pub struct LaunchConfig {
     /// Faults to inject, in the order given.
     pub faults: Vec<FaultSpec>,
     pub supervision: Supervision,
+    /// How each loop process waits for its input.
+    pub wait: WaitSettings,
     /// The whole resolved document, as written to the run folder.
     pub document: toml::Table,
     entry: &'static ScenarioEntry,
@@ -411,6 +416,7 @@ fn from_document(
         sensors: common.sensors.into_iter().filter(|(_, s)| s.enabled).collect(),
         faults: common.faults,
         supervision: common.supervision,
+        wait: common.wait,
         document,
         entry,
         origins,
@@ -418,6 +424,7 @@ fn from_document(
     check_common(&config)?;
     check_sensors(&config)?;
     config.supervision.check(&config)?;
+    config.wait.check(&config)?;
     for (i, fault) in config.faults.iter().enumerate() {
         fault.check(&config, &format!("faults.{i}"))?;
     }

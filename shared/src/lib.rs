@@ -17,4 +17,5 @@ pub mod sensors;
 pub mod signals;
 pub mod snapshot;
 pub mod stages;
+pub mod wait;
 pub mod sweep;

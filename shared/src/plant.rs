@@ -28,6 +28,7 @@ use crate::msg::*;
 use crate::protocol::{ChildEvent, PlantReport, emit, wait_for_line};
 use crate::snapshot::Snapshot;
 use crate::stages::{Context, wait, waitset};
+use crate::wait::{ArrivalModel, Waiter};
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.
@@ -64,6 +65,8 @@ struct PlantLoop {
     snapshot: Snapshot<SnapshotData>,
     /// The current tick: the plant's state is at t = k·dt.
     k: u64,
+    /// When commands arrive after their tick's state goes out (real time).
+    arrivals: ArrivalModel,
 }
 
 impl PlantLoop {
@@ -115,6 +118,7 @@ impl PlantLoop {
         if in_time {
             self.in_time_k = self.in_time_k.max(Some(k));
         }
+        self.arrivals.observe(k, command.header.trace.plant_publish, arrived);
         self.report.commands += 1;
         let mut record = LoopRecord {
             header: command.header,
@@ -163,8 +167,8 @@ impl PlantLoop {
     }
 
     fn drain(&mut self, commands: &TopicSubscriber<Command>) -> Result<()> {
-        commands.clear_wakeups()?;
-        while let Some(command) = commands.receive()? {
+        let mut cleared = false;
+        while let Some(command) = commands.next(&mut cleared)? {
             self.accept(&command)?;
         }
         Ok(())
@@ -232,6 +236,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
         report: PlantReport::default(),
         snapshot,
         k: 0,
+        arrivals: ArrivalModel::new((context.config.dt() * 1e9).round() as u64),
     };
     let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.restore(&s)).is_some();
     p.report.restored_at = restored.then_some(p.k);
@@ -308,8 +313,18 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
             let mut previous_wake = woke;
             let first = TickTiming { scheduled_ns: start_ns + p.k * period_ns, wake_ns: woke, period_ns: 0 };
             p.publish_state(first)?;
+            let mut waiter = Waiter::new(&context.config.wait, "plant", true);
             while p.k < loops && !context.stop.requested() {
-                wait(&ws)?;
+                // Next: command k, if its state went out and it is not in yet, else the tick.
+                let next_tick = start_ns + (p.k + 1) * period_ns;
+                let awaiting_command = p.published_k == Some(p.k) && p.in_time_k != Some(p.k);
+                let command_due = p.arrivals.due(p.k).filter(|due| awaiting_command && *due < next_tick);
+                waiter.wait(
+                    Some(command_due.unwrap_or(next_tick)),
+                    next_tick,
+                    || Ok(commands.has_samples()? || now_ns() >= next_tick),
+                    || wait(&ws),
+                )?;
                 let woke = now_ns();
                 p.drain(&commands)?;
                 let expired = timer.expirations();
@@ -333,6 +348,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                     p.publish_state(timing)?;
                 }
             }
+            p.report.wait = waiter.counts;
             // Record the last commands even when they come late.
             let grace_end = now_ns() + LATE_COMMAND_GRACE.as_nanos() as u64;
             while p.report.commands < p.report.published && now_ns() < grace_end && !context.stop.requested() {

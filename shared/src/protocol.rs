@@ -96,6 +96,9 @@ pub struct PlantReport {
     /// Samples that waited for a full reader, and samples dropped for one (lockstep).
     pub waited: u64,
     pub dropped: u64,
+    /// Adaptive waits: caught the command or tick by polling, or blocked after the cap.
+    #[serde(default)]
+    pub wait: crate::wait::WaitCounts,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
@@ -113,6 +116,9 @@ pub struct StageReport {
     pub dropped_by_fault: u64,
     /// Times an upstream process was seen restarted (a new incarnation in the data).
     pub upstream_restarts: u64,
+    /// Adaptive waits: caught the input by polling, or blocked after the cap.
+    #[serde(default)]
+    pub wait: crate::wait::WaitCounts,
 }
 
 /// Writes one event line on stdout for the launcher.

@@ -21,6 +21,7 @@ use crate::scenarios::{Calibration, Scenario};
 use crate::sensors::SensorEmulator;
 use crate::signals::StopFlag;
 use crate::snapshot::Snapshot;
+use crate::wait::{ArrivalModel, Waiter};
 
 /// Longest a wait blocks before it looks at the stop flag again (a signal also ends it early).
 const WAIT_SLICE: Duration = Duration::from_millis(100);
@@ -168,15 +169,19 @@ fn relay<In: Message, Out: Message>(
     let mut upstream: Option<[u32; 4]> = None;
     let mut report = StageReport::default();
     let mut last_k: Option<u64> = None;
+    let realtime = context.config.mode == Mode::Realtime;
+    let mut waiter = Waiter::new(&context.config.wait, stage.name(), realtime);
+    let mut arrivals = ArrivalModel::new((context.config.dt() * 1e9).round() as u64);
     while !context.stop.requested() {
-        wait(&ws)?;
-        // Consume the wake-ups first, then drain: a sample that lands after the drain also
-        // leaves a fresh wake-up behind, so nothing can be missed.
-        subscriber.clear_wakeups()?;
-        while let Some(sample) = subscriber.receive()? {
+        let due = last_k.and_then(|k| arrivals.due(k + 1));
+        let slice_end = now_ns() + WAIT_SLICE.as_nanos() as u64;
+        waiter.wait(due, slice_end, || subscriber.has_samples(), || wait(&ws))?;
+        let mut cleared = false;
+        while let Some(sample) = subscriber.next(&mut cleared)? {
             let received = now_ns();
             let header = *sample.header();
             let k = header.k;
+            arrivals.observe(k, header.trace.plant_publish, received);
             let mut seen = header.incarnations;
             seen[stage.index()..].fill(0);
             if upstream.is_some_and(|u| u != seen) {
@@ -225,6 +230,7 @@ fn relay<In: Message, Out: Message>(
         }
     }
     (report.waited, report.dropped) = publisher.backpressure();
+    report.wait = waiter.counts;
     Ok(ChildEvent::StageReport(report))
 }
 

@@ -1,0 +1,263 @@
+//! How a loop process waits for its input: the `[wait]` section of a launch file.
+//!
+//! - `block`: sleep in the WaitSet until the input's notification. Cheap, but on a virtual
+//!   machine each wake-up of a halted vCPU costs tens of microseconds per hop.
+//! - `spin`: poll without pause. The lowest latency, and a whole core per process.
+//! - `adaptive` (real time): the loop is periodic, so the input's arrival can be predicted.
+//!   The process learns the plant's schedule and how long after a tick its input arrives, sleeps
+//!   on an absolute timer until `lead_us` before that, then polls, yielding the CPU to whichever
+//!   process has work, until the input is there; after `spin_cap_us` without it, it blocks.
+//!   The wake-up from a halted vCPU then happens before the input arrives instead of after.
+//!   In lockstep there is no schedule to learn, and it blocks.
+
+use std::collections::VecDeque;
+
+use anyhow::Result;
+use serde::{Deserialize, Serialize};
+
+use crate::clock::now_ns;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Strategy {
+    Block,
+    Spin,
+    Adaptive,
+}
+
+impl Strategy {
+    pub fn name(self) -> &'static str {
+        match self {
+            Strategy::Block => "block",
+            Strategy::Spin => "spin",
+            Strategy::Adaptive => "adaptive",
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WaitSettings {
+    /// Every loop process's strategy, unless its own key below says otherwise.
+    pub strategy: Strategy,
+    pub plant: Option<Strategy>,
+    pub sensors: Option<Strategy>,
+    pub estimator: Option<Strategy>,
+    pub controller: Option<Strategy>,
+    /// Adaptive: wake up this long before the input is due, µs.
+    pub lead_us: f64,
+    /// Adaptive: poll at most this long past the due time before blocking, µs.
+    pub spin_cap_us: f64,
+    /// Pin the loop processes to CPUs so that consecutive stages sit on different CPUs (plant,
+    /// sensors, estimator, controller on CPUs 0, 1, 2, 3, modulo the CPUs there are): each hop's
+    /// reader then waits on another CPU than its writer's.
+    pub pin: bool,
+}
+
+impl Default for WaitSettings {
+    fn default() -> Self {
+        Self {
+            strategy: Strategy::Block,
+            plant: None,
+            sensors: None,
+            estimator: None,
+            controller: None,
+            lead_us: 20.0,
+            spin_cap_us: 200.0,
+            pin: false,
+        }
+    }
+}
+
+impl WaitSettings {
+    pub fn for_process(&self, process: &str) -> Strategy {
+        let own = match process {
+            "plant" => self.plant,
+            "sensors" => self.sensors,
+            "estimator" => self.estimator,
+            "controller" => self.controller,
+            _ => None,
+        };
+        own.unwrap_or(self.strategy)
+    }
+
+    pub fn check(&self, config: &crate::launch::LaunchConfig) -> Result<(), crate::launch::LaunchError> {
+        for (key, value) in [("wait.lead_us", self.lead_us), ("wait.spin_cap_us", self.spin_cap_us)] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(config.error(key, format!("must be 0 or a positive number of µs, got {value}")));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Observations kept to estimate how soon after a tick the input arrives.
+const WINDOW: usize = 64;
+
+/// Sleeps until an absolute CLOCK_MONOTONIC time.
+pub fn sleep_until(deadline_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (deadline_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (deadline_ns % 1_000_000_000) as libc::c_long,
+    };
+    // SAFETY: a valid timespec; an interrupted sleep just returns early, which is harmless.
+    unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
+}
+
+/// Asks the kernel to wake this thread's timers on time: the default slack lets a sleep end up
+/// to 50 µs late.
+pub fn tighten_timer_slack() {
+    // SAFETY: PR_SET_TIMERSLACK takes a plain integer.
+    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong) };
+}
+
+/// Pins this process to CPU i mod n, i its place in the loop (plant 0, sensors 1, ...).
+fn pin_in_loop_order(process: &str) {
+    let Some(place) = ["plant", "sensors", "estimator", "controller"].iter().position(|p| *p == process) else {
+        return;
+    };
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET writes inside it.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(place % cpus, &mut set);
+        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+    }
+}
+
+/// What an adaptive wait did, for the process's report.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WaitCounts {
+    /// Waits that found the input within the poll window.
+    pub caught: u64,
+    /// Waits that gave up polling and blocked.
+    pub blocked: u64,
+}
+
+/// The input's timing as a process has seen it: the plant's schedule (the earliest tick phase
+/// seen) and the recent arrival delays after a tick.
+pub struct ArrivalModel {
+    period_ns: u64,
+    /// min over ticks of (plant publish − k·period): the schedule's start plus the plant's
+    /// quickest wake-up.
+    phase_ns: Option<u64>,
+    /// Recent (arrival − plant publish) delays.
+    delays: VecDeque<u64>,
+}
+
+impl ArrivalModel {
+    pub fn new(period_ns: u64) -> Self {
+        Self { period_ns, phase_ns: None, delays: VecDeque::with_capacity(WINDOW) }
+    }
+
+    /// Input of tick k, published by the plant at `published` and arrived at `arrived`.
+    pub fn observe(&mut self, k: u64, published: u64, arrived: u64) {
+        let phase = published.saturating_sub(k * self.period_ns);
+        self.phase_ns = Some(self.phase_ns.map_or(phase, |p| p.min(phase)));
+        if self.delays.len() == WINDOW {
+            self.delays.pop_front();
+        }
+        self.delays.push_back(arrived.saturating_sub(published));
+    }
+
+    /// When the input of tick k is expected at the earliest.
+    pub fn due(&self, k: u64) -> Option<u64> {
+        let phase = self.phase_ns?;
+        let delay = self.delays.iter().copied().min()?;
+        Some(phase + k * self.period_ns + delay)
+    }
+}
+
+/// Waits for input with the process's strategy. `ready` says whether input is there;
+/// `block` waits in the WaitSet (for the input or the next timer).
+pub struct Waiter {
+    pub strategy: Strategy,
+    lead_ns: u64,
+    cap_ns: u64,
+    pub counts: WaitCounts,
+}
+
+impl Waiter {
+    pub fn new(settings: &WaitSettings, process: &str, realtime: bool) -> Self {
+        let strategy = match settings.for_process(process) {
+            Strategy::Adaptive if !realtime => Strategy::Block,
+            s => s,
+        };
+        if strategy == Strategy::Adaptive {
+            tighten_timer_slack();
+        }
+        if settings.pin {
+            pin_in_loop_order(process);
+        }
+        Self {
+            strategy,
+            lead_ns: (settings.lead_us * 1e3) as u64,
+            cap_ns: (settings.spin_cap_us * 1e3) as u64,
+            counts: WaitCounts::default(),
+        }
+    }
+
+    /// Waits until `ready()`, `until_ns` (for spin; block and adaptive leave that to the
+    /// WaitSet's timers), or `block` returns.
+    pub fn wait(
+        &mut self,
+        due_ns: Option<u64>,
+        slice_end_ns: u64,
+        mut ready: impl FnMut() -> Result<bool>,
+        block: impl FnOnce() -> Result<()>,
+    ) -> Result<()> {
+        match self.strategy {
+            Strategy::Block => block(),
+            Strategy::Spin => {
+                while !ready()? && now_ns() < slice_end_ns {
+                    std::hint::spin_loop();
+                }
+                Ok(())
+            }
+            Strategy::Adaptive => {
+                let Some(due) = due_ns else { return block() };
+                if ready()? {
+                    return Ok(());
+                }
+                sleep_until(due.saturating_sub(self.lead_ns));
+                let give_up = due.max(now_ns()) + self.cap_ns;
+                while now_ns() < give_up {
+                    if ready()? {
+                        self.counts.caught += 1;
+                        return Ok(());
+                    }
+                    // SAFETY: sched_yield has no preconditions.
+                    unsafe { libc::sched_yield() };
+                }
+                self.counts.blocked += 1;
+                block()
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_model_learns_the_schedule_and_the_quickest_arrival() {
+        let mut m = ArrivalModel::new(1_000_000);
+        assert_eq!(m.due(1), None);
+        // Ticks due at 5 ms + k ms; the plant wakes 10–300 µs late; input 40–90 µs after it.
+        for (k, late, delay) in [(0u64, 300_000u64, 90_000u64), (1, 10_000, 40_000), (2, 50_000, 60_000)] {
+            let published = 5_000_000 + k * 1_000_000 + late;
+            m.observe(k, published, published + delay);
+        }
+        assert_eq!(m.due(3), Some(5_000_000 + 3_000_000 + 10_000 + 40_000));
+    }
+
+    #[test]
+    fn per_process_strategy_overrides_the_default_and_lockstep_blocks() {
+        let s = WaitSettings { strategy: Strategy::Adaptive, plant: Some(Strategy::Spin), ..Default::default() };
+        assert_eq!(s.for_process("plant"), Strategy::Spin);
+        assert_eq!(s.for_process("sensors"), Strategy::Adaptive);
+        assert_eq!(Waiter::new(&s, "sensors", true).strategy, Strategy::Adaptive);
+        assert_eq!(Waiter::new(&s, "sensors", false).strategy, Strategy::Block);
+    }
+}
