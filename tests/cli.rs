@@ -127,3 +127,56 @@ fn a_missing_binary_is_named() {
     assert!(!out_dir.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `looplab bench` end to end, as short as it goes: every part runs and reports (the numbers
+/// themselves are the benchmark's business, not the test's), the charts are written, and
+/// nothing is left in shared memory.
+#[test]
+fn bench_quick_writes_every_part() {
+    let dir = fresh_dir("bench");
+    let output = looplab().args(["bench", "--quick", "--seconds", "1", "--out"]).arg(&dir).output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap();
+    for mode in ["block", "spin", "adaptive"] {
+        assert!(report["floor_one_way_us"][mode]["n"].as_u64().unwrap() >= 1000, "{mode}");
+    }
+    let names: Vec<&str> = report["loops"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    for expected in [
+        "looplab block",
+        "looplab spin",
+        "looplab adaptive",
+        "looplab adaptive 10 kHz",
+        "looplab adaptive, monitor stopped",
+        "unix socket + bincode (hand-written)",
+    ] {
+        assert!(names.contains(&expected), "{expected} missing from {names:?}");
+    }
+    let baseline = report["loops"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|l| l["name"] == "unix socket + bincode (hand-written)")
+        .unwrap();
+    assert_eq!(baseline["loops"], 1000);
+    assert!(baseline["end_to_end_us"]["n"].as_u64().unwrap() >= 990);
+    let sizes: Vec<u64> = report["payload"].as_array().unwrap().iter().map(|p| p["bytes"].as_u64().unwrap()).collect();
+    assert_eq!(sizes, (0..9).map(|i| 64u64 << (2 * i)).collect::<Vec<_>>());
+    assert!(report["lockstep_loops_per_s"].as_f64().unwrap() > 0.0);
+    assert!(report["in_process_loops_per_s"].as_f64().unwrap() > report["lockstep_loops_per_s"].as_f64().unwrap());
+    for chart in ["latency-cdf.svg", "floor-cdf.svg", "payload.svg"] {
+        let svg = std::fs::read_to_string(dir.join(chart)).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("polyline"), "{chart}");
+    }
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("÷ floor") && stdout.contains("zero copy"), "{stdout}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_wait_strategy_names_the_allowed_values() {
+    let output = looplab().args(["run", "pendulum", "--set", "wait.strategy=fast"]).output().unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("key `wait.strategy`") && stderr.contains("`block`, `spin`, `adaptive`"), "{stderr}");
+}

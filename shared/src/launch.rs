@@ -13,9 +13,9 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::faults::{FaultSpec, Supervision};
-use crate::wait::WaitSettings;
 use crate::msg::{MAX_SENSOR_DIM, MAX_SENSORS};
 use crate::scenarios::{self, Scenario, ScenarioEntry, Signal};
+use crate::wait::WaitSettings;
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
 const COMMON_KEYS: [&str; 9] =

@@ -71,6 +71,16 @@ enum Command {
     /// Run a scenario repeatedly in lockstep while one key varies; report the metrics per value
     /// and, for a controller delay, the measured delay margin against theory
     Sweep(SweepCli),
+    /// Measure LoopLab's own latency against the transport's floor and a hand-written Unix-socket
+    /// loop, per wait strategy, plus zero copy, the monitor's cost and lockstep speed; writes
+    /// bench.json and SVG charts
+    Bench(crate::bench::BenchArgs),
+    /// (internal) the far end of the bench's ping-pong
+    #[command(hide = true)]
+    BenchEcho(crate::bench::pingpong::EchoArgs),
+    /// (internal) one stage of the bench's Unix-socket baseline loop
+    #[command(hide = true)]
+    BenchUdsStage(crate::bench::uds_loop::StageArgs),
 }
 
 #[derive(Debug, Args)]
@@ -179,7 +189,20 @@ pub fn main() -> ExitCode {
         },
         Some(Command::Run(args)) => run(args),
         Some(Command::Sweep(args)) => sweep(args),
+        Some(Command::Bench(args)) => report_failure(crate::bench::run(&args)),
+        Some(Command::BenchEcho(args)) => report_failure(crate::bench::pingpong::echo_main(&args)),
+        Some(Command::BenchUdsStage(args)) => report_failure(crate::bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default()),
+    }
+}
+
+fn report_failure(result: Result<()>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
     }
 }
 

@@ -1,6 +1,7 @@
 //! LoopLab's shared crate: the messages, the models, the loop stages, the monitor and the
 //! launcher. The binaries in `services/` are one call each into here.
 
+pub mod bench;
 pub mod clock;
 pub mod faults;
 pub mod integrate;
@@ -17,5 +18,5 @@ pub mod sensors;
 pub mod signals;
 pub mod snapshot;
 pub mod stages;
-pub mod wait;
 pub mod sweep;
+pub mod wait;

@@ -1,0 +1,483 @@
+//! `looplab bench`: how fast LoopLab's own loop is, against the machine's limits and against
+//! what one would write by hand, measured in one invocation with the parts interleaved (each
+//! round runs every part once) so that drift on a shared machine hits them alike.
+//!
+//! 1. The floor: a two-process iceoryx2 ping-pong with the loop's message size, per wait mode.
+//! 2. The LoopLab loop (pendulum, real time, 1 kHz, monitor running) per wait mode, and the
+//!    adaptive mode at 10 kHz.
+//! 3. The baseline: the same four-stage loop over Unix sockets with bincode, blocking reads.
+//! 4. The monitor's cost: its CPU next to the loop's, and the loop with the monitor stopped.
+//! 5. Zero copy: one-way latency against payload size, iceoryx2 against the Unix socket.
+//! 6. Lockstep speed against the same four stages called in one process (the ceiling).
+//! 7. The machine: CPUs, kernel, load, and the timer's own wake-up error at 1 kHz.
+
+pub mod codec;
+pub mod pingpong;
+mod plot;
+pub mod uds_loop;
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, anyhow};
+use serde::Serialize;
+
+use self::pingpong::Transport;
+use crate::clock::{TickTimer, now_ns};
+use crate::launch::{self, Override};
+use crate::msg::{PlantState, SensorReading};
+use crate::report::Summary;
+use crate::wait::Strategy;
+
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// A short form that finishes in under a minute: fewer rounds, shorter runs
+    #[arg(long)]
+    pub quick: bool,
+    /// Seconds of loop per configuration, over all rounds (default 60; --quick 4)
+    #[arg(long, value_name = "SECONDS")]
+    pub seconds: Option<f64>,
+    /// Folder for bench.json, the charts and the runs (default: runs/<time>-bench)
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+const MODES: [Strategy; 3] = [Strategy::Block, Strategy::Spin, Strategy::Adaptive];
+
+/// A latency distribution, µs.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Dist {
+    pub n: usize,
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+    pub p999: f64,
+    pub max: f64,
+}
+
+impl Dist {
+    fn of(sorted: &[u64]) -> Self {
+        if sorted.is_empty() {
+            return Self::default();
+        }
+        let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize] as f64 / 1e3;
+        Self { n: sorted.len(), p50: at(0.5), p90: at(0.9), p99: at(0.99), p999: at(0.999), max: at(1.0) }
+    }
+}
+
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct LoopBench {
+    pub name: String,
+    pub rate_hz: f64,
+    pub loops: u64,
+    pub deadline_misses: u64,
+    pub end_to_end_us: Dist,
+    /// plant→sensors, sensors→estimator, estimator→controller, controller→plant.
+    pub hops_us: [Dist; 4],
+    /// Per process, percent of one core.
+    pub cpu_percent: BTreeMap<String, f64>,
+    /// Of the loop's processes (the monitor apart).
+    pub loop_cpu_percent: f64,
+    #[serde(skip)]
+    e2e: Vec<u64>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct PayloadPoint {
+    pub bytes: usize,
+    pub iceoryx2_us: Dist,
+    pub unix_socket_us: Dist,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Machine {
+    pub cpus: usize,
+    pub cpu_model: String,
+    pub kernel: String,
+    pub load_average: String,
+    /// A 1 kHz timerfd: how late each wake-up was.
+    pub timer_wake_error_us: Dist,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    pub started_at: String,
+    pub quick: bool,
+    pub rounds: usize,
+    pub machine: Machine,
+    /// One-way iceoryx2 hop with the loop's message size (PlantState), paced at 1 kHz.
+    pub floor_one_way_us: BTreeMap<String, Dist>,
+    pub message_bytes: usize,
+    pub loops: Vec<LoopBench>,
+    pub payload: Vec<PayloadPoint>,
+    pub lockstep_loops_per_s: f64,
+    pub in_process_loops_per_s: f64,
+    pub wall_time_s: f64,
+}
+
+fn sorted(mut v: Vec<u64>) -> Vec<u64> {
+    v.sort_unstable();
+    v
+}
+
+fn machine(timer_periods: u64) -> Result<Machine> {
+    let read = |path: &str| std::fs::read_to_string(path).unwrap_or_default().trim().to_string();
+    let cpu_model = read("/proc/cpuinfo")
+        .lines()
+        .find(|l| l.starts_with("model name"))
+        .and_then(|l| l.split(':').nth(1))
+        .unwrap_or("unknown")
+        .trim()
+        .to_string();
+    // The timer's own error: how late a 1 kHz timerfd wakes a blocked thread.
+    let period = 1_000_000;
+    let start = now_ns() + 5_000_000;
+    let timer = TickTimer::new(start, period)?;
+    let mut late = Vec::with_capacity(timer_periods as usize);
+    let mut k = 0;
+    while k < timer_periods {
+        let mut fds = libc::pollfd { fd: timer_fd(&timer), events: libc::POLLIN, revents: 0 };
+        // SAFETY: one valid pollfd.
+        unsafe { libc::poll(&mut fds, 1, 100) };
+        let woke = now_ns();
+        let expired = timer.expirations();
+        if expired > 0 {
+            late.push(woke.saturating_sub(start + (k + expired - 1) * period));
+            k += expired;
+        }
+    }
+    Ok(Machine {
+        cpus: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        cpu_model,
+        kernel: read("/proc/sys/kernel/osrelease"),
+        load_average: read("/proc/loadavg"),
+        timer_wake_error_us: Dist::of(&sorted(late)),
+    })
+}
+
+fn timer_fd(timer: &TickTimer) -> i32 {
+    use iceoryx2::prelude::FileDescriptorBased;
+    // SAFETY: the descriptor is only polled while the timer, which owns it, is alive.
+    unsafe { timer.file_descriptor().native_handle() }
+}
+
+/// Reads the eight stamps of every recorded loop from a run's loops.csv.
+fn traces(run_dir: &Path) -> Result<Vec<[u64; 8]>> {
+    let text = std::fs::read_to_string(run_dir.join("loops.csv")).context("loops.csv")?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let columns: Vec<usize> = crate::msg::LoopTrace::STAMP_NAMES
+        .iter()
+        .map(|name| header.iter().position(|h| *h == format!("{name}_ns")).ok_or_else(|| anyhow!("no {name}_ns")))
+        .collect::<Result<_>>()?;
+    Ok(lines
+        .filter_map(|line| {
+            let fields: Vec<&str> = line.split(',').collect();
+            let stamps: Option<Vec<u64>> = columns.iter().map(|&c| fields.get(c)?.parse().ok()).collect();
+            stamps.and_then(|s| s.try_into().ok())
+        })
+        .collect())
+}
+
+/// Accumulates a loop configuration's rounds.
+#[derive(Default)]
+struct LoopAccumulator {
+    traces: Vec<[u64; 8]>,
+    loops: u64,
+    misses: u64,
+    cpu_s: BTreeMap<String, f64>,
+    seconds: f64,
+}
+
+impl LoopAccumulator {
+    fn add_run(&mut self, summary: &Summary, run_dir: &Path) -> Result<()> {
+        self.traces.extend(traces(run_dir)?);
+        self.loops += summary.loops;
+        self.misses += summary.deadline_misses;
+        self.seconds += summary.duration_s;
+        for p in &summary.processes {
+            *self.cpu_s.entry(p.name.clone()).or_default() += p.cpu_s;
+        }
+        Ok(())
+    }
+
+    fn finish(self, name: &str, rate_hz: f64) -> LoopBench {
+        let e2e = sorted(self.traces.iter().map(|s| s[7].saturating_sub(s[0])).collect());
+        let hop = |from: usize, to: usize| {
+            Dist::of(&sorted(self.traces.iter().map(|s| s[to].saturating_sub(s[from])).collect()))
+        };
+        let cpu_percent: BTreeMap<String, f64> =
+            self.cpu_s.iter().map(|(k, v)| (k.clone(), 100.0 * v / self.seconds.max(1e-9))).collect();
+        let loop_cpu_percent = cpu_percent.iter().filter(|(k, _)| *k != "monitor").map(|(_, v)| v).sum();
+        LoopBench {
+            name: name.into(),
+            rate_hz,
+            loops: self.loops,
+            deadline_misses: self.misses,
+            end_to_end_us: Dist::of(&e2e),
+            hops_us: [hop(0, 1), hop(2, 3), hop(4, 5), hop(6, 7)],
+            cpu_percent,
+            loop_cpu_percent,
+            e2e,
+        }
+    }
+}
+
+/// One LoopLab run of the pendulum in real time with the given wait strategy.
+fn looplab_run(
+    out: &Path,
+    label: &str,
+    strategy: Strategy,
+    rate_hz: f64,
+    seconds: f64,
+    binaries: &BTreeMap<&'static str, PathBuf>,
+    stop_monitor: bool,
+) -> Result<(Summary, PathBuf)> {
+    let sets = [
+        "mode=realtime".to_string(),
+        format!("rate_hz={rate_hz:?}"),
+        format!("duration_s={seconds:?}"),
+        format!("wait.strategy={}", strategy.name()),
+    ];
+    let mut overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
+    if stop_monitor {
+        // SIGSTOP the monitor for the whole run after it is up: the loop runs without it.
+        overrides.push(Override::fault(&format!("stop monitor at 0.001s for {}s", seconds + 1.0))?);
+    }
+    let (config, scenario) = launch::resolve("pendulum", &overrides)?;
+    let mut n = 0;
+    let dir = loop {
+        let dir = out.join(format!("{label}-{n}"));
+        if !dir.exists() {
+            break dir;
+        }
+        n += 1;
+    };
+    let dir = crate::launcher::create_run_dir(Some(&dir), "pendulum")?;
+    let (summary, _) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
+    Ok((summary, dir))
+}
+
+/// The same four stages called in one process: the ceiling of lockstep speed.
+fn in_process_loops_per_s(loops: u64) -> Result<f64> {
+    let (config, scenario) = launch::resolve("pendulum", &[])?;
+    let mut plant = scenario.plant();
+    let mut sensors = crate::sensors::SensorEmulator::new(&config);
+    let mut estimator = scenario.estimator();
+    let mut controller = scenario.controller();
+    let (n_sensors, n_est, n_in) =
+        (config.sensors.len(), scenario.estimate_names().len(), scenario.input_names().len());
+    let mut readings = vec![SensorReading::default(); n_sensors];
+    let mut estimate = vec![0.0; n_est];
+    let mut command = vec![0.0; n_in];
+    let dt = config.dt();
+    let start = Instant::now();
+    for k in 0..loops {
+        let t = k as f64 * dt;
+        let state = plant.state().to_vec();
+        sensors.tick(k, t, &state, &mut readings);
+        estimator.update(t, &readings, &command, &mut estimate);
+        controller.update(t, &estimate, &mut command);
+        plant.step(t, &command, dt);
+    }
+    Ok(loops as f64 / start.elapsed().as_secs_f64())
+}
+
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let began = Instant::now();
+    let quick = args.quick;
+    let seconds = args.seconds.unwrap_or(if quick { 4.0 } else { 60.0 });
+    let rounds = if quick { 1 } else { 6 };
+    let segment = seconds / rounds as f64;
+    let out = crate::launcher::create_run_dir(args.out.as_deref(), "bench")?;
+    let exe = std::env::current_exe()?;
+    let binaries = crate::launcher::locate_binaries()?;
+    let run_id = format!("bench{}", std::process::id());
+    let setup = pingpong::Setup { exe: &exe, run_id: &run_id, scratch: &out };
+    let message_bytes = std::mem::size_of::<PlantState>();
+    eprintln!("looplab bench: {rounds} round(s) of {segment} s per loop configuration; writing {}", out.display());
+
+    let machine = machine(if quick { 500 } else { 3000 })?;
+    let floor_rounds = if quick { 500 } else { 2000 };
+    let mut floor: BTreeMap<String, Vec<u64>> = BTreeMap::new();
+    let mut ours: BTreeMap<String, LoopAccumulator> = BTreeMap::new();
+    let mut baseline = LoopAccumulator::default();
+    let loop_names = |s: Strategy| format!("looplab {}", s.name());
+    for round in 0..rounds {
+        eprintln!("  round {} of {rounds}", round + 1);
+        for mode in MODES {
+            let series = pingpong::ping(&setup, Transport::Iox, mode, message_bytes, floor_rounds, 1_000_000)?;
+            floor.entry(mode.name().into()).or_default().extend(series.one_way_ns);
+        }
+        for mode in MODES {
+            let (summary, dir) = looplab_run(&out, mode.name(), mode, 1000.0, segment, &binaries, false)?;
+            ours.entry(loop_names(mode)).or_default().add_run(&summary, &dir)?;
+        }
+        let (summary, dir) =
+            looplab_run(&out, "adaptive-10khz", Strategy::Adaptive, 10_000.0, segment, &binaries, false)?;
+        ours.entry("looplab adaptive 10 kHz".into()).or_default().add_run(&summary, &dir)?;
+        let (summary, dir) =
+            looplab_run(&out, "monitor-stopped", Strategy::Adaptive, 1000.0, segment, &binaries, true)?;
+        ours.entry("looplab adaptive, monitor stopped".into()).or_default().add_run(&summary, &dir)?;
+        let loops = (segment * 1000.0).round() as u64;
+        let result = uds_loop::run(&exe, &out.join("uds"), 1000.0, loops)?;
+        baseline.traces.extend(result.traces);
+        baseline.loops += result.loops;
+        baseline.misses += result.deadline_misses;
+        baseline.seconds += segment;
+        for (name, cpu) in ["plant", "sensors", "estimator", "controller"].iter().zip(result.cpu_s) {
+            *baseline.cpu_s.entry(name.to_string()).or_default() += cpu;
+        }
+    }
+
+    eprintln!("  payload sweep");
+    let sizes: Vec<usize> = (0..9).map(|i| 64usize << (2 * i)).collect();
+    let samples = if quick { 40 } else { 300 };
+    let mut payload = Vec::new();
+    for &bytes in &sizes {
+        let iox = pingpong::ping(&setup, Transport::Iox, Strategy::Block, bytes, samples, 0)?;
+        let uds = pingpong::ping(&setup, Transport::Uds, Strategy::Block, bytes, samples, 0)?;
+        payload.push(PayloadPoint {
+            bytes,
+            iceoryx2_us: Dist::of(&sorted(iox.one_way_ns)),
+            unix_socket_us: Dist::of(&sorted(uds.one_way_ns)),
+        });
+    }
+
+    eprintln!("  lockstep speed");
+    let lockstep_seconds = if quick { 3.0 } else { 20.0 };
+    let sets = ["mode=lockstep".to_string(), format!("duration_s={lockstep_seconds:?}")];
+    let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
+    let (config, scenario) = launch::resolve("pendulum", &overrides)?;
+    let dir = crate::launcher::create_run_dir(Some(&out.join("lockstep")), "pendulum")?;
+    let (lockstep, _) = crate::launcher::run_once(&config, scenario.as_ref(), &binaries, &dir, true)?;
+    let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 })?;
+    // The ping-pongs' iceoryx2 files (the loop runs clean up after themselves).
+    let cleanup = crate::ipc::clean_up_run(&run_id)?;
+    if !cleanup.leftover.is_empty() {
+        return Err(anyhow!("files left in shared memory: {}", cleanup.leftover.join(", ")));
+    }
+
+    let mut loops: Vec<LoopBench> = ours
+        .into_iter()
+        .map(|(name, acc)| {
+            let rate = if name.contains("10 kHz") { 10_000.0 } else { 1000.0 };
+            acc.finish(&name, rate)
+        })
+        .collect();
+    loops.push(baseline.finish("unix socket + bincode (hand-written)", 1000.0));
+    let report = BenchReport {
+        started_at: chrono::Utc::now().to_rfc3339(),
+        quick,
+        rounds,
+        machine,
+        floor_one_way_us: floor.iter().map(|(k, v)| (k.clone(), Dist::of(&sorted(v.clone())))).collect(),
+        message_bytes,
+        loops,
+        payload,
+        lockstep_loops_per_s: lockstep.loops_per_s,
+        in_process_loops_per_s: in_process,
+        wall_time_s: began.elapsed().as_secs_f64(),
+    };
+    std::fs::write(out.join("bench.json"), serde_json::to_string_pretty(&report)?)?;
+    let mut curves: Vec<(String, Vec<u64>)> =
+        report.loops.iter().filter(|l| l.rate_hz == 1000.0).map(|l| (l.name.clone(), l.e2e.clone())).collect();
+    if let Some(spin) = floor.get("spin") {
+        // Four one-way hops, as a loop of them would take at best.
+        curves.push(("floor: 4 × spin hop (median)".into(), vec![4 * sorted(spin.clone())[spin.len() / 2]]));
+    }
+    plot::cdf(&out.join("latency-cdf.svg"), "end-to-end loop latency, 1 kHz", &curves)?;
+    let floor_curves: Vec<(String, Vec<u64>)> =
+        floor.into_iter().map(|(k, v)| (format!("iceoryx2 hop, {k}"), sorted(v))).collect();
+    plot::cdf(&out.join("floor-cdf.svg"), "one-way iceoryx2 hop, loop message size, 1 kHz", &floor_curves)?;
+    plot::payload(
+        &out.join("payload.svg"),
+        &[
+            ("iceoryx2 (zero copy)".into(), report.payload.iter().map(|p| (p.bytes, p.iceoryx2_us.p50)).collect()),
+            ("unix socket + bincode".into(), report.payload.iter().map(|p| (p.bytes, p.unix_socket_us.p50)).collect()),
+        ],
+    )?;
+    print!("{}", render(&report));
+    println!("  written: {}", out.display());
+    Ok(())
+}
+
+fn render(r: &BenchReport) -> String {
+    let mut s = String::new();
+    let m = &r.machine;
+    let _ = writeln!(
+        s,
+        "\nLoopLab bench · {} CPUs ({}) · Linux {} · load {} · {} round(s){}",
+        m.cpus,
+        m.cpu_model,
+        m.kernel,
+        m.load_average,
+        r.rounds,
+        if r.quick { " · quick" } else { "" }
+    );
+    let t = &m.timer_wake_error_us;
+    let _ = writeln!(s, "  timer wake-up error at 1 kHz (µs): p50 {:.1}, p99 {:.1}, max {:.1}", t.p50, t.p99, t.max);
+    let _ = writeln!(s, "\n  floor: one-way iceoryx2 hop, {} B, paced at 1 kHz (µs)", r.message_bytes);
+    let _ = writeln!(s, "    {:<10}{:>8}{:>9}{:>9}{:>9}", "mode", "p50", "p90", "p99", "p99.9");
+    for (mode, d) in &r.floor_one_way_us {
+        let _ = writeln!(s, "    {mode:<10}{:>8.2}{:>9.2}{:>9.2}{:>9.2}", d.p50, d.p90, d.p99, d.p999);
+    }
+    let floor4 = r.floor_one_way_us.get("spin").map_or(f64::NAN, |d| 4.0 * d.p50);
+    let baseline = r.loops.iter().find(|l| l.name.starts_with("unix")).map_or(f64::NAN, |l| l.end_to_end_us.p50);
+    let _ = writeln!(s, "\n  loop: end to end (µs); floor = 4 spin hops = {floor4:.2} µs");
+    let _ = writeln!(
+        s,
+        "    {:<36}{:>8}{:>9}{:>9}{:>9}{:>10}{:>9}{:>10}{:>10}",
+        "configuration", "p50", "p99", "p99.9", "max", "misses", "CPU %", "÷ floor", "÷ socket"
+    );
+    for l in &r.loops {
+        let e = &l.end_to_end_us;
+        let misses = format!("{:.2}%", 100.0 * l.deadline_misses as f64 / l.loops.max(1) as f64);
+        let _ = writeln!(
+            s,
+            "    {:<36}{:>8.1}{:>9.1}{:>9.1}{:>9.1}{:>10}{:>9.1}{:>10.1}{:>10.2}",
+            l.name,
+            e.p50,
+            e.p99,
+            e.p999,
+            e.max,
+            misses,
+            l.loop_cpu_percent,
+            e.p50 / floor4,
+            e.p50 / baseline
+        );
+    }
+    let _ = writeln!(s, "    hops p50 (µs): plant→sensors, sensors→estimator, estimator→controller, controller→plant");
+    for l in &r.loops {
+        let h = &l.hops_us;
+        let _ = writeln!(s, "    {:<36}{:>8.1}{:>8.1}{:>8.1}{:>8.1}", l.name, h[0].p50, h[1].p50, h[2].p50, h[3].p50);
+    }
+    if let Some(monitor) =
+        r.loops.iter().find(|l| l.name == "looplab adaptive").and_then(|l| l.cpu_percent.get("monitor"))
+    {
+        let _ = writeln!(s, "    monitor CPU in the adaptive run: {monitor:.1}% of a core");
+    }
+    let _ = writeln!(s, "\n  zero copy: one-way latency against payload (µs, p50; blocking reads both)");
+    let _ = writeln!(s, "    {:>10}{:>12}{:>14}{:>10}", "bytes", "iceoryx2", "unix socket", "ratio");
+    for p in &r.payload {
+        let _ = writeln!(
+            s,
+            "    {:>10}{:>12.1}{:>14.1}{:>10.2}",
+            p.bytes,
+            p.iceoryx2_us.p50,
+            p.unix_socket_us.p50,
+            p.unix_socket_us.p50 / p.iceoryx2_us.p50
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n  lockstep: {:.0} loops/s through the five processes; {:.0} loops/s in one process (ceiling), ratio {:.3}",
+        r.lockstep_loops_per_s,
+        r.in_process_loops_per_s,
+        r.lockstep_loops_per_s / r.in_process_loops_per_s
+    );
+    let _ = writeln!(s, "  wall time {:.0} s", r.wall_time_s);
+    s
+}

@@ -1,0 +1,105 @@
+//! The bench's charts, as SVG (no fonts or image libraries needed).
+
+use std::path::Path;
+
+use anyhow::{Result, anyhow};
+use plotters::prelude::*;
+
+const COLOURS: [RGBColor; 7] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(127, 127, 127),
+];
+
+/// Latency CDFs on a log time axis: one curve per (name, sorted samples in ns).
+pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()> {
+    let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let us = |ns: u64| (ns as f64 / 1e3).max(0.1);
+    let lo = series.iter().filter_map(|(_, s)| s.first()).map(|v| us(*v)).fold(f64::MAX, f64::min).max(0.1);
+    let hi = series.iter().filter_map(|(_, s)| s.last()).map(|v| us(*v)).fold(1.0, f64::max);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(55)
+        .build_cartesian_2d((lo * 0.8..hi * 1.2).log_scale(), 0.0..1.0)
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("latency, µs (log)")
+        .y_desc("fraction of samples at or below")
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    for (i, (name, samples)) in series.iter().enumerate() {
+        if samples.is_empty() {
+            continue;
+        }
+        let colour = COLOURS[i % COLOURS.len()];
+        let n = samples.len();
+        // At most 2000 points per curve.
+        let step = n.div_ceil(2000).max(1);
+        let points: Vec<(f64, f64)> =
+            (0..n).step_by(step).chain([n - 1]).map(|j| (us(samples[j]), (j + 1) as f64 / n as f64)).collect();
+        chart
+            .draw_series(LineSeries::new(points, colour.stroke_width(2)))
+            .map_err(|e| anyhow!("{e}"))?
+            .label(name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    root.present().map_err(|e| anyhow!("{e}"))
+}
+
+/// Median one-way latency against payload size, log-log: one curve per transport.
+pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()> {
+    let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let xs = series.iter().flat_map(|(_, p)| p.iter().map(|(b, _)| *b as f64));
+    let (x_lo, x_hi) = xs.fold((f64::MAX, 1.0f64), |(lo, hi), x| (lo.min(x), hi.max(x)));
+    let ys = series.iter().flat_map(|(_, p)| p.iter().map(|(_, us)| *us));
+    let (y_lo, y_hi) = ys.fold((f64::MAX, 1.0f64), |(lo, hi), y| (lo.min(y), hi.max(y)));
+    let mut chart = ChartBuilder::on(&root)
+        .caption("one-way latency against payload size (median)", ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(55)
+        .build_cartesian_2d((x_lo * 0.8..x_hi * 1.25).log_scale(), (y_lo.max(0.1) * 0.8..y_hi * 1.25).log_scale())
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("payload, bytes (log)")
+        .y_desc("latency, µs (log)")
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    for (i, (name, points)) in series.iter().enumerate() {
+        let colour = COLOURS[i % COLOURS.len()];
+        let points: Vec<(f64, f64)> = points.iter().map(|(b, us)| (*b as f64, *us)).collect();
+        chart
+            .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))
+            .map_err(|e| anyhow!("{e}"))?
+            .label(name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+        chart
+            .draw_series(points.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    root.present().map_err(|e| anyhow!("{e}"))
+}
