@@ -437,6 +437,11 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     commands.connect(&context.stop)?;
     records.connect(&context.stop)?;
     let writer = Writer::new(context)?;
+    if context.config.mode == Mode::Realtime {
+        // The monitor must never slow the loop: it runs only on CPU time the loop leaves idle
+        // (its threads inherit this). Its buffers hold a second of samples to catch up with.
+        crate::wait::run_in_background();
+    }
     emit(&ChildEvent::Ready)?;
 
     let (tx, rx) = crossbeam_channel::unbounded();

@@ -125,6 +125,14 @@ fn pin_in_loop_order(process: &str) {
     }
 }
 
+/// Puts the calling thread (and threads it starts later) under SCHED_IDLE: it runs only when
+/// a CPU has nothing else to do, and any loop process that wakes preempts it at once.
+pub fn run_in_background() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: a valid sched_param for SCHED_IDLE on this thread.
+    unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) };
+}
+
 /// What an adaptive wait did, for the process's report.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct WaitCounts {
