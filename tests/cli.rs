@@ -146,6 +146,7 @@ fn bench_quick_writes_every_part() {
         "looplab block",
         "looplab spin",
         "looplab adaptive",
+        "looplab adaptive, pinned",
         "looplab adaptive 10 kHz",
         "looplab adaptive, monitor stopped",
         "unix socket + bincode (hand-written)",

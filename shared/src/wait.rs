@@ -5,8 +5,10 @@
 //! - `spin`: poll without pause. The lowest latency, and a whole core per process.
 //! - `adaptive` (real time): the loop is periodic, so the input's arrival can be predicted.
 //!   The process learns the plant's schedule and how long after a tick its input arrives, sleeps
-//!   on an absolute timer until `lead_us` before that, then polls, yielding the CPU to whichever
-//!   process has work, until the input is there; after `spin_cap_us` without it, it blocks.
+//!   on an absolute timer until `lead_us` before that, less how late its sleeps typically end
+//!   (learnt: a halted vCPU takes tens of µs to wake, a busy one a few), then polls, yielding the
+//!   CPU to whichever process has work, until the input is there; after `spin_cap_us` without
+//!   it, it blocks.
 //!   The wake-up from a halted vCPU then happens before the input arrives instead of after.
 //!   In lockstep there is no schedule to learn, and it blocks.
 
@@ -44,7 +46,8 @@ pub struct WaitSettings {
     pub sensors: Option<Strategy>,
     pub estimator: Option<Strategy>,
     pub controller: Option<Strategy>,
-    /// Adaptive: wake up this long before the input is due, µs.
+    /// Adaptive: wake up this long before the input is due, on top of how late this process's
+    /// sleeps typically end (learnt), µs.
     pub lead_us: f64,
     /// Adaptive: poll at most this long past the due time before blocking, µs.
     pub spin_cap_us: f64,
@@ -62,7 +65,7 @@ impl Default for WaitSettings {
             sensors: None,
             estimator: None,
             controller: None,
-            lead_us: 20.0,
+            lead_us: 5.0,
             spin_cap_us: 200.0,
             pin: false,
         }
@@ -93,6 +96,9 @@ impl WaitSettings {
 
 /// Observations kept to estimate how soon after a tick the input arrives.
 const WINDOW: usize = 64;
+
+/// Sleeps remembered to learn how late this process wakes.
+const OVERSLEEP_WINDOW: usize = 32;
 
 /// Sleeps until an absolute CLOCK_MONOTONIC time.
 pub fn sleep_until(deadline_ns: u64) {
@@ -183,9 +189,23 @@ pub struct Waiter {
     lead_ns: u64,
     cap_ns: u64,
     pub counts: WaitCounts,
+    /// How late the last sleeps woke up, ns: a halted vCPU takes tens of µs to wake, a busy
+    /// one a few; the sleep is cut short by what this process typically needs.
+    oversleeps: VecDeque<u64>,
 }
 
 impl Waiter {
+    /// The third quartile of the recent oversleeps: early enough most of the time, without
+    /// letting one long VM stall make every wait spin for longer.
+    fn typical_oversleep(&self) -> u64 {
+        let mut recent: Vec<u64> = self.oversleeps.iter().copied().collect();
+        if recent.is_empty() {
+            return 0;
+        }
+        recent.sort_unstable();
+        recent[recent.len() * 3 / 4]
+    }
+
     pub fn new(settings: &WaitSettings, process: &str, realtime: bool) -> Self {
         let strategy = match settings.for_process(process) {
             Strategy::Adaptive if !realtime => Strategy::Block,
@@ -202,6 +222,7 @@ impl Waiter {
             lead_ns: (settings.lead_us * 1e3) as u64,
             cap_ns: (settings.spin_cap_us * 1e3) as u64,
             counts: WaitCounts::default(),
+            oversleeps: VecDeque::with_capacity(OVERSLEEP_WINDOW),
         }
     }
 
@@ -227,7 +248,14 @@ impl Waiter {
                 if ready()? {
                     return Ok(());
                 }
-                sleep_until(due.saturating_sub(self.lead_ns));
+                let wake_at = due.saturating_sub(self.lead_ns + self.typical_oversleep());
+                if wake_at > now_ns() {
+                    sleep_until(wake_at);
+                    if self.oversleeps.len() == OVERSLEEP_WINDOW {
+                        self.oversleeps.pop_front();
+                    }
+                    self.oversleeps.push_back(now_ns() - wake_at);
+                }
                 let give_up = due.max(now_ns()) + self.cap_ns;
                 while now_ns() < give_up {
                     if ready()? {

@@ -225,31 +225,92 @@ impl LoopAccumulator {
     }
 }
 
-/// One LoopLab run of the pendulum in real time with the given wait strategy.
-fn looplab_run(
-    out: &Path,
-    label: &str,
+/// A LoopLab loop configuration the bench runs: the pendulum in real time.
+struct LoopConfig {
+    name: &'static str,
+    /// Its run folders' prefix.
+    label: &'static str,
     strategy: Strategy,
     rate_hz: f64,
+    /// SIGSTOP the monitor for the whole run.
+    stop_monitor: bool,
+    pin: bool,
+}
+
+const LOOP_CONFIGS: [LoopConfig; 6] = [
+    LoopConfig {
+        name: "looplab block",
+        label: "block",
+        strategy: Strategy::Block,
+        rate_hz: 1000.0,
+        stop_monitor: false,
+        pin: false,
+    },
+    LoopConfig {
+        name: "looplab spin",
+        label: "spin",
+        strategy: Strategy::Spin,
+        rate_hz: 1000.0,
+        stop_monitor: false,
+        pin: false,
+    },
+    LoopConfig {
+        name: "looplab adaptive",
+        label: "adaptive",
+        strategy: Strategy::Adaptive,
+        rate_hz: 1000.0,
+        stop_monitor: false,
+        pin: false,
+    },
+    LoopConfig {
+        name: "looplab adaptive, pinned",
+        label: "adaptive-pinned",
+        strategy: Strategy::Adaptive,
+        rate_hz: 1000.0,
+        stop_monitor: false,
+        pin: true,
+    },
+    LoopConfig {
+        name: "looplab adaptive 10 kHz",
+        label: "adaptive-10khz",
+        strategy: Strategy::Adaptive,
+        rate_hz: 10_000.0,
+        stop_monitor: false,
+        pin: false,
+    },
+    LoopConfig {
+        name: "looplab adaptive, monitor stopped",
+        label: "monitor-stopped",
+        strategy: Strategy::Adaptive,
+        rate_hz: 1000.0,
+        stop_monitor: true,
+        pin: false,
+    },
+];
+
+/// One LoopLab run of the pendulum in real time.
+fn looplab_run(
+    out: &Path,
+    c: &LoopConfig,
     seconds: f64,
     binaries: &BTreeMap<&'static str, PathBuf>,
-    stop_monitor: bool,
 ) -> Result<(Summary, PathBuf)> {
     let sets = [
         "mode=realtime".to_string(),
-        format!("rate_hz={rate_hz:?}"),
+        format!("rate_hz={:?}", c.rate_hz),
         format!("duration_s={seconds:?}"),
-        format!("wait.strategy={}", strategy.name()),
+        format!("wait.strategy={}", c.strategy.name()),
+        format!("wait.pin={}", c.pin),
     ];
     let mut overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
-    if stop_monitor {
-        // SIGSTOP the monitor for the whole run after it is up: the loop runs without it.
+    if c.stop_monitor {
+        // SIGSTOP the monitor for the whole run once it is up: the loop runs without it.
         overrides.push(Override::fault(&format!("stop monitor at 0.001s for {}s", seconds + 1.0))?);
     }
     let (config, scenario) = launch::resolve("pendulum", &overrides)?;
     let mut n = 0;
     let dir = loop {
-        let dir = out.join(format!("{label}-{n}"));
+        let dir = out.join(format!("{}-{n}", c.label));
         if !dir.exists() {
             break dir;
         }
@@ -302,25 +363,18 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let machine = machine(if quick { 500 } else { 3000 })?;
     let floor_rounds = if quick { 500 } else { 2000 };
     let mut floor: BTreeMap<String, Vec<u64>> = BTreeMap::new();
-    let mut ours: BTreeMap<String, LoopAccumulator> = BTreeMap::new();
+    let mut ours: BTreeMap<&'static str, LoopAccumulator> = BTreeMap::new();
     let mut baseline = LoopAccumulator::default();
-    let loop_names = |s: Strategy| format!("looplab {}", s.name());
     for round in 0..rounds {
         eprintln!("  round {} of {rounds}", round + 1);
         for mode in MODES {
             let series = pingpong::ping(&setup, Transport::Iox, mode, message_bytes, floor_rounds, 1_000_000)?;
             floor.entry(mode.name().into()).or_default().extend(series.one_way_ns);
         }
-        for mode in MODES {
-            let (summary, dir) = looplab_run(&out, mode.name(), mode, 1000.0, segment, &binaries, false)?;
-            ours.entry(loop_names(mode)).or_default().add_run(&summary, &dir)?;
+        for c in &LOOP_CONFIGS {
+            let (summary, dir) = looplab_run(&out, c, segment, &binaries)?;
+            ours.entry(c.name).or_default().add_run(&summary, &dir)?;
         }
-        let (summary, dir) =
-            looplab_run(&out, "adaptive-10khz", Strategy::Adaptive, 10_000.0, segment, &binaries, false)?;
-        ours.entry("looplab adaptive 10 kHz".into()).or_default().add_run(&summary, &dir)?;
-        let (summary, dir) =
-            looplab_run(&out, "monitor-stopped", Strategy::Adaptive, 1000.0, segment, &binaries, true)?;
-        ours.entry("looplab adaptive, monitor stopped".into()).or_default().add_run(&summary, &dir)?;
         let loops = (segment * 1000.0).round() as u64;
         let result = uds_loop::run(&exe, &out.join("uds"), 1000.0, loops)?;
         baseline.traces.extend(result.traces);
@@ -360,13 +414,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         return Err(anyhow!("files left in shared memory: {}", cleanup.leftover.join(", ")));
     }
 
-    let mut loops: Vec<LoopBench> = ours
-        .into_iter()
-        .map(|(name, acc)| {
-            let rate = if name.contains("10 kHz") { 10_000.0 } else { 1000.0 };
-            acc.finish(&name, rate)
-        })
-        .collect();
+    let mut loops: Vec<LoopBench> =
+        LOOP_CONFIGS.iter().filter_map(|c| ours.remove(c.name).map(|acc| acc.finish(c.name, c.rate_hz))).collect();
     loops.push(baseline.finish("unix socket + bincode (hand-written)", 1000.0));
     let report = BenchReport {
         started_at: chrono::Utc::now().to_rfc3339(),
