@@ -1012,6 +1012,25 @@ impl<'a> Supervisor<'a> {
         }
     }
 
+    /// Adaptive-wait counts per process, summed over its incarnations.
+    fn adaptive_waits(&self, plant: &PlantReport) -> BTreeMap<String, crate::wait::WaitCounts> {
+        let mut all = BTreeMap::new();
+        let mut add = |name: &str, w: crate::wait::WaitCounts| {
+            if w.caught + w.blocked > 0 {
+                let entry: &mut crate::wait::WaitCounts = all.entry(name.to_string()).or_default();
+                entry.caught += w.caught;
+                entry.blocked += w.blocked;
+            }
+        };
+        add("plant", plant.wait);
+        for (name, reports) in &self.reports.stages {
+            for r in reports {
+                add(name, r.wait);
+            }
+        }
+        all
+    }
+
     /// Stops every process still running, in order, each with SIGTERM and then, past its
     /// timeout, SIGKILL; collects their reports on the way.
     fn stop_all(&mut self) {
@@ -1141,6 +1160,7 @@ impl<'a> Supervisor<'a> {
                 .map(|p| (p.name.to_string(), p.runs.len().saturating_sub(1) as u32))
                 .collect(),
             processes,
+            adaptive_waits: self.adaptive_waits(&plant),
             latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
             jitter_ns: Jitter {
                 plant_tick: monitor.plant_tick_jitter.clone(),

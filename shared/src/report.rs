@@ -45,6 +45,10 @@ pub struct Summary {
     pub restarts: BTreeMap<String, u32>,
     /// One entry per start of each process.
     pub processes: Vec<ProcessInfo>,
+    /// Per process with an adaptive wait (real time): inputs caught by polling, and waits that
+    /// gave up polling and blocked.
+    #[serde(default)]
+    pub adaptive_waits: BTreeMap<String, crate::wait::WaitCounts>,
     pub latency_ns: Latency,
     pub jitter_ns: Jitter,
     /// Per sensor: how old the sample behind command k was when command k took effect.
@@ -234,6 +238,14 @@ pub fn render(s: &Summary) -> String {
     }
     for (sensor, stats) in &s.data_age_ns {
         stats_row(&mut out, &format!("data age: {sensor}"), stats);
+    }
+
+    for (process, w) in &s.adaptive_waits {
+        let _ = writeln!(
+            out,
+            "  adaptive wait, {process}: {} caught by polling, {} blocked after the cap",
+            w.caught, w.blocked
+        );
     }
 
     render_faults(&mut out, s);
