@@ -12,6 +12,12 @@ pub fn now_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// User plus system CPU time of a `getrusage`/`wait4` result, in seconds.
+pub fn cpu_seconds(usage: &libc::rusage) -> f64 {
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    secs(usage.ru_utime) + secs(usage.ru_stime)
+}
+
 /// A periodic timerfd on CLOCK_MONOTONIC with an absolute first expiry. The kernel keeps the
 /// schedule (start + k·period), so wake-ups never drift, unlike WaitSet intervals, which have
 /// millisecond resolution. It can be attached to an iceoryx2 WaitSet.

@@ -89,7 +89,7 @@ pub fn service_name(run_id: &str, topic: Topic) -> Result<ServiceName> {
 }
 
 /// Retries an open-or-create while other processes of the run create the same service.
-fn retry<T, E: Debug>(what: &str, mut attempt: impl FnMut() -> Result<T, E>) -> Result<T> {
+pub(crate) fn retry<T, E: Debug>(what: &str, mut attempt: impl FnMut() -> Result<T, E>) -> Result<T> {
     let start = Instant::now();
     loop {
         match attempt() {

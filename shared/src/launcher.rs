@@ -439,8 +439,7 @@ impl Process {
         if pid != run.pid as i32 {
             return false;
         }
-        let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-        run.cpu_s = secs(usage.ru_utime) + secs(usage.ru_stime);
+        run.cpu_s = crate::clock::cpu_seconds(&usage);
         run.exit = Some(if libc::WIFEXITED(status) {
             (libc::WEXITSTATUS(status).to_string(), libc::WEXITSTATUS(status) == 0)
         } else {

@@ -438,8 +438,8 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     records.connect(&context.stop)?;
     let writer = Writer::new(context)?;
     if context.config.mode == Mode::Realtime {
-        // The monitor must never slow the loop: it runs only on CPU time the loop leaves idle
-        // (its threads inherit this). Its buffers hold a second of samples to catch up with.
+        // The monitor must never slow the loop: it runs at the lowest priority (its threads
+        // inherit it). Its buffers hold a second of samples to catch up with.
         crate::wait::run_in_background();
     }
     emit(&ChildEvent::Ready)?;

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::clock::now_ns;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Strategy {
     Block,
@@ -131,12 +131,12 @@ fn pin_in_loop_order(process: &str) {
     }
 }
 
-/// Puts the calling thread (and threads it starts later) under SCHED_IDLE: it runs only when
-/// a CPU has nothing else to do, and any loop process that wakes preempts it at once.
+/// Gives the calling thread (and threads it starts later) the lowest normal priority, nice 19:
+/// a loop process that wakes preempts it, yet it still gets a share of a busy machine.
+/// (SCHED_IDLE would get next to none, and a starved monitor loses records.)
 pub fn run_in_background() {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: a valid sched_param for SCHED_IDLE on this thread.
-    unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) };
+    // SAFETY: setpriority on this thread (who = 0) with a valid nice value.
+    unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, 19) };
 }
 
 /// What an adaptive wait did, for the process's report.

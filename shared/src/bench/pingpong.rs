@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use super::codec;
 use crate::clock::now_ns;
-use crate::ipc::run_config;
+use crate::ipc::{retry, run_config};
 use crate::wait::{ArrivalModel, Strategy, WaitSettings, Waiter, sleep_until};
 
 /// Bytes at the start of every message: sequence, ping sent, echo received, echo sent.
@@ -46,7 +46,7 @@ pub struct EchoArgs {
     pub run_id: String,
     #[arg(long, value_enum)]
     pub transport: Transport,
-    #[arg(long, value_parser = parse_strategy)]
+    #[arg(long, value_enum)]
     pub mode: Strategy,
     #[arg(long)]
     pub period_ns: u64,
@@ -54,15 +54,6 @@ pub struct EchoArgs {
     pub max_bytes: usize,
     #[arg(long)]
     pub socket: Option<PathBuf>,
-}
-
-pub fn parse_strategy(text: &str) -> Result<Strategy, String> {
-    match text {
-        "block" => Ok(Strategy::Block),
-        "spin" => Ok(Strategy::Spin),
-        "adaptive" => Ok(Strategy::Adaptive),
-        _ => Err(format!("unknown wait strategy {text}; allowed: block, spin, adaptive")),
-    }
 }
 
 fn write_stamps(bytes: &mut [u8], stamps: [u64; 4]) {
@@ -94,34 +85,21 @@ impl IoxEnd {
             .create::<ipc::Service>()
             .map_err(|e| anyhow!("node: {e:?}"))?;
         let name = |topic: &str| ServiceName::new(&format!("bench/{run_id}/{topic}")).map_err(|e| anyhow!("{e:?}"));
+        // Both processes open the same services: retry while the other is creating them.
         let pubsub = |topic: &str| -> Result<_> {
             let name = name(topic)?;
-            let start = Instant::now();
-            loop {
-                match node
-                    .service_builder(&name)
+            retry(&format!("service {topic}"), || {
+                node.service_builder(&name)
                     .publish_subscribe::<[u8]>()
                     .history_size(0)
                     .subscriber_max_buffer_size(2)
                     .enable_safe_overflow(true)
                     .open_or_create()
-                {
-                    Ok(s) => return Ok(s),
-                    Err(e) if start.elapsed() > Duration::from_secs(3) => bail!("service {topic}: {e:?}"),
-                    Err(_) => std::thread::sleep(Duration::from_millis(5)),
-                }
-            }
+            })
         };
         let event = |topic: &str| -> Result<_> {
             let name = name(&format!("{topic}-wake"))?;
-            let start = Instant::now();
-            loop {
-                match node.service_builder(&name).event().open_or_create() {
-                    Ok(s) => return Ok(s),
-                    Err(e) if start.elapsed() > Duration::from_secs(3) => bail!("event {topic}: {e:?}"),
-                    Err(_) => std::thread::sleep(Duration::from_millis(5)),
-                }
-            }
+            retry(&format!("event {topic}"), || node.service_builder(&name).event().open_or_create())
         };
         let publisher = pubsub(send)?
             .publisher_builder()

@@ -15,6 +15,11 @@ const COLOURS: [RGBColor; 7] = [
     RGBColor(127, 127, 127),
 ];
 
+/// A legend's short line in a series' colour.
+fn legend_mark(x: i32, y: i32, colour: RGBColor) -> PathElement<(i32, i32)> {
+    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+}
+
 /// Latency CDFs on a log time axis: one curve per (name, sorted samples in ns).
 pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()> {
     let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
@@ -49,7 +54,7 @@ pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()
             .draw_series(LineSeries::new(points, colour.stroke_width(2)))
             .map_err(|e| anyhow!("{e}"))?
             .label(name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+            .legend(move |(x, y)| legend_mark(x, y, colour));
     }
     chart
         .configure_series_labels()
@@ -89,7 +94,7 @@ pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()
             .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))
             .map_err(|e| anyhow!("{e}"))?
             .label(name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+            .legend(move |(x, y)| legend_mark(x, y, colour));
         chart
             .draw_series(points.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
             .map_err(|e| anyhow!("{e}"))?;

@@ -17,7 +17,7 @@ use anyhow::{Context, Result, anyhow};
 use serde::{Deserialize, Serialize};
 
 use super::codec;
-use crate::clock::now_ns;
+use crate::clock::{cpu_seconds, now_ns};
 use crate::msg::{Estimate, Measurements, PlantState};
 use crate::wait::sleep_until;
 
@@ -97,8 +97,7 @@ fn thread_cpu_s() -> f64 {
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
     // SAFETY: getrusage writes into the struct we own.
     unsafe { libc::getrusage(libc::RUSAGE_THREAD, &mut usage) };
-    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-    tv(usage.ru_utime) + tv(usage.ru_stime)
+    cpu_seconds(&usage)
 }
 
 /// Waits for a child and returns its CPU seconds.
@@ -110,8 +109,7 @@ fn reap(child: Child) -> Result<f64> {
     if pid < 0 {
         return Err(std::io::Error::last_os_error().into());
     }
-    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-    Ok(tv(usage.ru_utime) + tv(usage.ru_stime))
+    Ok(cpu_seconds(&usage))
 }
 
 /// Runs the baseline loop for `loops` ticks at `rate_hz`.

@@ -214,10 +214,10 @@ impl Quadcopter {
         not_negative(c, "metrics.steady_from_s", metrics.steady_from_s)?;
 
         let (pose, _, _) = c.sensor_for("pose")?;
-        let find = |signal: &str| c.sensors.values().position(|s| s.signal == signal);
-        let rates = match (find("velocity"), find("angular_rate")) {
-            (Some(_), Some(_)) => Some((c.sensor_for("velocity")?.0, c.sensor_for("angular_rate")?.0)),
-            (None, None) => None,
+        let has = |signal: &str| c.sensors.values().any(|s| s.signal == signal);
+        let rates = match (has("velocity"), has("angular_rate")) {
+            (true, true) => Some((c.sensor_for("velocity")?.0, c.sensor_for("angular_rate")?.0)),
+            (false, false) => None,
             _ => {
                 return Err(c.error(
                     "sensors",
