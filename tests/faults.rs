@@ -8,7 +8,7 @@ use common::*;
 
 fn assert_clean(s: &serde_json::Value) {
     assert_eq!(s["shared_memory"]["clean"], true, "{}", s["shared_memory"]);
-    let left = looplab_shared::ipc::files_of_run(s["run_id"].as_str().unwrap()).unwrap();
+    let left = looplab_shared::ipc::files_of_run(s["run_id"].as_str().unwrap());
     assert!(left.is_empty(), "files left behind: {left:?}");
     for p in s["processes"].as_array().unwrap() {
         assert!(!alive(p["pid"].as_i64().unwrap()), "{p} is still running");

@@ -316,6 +316,9 @@ pub struct Supervision {
     pub max_restarts: u32,
     /// Wait before a restart, s; it doubles with each restart of the same process, up to 1 s.
     pub backoff_s: f64,
+    /// A process that has run this long (wall-clock seconds) since it was last ready counts as
+    /// healthy again: its next restart waits `backoff_s`, not the doubled wait.
+    pub backoff_reset_s: f64,
     /// A process whose input has been waiting this long with no output from it is stalled
     /// (wall-clock seconds; a stopped process looks alive to iceoryx2).
     pub stall_timeout_s: f64,
@@ -338,6 +341,7 @@ impl Default for Supervision {
             restart: Restart::OnFailure,
             max_restarts: 10,
             backoff_s: 0.01,
+            backoff_reset_s: 1.0,
             stall_timeout_s: 0.05,
             command_timeout_s: 0.02,
             on_stale: OnStale::Hold,
@@ -380,6 +384,7 @@ impl Supervision {
         positive("stall_timeout_s", self.stall_timeout_s)?;
         positive("command_timeout_s", self.command_timeout_s)?;
         positive("lockstep_stall_s", self.lockstep_stall_s)?;
+        positive("backoff_reset_s", self.backoff_reset_s)?;
         for process in PROCESSES {
             let backoff = self.policy(process).backoff_s;
             if !(backoff.is_finite() && backoff >= 0.0) {

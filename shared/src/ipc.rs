@@ -13,7 +13,9 @@
 //!   every loop of a deterministic run), for at most [`LOCKSTEP_BACKPRESSURE_LIMIT`], after which
 //!   the sample is dropped for that reader and counted.
 
+use std::collections::BTreeSet;
 use std::fmt::Debug;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -25,6 +27,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
+use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 
 use crate::launch::Mode;
@@ -75,12 +78,31 @@ pub fn file_prefix(run_id: &str) -> String {
     format!("looplab_{run_id}_")
 }
 
-/// The iceoryx2 configuration every process of a run uses.
+/// The iceoryx2 configuration every process of a run uses: the run's file prefix, and the run's
+/// private folder as iceoryx2's root (checked to be private before it is used).
 pub fn run_config(run_id: &str) -> Result<Config> {
     let mut config = Config::default();
     config.global.prefix = FileName::new(file_prefix(run_id).as_bytes())
         .map_err(|e| anyhow!("run id {run_id:?} does not make a valid file prefix: {e:?}"))?;
+    let folder = run_folder(run_id);
+    check_private(&folder)?;
+    let root = format!("{}/", folder.display());
+    config.global.set_root_path(
+        &Path::new(root.as_bytes()).map_err(|e| anyhow!("{root} is not a valid iceoryx2 root path: {e:?}"))?,
+    );
     Ok(config)
+}
+
+/// A node of the run, which handles no signals: each process handles SIGTERM and SIGINT itself
+/// (`crate::signals`), so that iceoryx2 never swallows them.
+fn node(name: &str, config: &Config) -> Result<Node<ipc::Service>> {
+    quiet_logs();
+    NodeBuilder::new()
+        .name(&NodeName::new(name).map_err(|e| anyhow!("invalid node name {name}: {e:?}"))?)
+        .config(config)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow!("cannot create the iceoryx2 node for {name}: {e:?}"))
 }
 
 pub fn service_name(run_id: &str, topic: Topic) -> Result<ServiceName> {
@@ -114,16 +136,7 @@ pub struct Ipc {
 
 impl Ipc {
     pub fn new(process: &str, run_id: &str, mode: Mode) -> Result<Self> {
-        quiet_logs();
-        let config = run_config(run_id)?;
-        let node = NodeBuilder::new()
-            .name(&NodeName::new(process).map_err(|e| anyhow!("invalid node name {process}: {e:?}"))?)
-            .config(&config)
-            // Each process handles SIGTERM/SIGINT itself (`crate::signals`), so that iceoryx2
-            // never swallows them and a stop request is seen at any point of the run.
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .map_err(|e| anyhow!("cannot create the iceoryx2 node for {process}: {e:?}"))?;
+        let node = node(process, &run_config(run_id)?)?;
         Ok(Self { node, run_id: run_id.to_owned(), mode })
     }
 
@@ -341,8 +354,86 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
     }
 }
 
-/// iceoryx2's shared-memory folder on Linux; its other files are under the config's root path.
+/// iceoryx2's shared-memory folder on Linux (fixed when iceoryx2 is built); a tmpfs.
 pub const SHM_DIR: &str = "/dev/shm";
+
+/// The run's private folder, on tmpfs: iceoryx2's node and service files and event sockets (its
+/// root path), the processes' snapshots, and the launcher's lock. Mode 0700, created fresh by
+/// the run, so nothing of a live run is readable or writable by another user, and nothing in it
+/// ever waits for a disk. iceoryx2's shared-memory segments themselves must lie in `SHM_DIR`;
+/// their names start with [`file_prefix`] and they are owner-only.
+pub fn run_folder(run_id: &str) -> PathBuf {
+    PathBuf::from(SHM_DIR).join(format!("looplab_{run_id}"))
+}
+
+/// The file the launcher holds an exclusive lock on for as long as it runs the run: a run whose
+/// lock is free was abandoned (its launcher was killed) and may be cleaned.
+fn owner_lock_path(run_id: &str) -> PathBuf {
+    run_folder(run_id).join("launcher.lock")
+}
+
+/// Creates the run's private folder and takes its owner lock; refuses a folder that exists
+/// already (planted by someone else, or a reused id) instead of trusting it. Drop the returned
+/// file to release the lock.
+pub fn create_run_storage(run_id: &str) -> Result<std::fs::File> {
+    use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
+    let folder = run_folder(run_id);
+    std::fs::DirBuilder::new().mode(0o700).create(&folder).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::AlreadyExists {
+            anyhow!("{} exists already; a new run needs a folder of its own, so it refuses to use it", folder.display())
+        } else {
+            anyhow!("cannot create the run's shared-memory folder {}: {e}", folder.display())
+        }
+    })?;
+    check_private(&folder)?;
+    let path = owner_lock_path(run_id);
+    let lock = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+        .open(&path)
+        .with_context(|| format!("create {}", path.display()))?;
+    // SAFETY: flock on a file descriptor we own.
+    if unsafe { libc::flock(std::os::fd::AsRawFd::as_raw_fd(&lock), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+        return Err(anyhow!("cannot lock {}: {}", path.display(), std::io::Error::last_os_error()));
+    }
+    // iceoryx2 creates its registry segment world-writable; create it now, before any other
+    // process of the run exists, and make it the owner's alone.
+    drop(node("looplab", &run_config(run_id)?)?);
+    for path in paths_of_run(run_id) {
+        if path.to_string_lossy().ends_with(".global_mgmt") {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600))
+                .with_context(|| format!("make {} private", path.display()))?;
+        }
+    }
+    Ok(lock)
+}
+
+/// Refuses a run folder that is not a real folder of ours that only we can use: a symbolic
+/// link, another user's folder, or one others can read or write.
+pub fn check_private(folder: &std::path::Path) -> Result<()> {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let meta = std::fs::symlink_metadata(folder)
+        .map_err(|e| anyhow!("the run's folder {} is not usable: {e}", folder.display()))?;
+    // SAFETY: geteuid has no preconditions.
+    let me = unsafe { libc::geteuid() };
+    if meta.file_type().is_symlink() || !meta.is_dir() {
+        return Err(anyhow!("{} is not a folder (a symbolic link or a file); refusing it", folder.display()));
+    }
+    if meta.uid() != me {
+        return Err(anyhow!("{} belongs to user {}, not to this user ({me}); refusing it", folder.display(), meta.uid()));
+    }
+    if meta.permissions().mode() & 0o077 != 0 {
+        return Err(anyhow!(
+            "{} can be used by other users (mode {:o}); refusing it",
+            folder.display(),
+            meta.permissions().mode() & 0o777
+        ));
+    }
+    Ok(())
+}
 
 /// After a run: removes the resources of the run's dead nodes (processes that were killed) and
 /// the run's own node registry, then lists every file of the run still there.
@@ -351,73 +442,162 @@ pub struct Cleanup {
     pub leftover: Vec<String>,
 }
 
-/// Removes the resources of the run's dead nodes (during a run, after a process died); returns
-/// how many it removed.
-pub fn remove_dead_nodes(run_id: &str) -> Result<u64> {
+/// The run's nodes: alive (pids of their processes) and how many dead ones had their resources
+/// removed.
+fn sweep_nodes(config: &Config) -> Result<(Vec<i32>, u64)> {
     quiet_logs();
-    let config = run_config(run_id)?;
-    let mut removed = 0;
-    Node::<ipc::Service>::list(&config, |state| {
-        if let NodeState::Dead(view) = state {
-            removed += u64::from(view.try_remove_stale_resources().is_ok());
-        }
-        CallbackProgression::Continue
-    })
-    .map_err(|e| anyhow!("cannot list the run's iceoryx2 nodes: {e:?}"))?;
-    Ok(removed)
-}
-
-pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
-    quiet_logs();
-    let config = run_config(run_id)?;
+    let mut alive = Vec::new();
     let mut removed_dead_nodes = 0;
-    let mut alive_nodes = 0;
-    Node::<ipc::Service>::list(&config, |state| {
+    Node::<ipc::Service>::list(config, |state| {
         match state {
             NodeState::Dead(view) => removed_dead_nodes += u64::from(view.try_remove_stale_resources().is_ok()),
-            NodeState::Alive(_) => alive_nodes += 1,
+            NodeState::Alive(view) => {
+                alive.push(view.details().as_ref().map_or(0, |d| d.process_id().value()));
+            }
             _ => {}
         }
         CallbackProgression::Continue
     })
     .map_err(|e| anyhow!("cannot list the run's iceoryx2 nodes: {e:?}"))?;
-
-    let mut leftover = paths_of_run(run_id, &config);
-    // iceoryx2 keeps one registry file per prefix for good. The prefix is this run's alone, so
-    // once no node of the run is alive, it goes too, with the processes' snapshots.
-    if alive_nodes == 0 {
-        leftover.retain(|path| {
-            let name = path.to_string_lossy();
-            let ours = name.ends_with(".global_mgmt") || name.ends_with(".snapshot");
-            !(path.starts_with(SHM_DIR) && ours && std::fs::remove_file(path).is_ok())
-        });
-    }
-    Ok(Cleanup { removed_dead_nodes, leftover: leftover.iter().map(|p| p.display().to_string()).collect() })
+    Ok((alive, removed_dead_nodes))
 }
 
-/// Every file under `dir` (recursively) whose name starts with `prefix`.
-fn collect_with_prefix(dir: &std::path::Path, prefix: &str, out: &mut Vec<std::path::PathBuf>) {
-    let Ok(entries) = std::fs::read_dir(dir) else { return };
-    for entry in entries.flatten() {
-        let path = entry.path();
-        if entry.file_name().to_string_lossy().starts_with(prefix) {
-            out.push(path);
-        } else if entry.file_type().is_ok_and(|t| t.is_dir()) {
-            collect_with_prefix(&path, prefix, out);
+/// Removes the resources of the run's dead nodes (during a run, after a process died); returns
+/// how many it removed.
+pub fn remove_dead_nodes(run_id: &str) -> Result<u64> {
+    Ok(sweep_nodes(&run_config(run_id)?)?.1)
+}
+
+/// Removes what the run's dead processes left, and once none of its processes is alive, every
+/// file of the run and its folder; returns what could not be removed.
+pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
+    let config = run_config(run_id)?;
+    let (alive, removed_dead_nodes) = sweep_nodes(&config)?;
+    // iceoryx2 keeps one registry segment per prefix for good. The prefix is this run's alone, so
+    // once no process of the run is alive, it goes too, with the folder.
+    if alive.is_empty() {
+        for path in paths_of_run(run_id) {
+            if path.is_dir() && !path.is_symlink() {
+                let _ = std::fs::remove_dir_all(&path);
+            } else {
+                let _ = std::fs::remove_file(&path);
+            }
         }
     }
+    Ok(Cleanup { removed_dead_nodes, leftover: files_of_run(run_id) })
 }
 
-fn paths_of_run(run_id: &str, config: &Config) -> Vec<std::path::PathBuf> {
-    let root = String::from_utf8_lossy(config.global.root_path().as_bytes()).into_owned();
-    let mut found = Vec::new();
-    for dir in [SHM_DIR, root.as_str()] {
-        collect_with_prefix(std::path::Path::new(dir), &file_prefix(run_id), &mut found);
-    }
-    found
+/// Every entry of `SHM_DIR` that belongs to the run: its folder and its segments.
+fn paths_of_run(run_id: &str) -> Vec<PathBuf> {
+    let folder = format!("looplab_{run_id}");
+    let prefix = file_prefix(run_id);
+    let Ok(entries) = std::fs::read_dir(SHM_DIR) else { return vec![] };
+    entries
+        .flatten()
+        .filter(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            name == folder || name.starts_with(&prefix)
+        })
+        .map(|e| e.path())
+        .collect()
 }
 
 /// Every file of a run still present; removes nothing (for checks from outside a run).
-pub fn files_of_run(run_id: &str) -> Result<Vec<String>> {
-    Ok(paths_of_run(run_id, &run_config(run_id)?).iter().map(|p| p.display().to_string()).collect())
+pub fn files_of_run(run_id: &str) -> Vec<String> {
+    let mut found = vec![];
+    for path in paths_of_run(run_id) {
+        found.push(path.display().to_string());
+        if let Ok(entries) = std::fs::read_dir(&path) {
+            found.extend(entries.flatten().map(|e| e.path().display().to_string()));
+        }
+    }
+    found.sort();
+    found
+}
+
+/// What [`clean_abandoned_runs`] did.
+#[derive(Debug, Default)]
+pub struct Abandoned {
+    /// Runs whose launcher was gone and whose files were removed.
+    pub runs: Vec<String>,
+    /// Their processes that were still alive (orphans) and were killed.
+    pub killed: usize,
+    /// Entries that could not be removed.
+    pub leftover: Vec<String>,
+}
+
+/// Removes the files of every run of this user whose launcher is gone (killed with SIGKILL, or
+/// the machine's power): kills its processes that are still alive, then removes its segments and
+/// its folder. A run whose launcher still holds its lock is left alone.
+pub fn clean_abandoned_runs() -> Abandoned {
+    let mut done = Abandoned::default();
+    let Ok(entries) = std::fs::read_dir(SHM_DIR) else { return done };
+    let mut ids = BTreeSet::new();
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if let Some(rest) = name.strip_prefix("looplab_") {
+            ids.insert(rest.split('_').next().unwrap_or(rest).to_owned());
+        }
+    }
+    for id in ids {
+        let folder = run_folder(&id);
+        if folder.exists() {
+            if check_private(&folder).is_err() || launcher_alive(&id) {
+                continue;
+            }
+        } else if !segments_are_mine(&id) {
+            continue;
+        }
+        if folder.exists()
+            && let Ok(config) = run_config(&id)
+            && let Ok((alive, _)) = sweep_nodes(&config)
+        {
+            for pid in alive.into_iter().filter(|&pid| pid > 0) {
+                // SAFETY: the pid holds a node lock of this run, so it is the run's process.
+                unsafe { libc::kill(pid, libc::SIGKILL) };
+                done.killed += 1;
+            }
+            // A killed process's node lock goes when the kernel has torn it down.
+            let until = Instant::now() + Duration::from_secs(2);
+            while sweep_nodes(&config).is_ok_and(|(alive, _)| !alive.is_empty()) && Instant::now() < until {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
+        let cleanup = if folder.exists() {
+            clean_up_run(&id).map(|c| c.leftover).unwrap_or_else(|_| files_of_run(&id))
+        } else {
+            // Segments with no folder: the run had removed its folder, or never made one.
+            for path in paths_of_run(&id) {
+                let _ = std::fs::remove_file(path);
+            }
+            files_of_run(&id)
+        };
+        done.leftover.extend(cleanup);
+        done.runs.push(id);
+    }
+    done
+}
+
+/// Whether the run's launcher still holds its lock.
+fn launcher_alive(run_id: &str) -> bool {
+    use std::os::unix::fs::OpenOptionsExt;
+    let Ok(file) = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+        .open(owner_lock_path(run_id))
+    else {
+        // No lock file: a launcher is between creating the folder and its lock (a moment), or
+        // died in it; leave it.
+        return true;
+    };
+    // SAFETY: flock on a file descriptor we own; the lock is dropped with the file.
+    unsafe { libc::flock(std::os::fd::AsRawFd::as_raw_fd(&file), libc::LOCK_EX | libc::LOCK_NB) != 0 }
+}
+
+/// Whether every segment of a run without a folder belongs to this user.
+fn segments_are_mine(run_id: &str) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    // SAFETY: geteuid has no preconditions.
+    let me = unsafe { libc::geteuid() };
+    paths_of_run(run_id).iter().all(|p| std::fs::symlink_metadata(p).is_ok_and(|m| m.uid() == me && m.is_file()))
 }

@@ -309,7 +309,7 @@ pub fn scenario_names() -> String {
 pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
     // A scenario's name wins over a file of that name; anything else that looks like a path is one.
     let looks_like_path =
-        builtin(target).is_none() && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
+        builtin(target).is_none() && !Path::new(target).is_dir() && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
     let (origin, document) = if looks_like_path {
         let text = std::fs::read_to_string(target)
             .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;
@@ -341,6 +341,12 @@ pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Bo
         let mut document = entry.defaults();
         merge(&mut document, user);
         (target.to_owned(), document)
+    } else if Path::new(target).is_dir() {
+        return Err(LaunchError::new(
+            target,
+            None,
+            format!("is a folder; give a launch file (.toml) or a scenario name: {}", scenario_names()),
+        ));
     } else {
         let entry = builtin(target).ok_or_else(|| {
             LaunchError::new(

@@ -71,6 +71,9 @@ enum Command {
     /// Run a scenario repeatedly in lockstep while one key varies; report the metrics per value
     /// and, for a controller delay, the measured delay margin against theory
     Sweep(SweepCli),
+    /// Remove what runs killed with SIGKILL left in shared memory (their launcher is gone): kill
+    /// their orphaned processes, remove their files. `looplab run` does this too before it starts.
+    Clean,
     /// Measure LoopLab's own latency against the transport's floor and a hand-written Unix-socket
     /// loop, per wait strategy, plus zero copy, the monitor's cost and lockstep speed; writes
     /// bench.json and SVG charts
@@ -188,12 +191,37 @@ pub fn main() -> ExitCode {
             None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", launch::scenario_names())),
         },
         Some(Command::Run(args)) => run(args),
+        Some(Command::Clean) => clean(),
         Some(Command::Sweep(args)) => sweep(args),
         Some(Command::Bench(args)) => report_failure(crate::bench::run(&args)),
         Some(Command::BenchEcho(args)) => report_failure(crate::bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(crate::bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default()),
     }
+}
+
+/// Tells what the clean-up of runs whose launcher was killed found.
+fn report_abandoned(done: &ipc::Abandoned) {
+    if !done.runs.is_empty() {
+        eprintln!(
+            "looplab: removed the shared-memory files of {} run(s) whose launcher was killed ({}){}",
+            done.runs.len(),
+            done.runs.join(", "),
+            if done.killed > 0 { format!("; killed {} orphaned process(es)", done.killed) } else { String::new() }
+        );
+    }
+    for path in &done.leftover {
+        eprintln!("looplab: could not remove {path}");
+    }
+}
+
+fn clean() -> ExitCode {
+    let done = ipc::clean_abandoned_runs();
+    report_abandoned(&done);
+    if done.runs.is_empty() {
+        println!("nothing to clean: no abandoned run of this user in {}", ipc::SHM_DIR);
+    }
+    if done.leftover.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE }
 }
 
 fn report_failure(result: Result<()>) -> ExitCode {
@@ -270,10 +298,16 @@ fn run(args: RunArgs) -> ExitCode {
         Ok(d) => d,
         Err(e) => return bad_input(format!("{e:#}")),
     };
+    report_abandoned(&ipc::clean_abandoned_runs());
     match Supervisor::run(&config, scenario.as_ref(), &binaries, &run_dir, args.quiet) {
         Ok((summary, outcome)) => {
             print!("{}", report::render(&summary));
             match outcome {
+                Outcome::Completed if !summary.completed => {
+                    let why = summary.stopped_because.as_deref().unwrap_or("it ran fewer loops than planned");
+                    eprintln!("error: the run did not complete: {why} ({} of {} loops)", summary.loops, summary.loops_planned);
+                    ExitCode::FAILURE
+                }
                 Outcome::Completed if summary.shared_memory.clean => ExitCode::SUCCESS,
                 Outcome::Completed => {
                     eprintln!(
@@ -342,6 +376,9 @@ fn build_siblings_under_cargo(exe_dir: &Path) -> Result<()> {
 pub(crate) fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     let dir = match out {
         Some(dir) => {
+            if dir.exists() && !dir.is_dir() {
+                bail!("--out {}: is a file, not a folder; give a new or empty folder", dir.display());
+            }
             if dir.exists() && std::fs::read_dir(dir).map(|mut d| d.next().is_some()).unwrap_or(true) {
                 bail!("--out {}: the folder exists and is not empty; give a new or empty folder", dir.display());
             }
@@ -368,11 +405,26 @@ pub(crate) fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathB
     Ok(dir)
 }
 
-fn new_run_id() -> String {
-    use std::hash::BuildHasher;
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
-    let hash = std::collections::hash_map::RandomState::new().hash_one((std::process::id(), nanos));
-    format!("{:08x}", hash as u32)
+/// A new run id: 64 random bits from the kernel, so that no one can guess the names of a run's
+/// files before it creates them.
+pub(crate) fn new_run_id() -> String {
+    let mut bytes = [0u8; 8];
+    // SAFETY: getrandom writes at most `bytes.len()` bytes into the buffer.
+    let n = unsafe { libc::getrandom(bytes.as_mut_ptr().cast(), bytes.len(), 0) };
+    assert_eq!(n, bytes.len() as isize, "the kernel's random source failed");
+    format!("{:016x}", u64::from_ne_bytes(bytes))
+}
+
+/// Writes a file whole or not at all: a failed write (a full disk) leaves no truncated file
+/// behind that a script could take for the real one, and says which file it was.
+pub(crate) fn write_atomically(path: &Path, contents: &str) -> Result<()> {
+    let partial = path.with_extension("partial");
+    let written = std::fs::write(&partial, contents).and_then(|()| std::fs::rename(&partial, path));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&partial);
+        bail!("cannot write {}: {e}", path.display());
+    }
+    Ok(())
 }
 
 /// Runs one launch configuration to its end in `run_dir` (which must exist, with `logs/`).
@@ -409,8 +461,12 @@ struct Process {
     stdin: Option<ChildStdin>,
     /// Its ports are up (cleared when it dies or is killed).
     ready: bool,
-    /// Set while it waits for its backoff before a restart.
-    restart_at: Option<Instant>,
+    /// When its running incarnation became ready.
+    ready_since: Option<Instant>,
+    /// Set while it waits for its clean-up and backoff before a restart.
+    restart: Option<PendingRestart>,
+    /// Restarts since it last ran healthy (`backoff_reset_s`): the backoff doubles with each.
+    quick_restarts: u32,
     /// SIGSTOPped by a fault and not continued yet.
     stopped: bool,
     /// It died and will not be restarted (the monitor may; the others end the run).
@@ -470,9 +526,15 @@ impl Process {
     }
 }
 
-/// What a child's stdout reader passes on: (process, incarnation, event), or no event at end of
-/// output.
-type Event = (usize, usize, Option<ChildEvent>);
+/// What reaches the supervision loop.
+enum Event {
+    /// A child's event (None: its output ended, it is exiting).
+    Child { index: usize, incarnation: usize, event: Option<ChildEvent> },
+    /// A line on a child's stdout that is not an event.
+    Unreadable { index: usize, line: String, error: String },
+    /// The clean-up after a death of process `index` is done.
+    Cleaned { index: usize, removed: u64 },
+}
 
 #[derive(Default)]
 struct Reports {
@@ -480,6 +542,24 @@ struct Reports {
     monitor: Option<MonitorReport>,
     /// Per stage, the reports of every incarnation that ended cleanly.
     stages: BTreeMap<&'static str, Vec<StageReport>>,
+}
+
+/// A restart under way: it starts once the dead process's resources are removed and the backoff
+/// has passed.
+struct PendingRestart {
+    not_before: Instant,
+    cleaned: bool,
+}
+
+/// The steps of one restart (CLOCK_MONOTONIC, ns), for the report.
+struct RestartRecord {
+    process: &'static str,
+    incarnation: usize,
+    backoff: Duration,
+    died_ns: u64,
+    cleaned_ns: Option<u64>,
+    spawned_ns: Option<u64>,
+    ready_ns: Option<u64>,
 }
 
 /// What the launcher saw of one injected fault (CLOCK_MONOTONIC, ns).
@@ -525,6 +605,11 @@ struct Supervisor<'a> {
     removed_dead_nodes: u64,
     /// Run stopping: deaths are expected, nothing is restarted.
     stopping: bool,
+    stop: StopFlag,
+    /// Clean-up requests (a process index) for the clean-up thread: iceoryx2's clean-up of a dead
+    /// process's resources can wait on the file system, and nothing of the supervision may.
+    cleaner: Option<crossbeam_channel::Sender<usize>>,
+    restarts: Vec<RestartRecord>,
 }
 
 impl<'a> Supervisor<'a> {
@@ -536,7 +621,7 @@ impl<'a> Supervisor<'a> {
         quiet: bool,
     ) -> Result<(Summary, Outcome)> {
         let launch_file = run_dir.join("launch.toml");
-        std::fs::write(&launch_file, config.to_toml()).with_context(|| format!("write {}", launch_file.display()))?;
+        write_atomically(&launch_file, &config.to_toml())?;
         let stop = StopFlag::install()?;
         let started_at = chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true);
 
@@ -558,16 +643,32 @@ impl<'a> Supervisor<'a> {
                 runs: vec![],
                 stdin: None,
                 ready: false,
-                restart_at: None,
+                ready_since: None,
+                restart: None,
+                quick_restarts: 0,
                 stopped: false,
                 gone: false,
             })
             .collect();
+        let run_id = new_run_id();
+        // The run's private folder; the lock in it says the run is alive until we return.
+        let storage_lock = ipc::create_run_storage(&run_id)?;
+        let (cleaner, clean_requests) = crossbeam_channel::unbounded::<usize>();
+        let cleaned = tx.clone();
+        let clean_run_id = run_id.clone();
+        let clean_thread = std::thread::spawn(move || {
+            for index in clean_requests {
+                let removed = ipc::remove_dead_nodes(&clean_run_id).unwrap_or(0);
+                if cleaned.send(Event::Cleaned { index, removed }).is_err() {
+                    break;
+                }
+            }
+        });
         let mut supervisor = Supervisor {
             config,
             binaries,
             launch_file,
-            run_id: new_run_id(),
+            run_id,
             run_dir: run_dir.to_path_buf(),
             processes,
             tx,
@@ -582,10 +683,13 @@ impl<'a> Supervisor<'a> {
             last_status: Instant::now(),
             removed_dead_nodes: 0,
             stopping: false,
+            stop,
+            cleaner: Some(cleaner),
+            restarts: vec![],
         };
         let spawned: Result<()> = (0..supervisor.processes.len()).try_for_each(|i| supervisor.spawn(i));
         let outcome = match spawned {
-            Ok(()) => supervisor.supervise(&stop),
+            Ok(()) => supervisor.supervise(),
             Err(e) => Outcome::Failed(format!("{e:#}")),
         };
         supervisor.stop_all();
@@ -599,11 +703,12 @@ impl<'a> Supervisor<'a> {
         for reader in supervisor.readers.drain(..) {
             let _ = reader.join();
         }
+        supervisor.cleaner = None;
+        let _ = clean_thread.join();
         let cleanup = ipc::clean_up_run(&supervisor.run_id)?;
+        drop(storage_lock);
         let summary = supervisor.summary(scenario, started_at, &outcome, cleanup);
-        let path = run_dir.join("summary.json");
-        std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n")
-            .with_context(|| format!("write {}", path.display()))?;
+        write_atomically(&run_dir.join("summary.json"), &(serde_json::to_string_pretty(&summary)? + "\n"))?;
         Ok((summary, outcome))
     }
 
@@ -652,18 +757,20 @@ impl<'a> Supervisor<'a> {
         let tx = self.tx.clone();
         self.readers.push(std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if let Ok(event) = serde_json::from_str::<ChildEvent>(&line) {
-                    let _ = tx.send((index, incarnation, Some(event)));
-                }
+                let _ = tx.send(match serde_json::from_str::<ChildEvent>(&line) {
+                    Ok(event) => Event::Child { index, incarnation, event: Some(event) },
+                    Err(e) => Event::Unreadable { index, line, error: e.to_string() },
+                });
             }
-            let _ = tx.send((index, incarnation, None));
+            let _ = tx.send(Event::Child { index, incarnation, event: None });
         }));
         let process = &mut self.processes[index];
         process.runs.push(Incarnation { pid: child.id(), exit: None, cpu_s: 0.0 });
         process.incarnation = incarnation;
         process.stdin = child.stdin.take();
         process.ready = false;
-        process.restart_at = None;
+        process.ready_since = None;
+        process.restart = None;
         Ok(())
     }
 
@@ -680,7 +787,8 @@ impl<'a> Supervisor<'a> {
         self.timeline.push(TimelineEntry { at_ms: self.since_start_ms(ns), event });
     }
 
-    fn supervise(&mut self, stop: &StopFlag) -> Outcome {
+    fn supervise(&mut self) -> Outcome {
+        let stop = self.stop.clone();
         // Start-up: every process, the monitor included, has its ports before the first sample.
         let deadline = Instant::now() + READY_TIMEOUT;
         while !self.processes.iter().all(|p| p.ready) {
@@ -688,7 +796,10 @@ impl<'a> Supervisor<'a> {
                 return Outcome::Interrupted;
             }
             match self.events.recv_timeout(Duration::from_millis(50)) {
-                Ok((index, _, Some(ChildEvent::Ready))) => self.processes[index].ready = true,
+                Ok(Event::Child { index, event: Some(ChildEvent::Ready), .. }) => {
+                    self.processes[index].ready = true;
+                    self.processes[index].ready_since = Some(Instant::now());
+                }
                 Ok(event) => {
                     if let Some(index) = self.handle(event) {
                         return Outcome::Failed(format!(
@@ -719,7 +830,9 @@ impl<'a> Supervisor<'a> {
             if stop.requested() {
                 return Outcome::Interrupted;
             }
-            self.due_actions();
+            if let Some(outcome) = self.due_actions() {
+                return outcome;
+            }
             if let Some(outcome) = self.release_pause() {
                 return outcome;
             }
@@ -738,8 +851,9 @@ impl<'a> Supervisor<'a> {
     }
 
     /// Injects the faults that are due (real time), continues stopped processes, restarts the
-    /// dead ones whose backoff is over, and watches the monitor's heartbeat.
-    fn due_actions(&mut self) {
+    /// dead ones whose clean-up and backoff are over, and watches the monitor's heartbeat. Returns
+    /// the outcome if a restart failed and the run cannot go on.
+    fn due_actions(&mut self) -> Option<Outcome> {
         let now = Instant::now();
         if self.config.mode == Mode::Realtime
             && let Some(start) = self.plant_start_ns
@@ -764,17 +878,26 @@ impl<'a> Supervisor<'a> {
             }
         }
         for index in 0..self.processes.len() {
-            if self.processes[index].restart_at.is_some_and(|at| now >= at) {
-                let name = self.processes[index].name;
-                match self.spawn(index) {
-                    Ok(()) => {
-                        let n = self.processes[index].incarnation;
-                        self.note(now_ns(), format!("{name} restarted (incarnation {n})"));
+            if !self.processes[index].restart.as_ref().is_some_and(|r| r.cleaned && now >= r.not_before) {
+                continue;
+            }
+            let name = self.processes[index].name;
+            match self.spawn(index) {
+                Ok(()) => {
+                    let ns = now_ns();
+                    let n = self.processes[index].incarnation;
+                    if let Some(r) = self.restarts.iter_mut().rev().find(|r| r.process == name) {
+                        r.spawned_ns = Some(ns);
                     }
-                    Err(e) => {
-                        self.processes[index].restart_at = None;
-                        self.processes[index].gone = true;
-                        self.note(now_ns(), format!("{name} could not be restarted: {e:#}"));
+                    self.note(ns, format!("{name} restarted (incarnation {n})"));
+                }
+                Err(e) => {
+                    self.processes[index].restart = None;
+                    self.processes[index].gone = true;
+                    let why = format!("{name} could not be restarted: {e:#}");
+                    self.note(now_ns(), why.clone());
+                    if name != "monitor" {
+                        return Some(Outcome::Failed(why));
                     }
                 }
             }
@@ -792,6 +915,7 @@ impl<'a> Supervisor<'a> {
                 }
             }
         }
+        None
     }
 
     /// The faults on `process` of `kind` that were injected, newest first.
@@ -846,7 +970,20 @@ impl<'a> Supervisor<'a> {
     }
 
     /// Files an event; returns the index of a process whose output ended.
-    fn handle(&mut self, (index, incarnation, event): Event) -> Option<usize> {
+    fn handle(&mut self, event: Event) -> Option<usize> {
+        let (index, incarnation, event) = match event {
+            Event::Child { index, incarnation, event } => (index, incarnation, event),
+            Event::Unreadable { index, line, error } => {
+                let name = self.processes[index].name;
+                eprintln!("looplab: {name} wrote a line that is not an event ({error}): {line}");
+                self.note(now_ns(), format!("{name} wrote a line that is not an event ({error})"));
+                return None;
+            }
+            Event::Cleaned { index, removed } => {
+                self.cleaned(index, removed);
+                return None;
+            }
+        };
         let name = self.processes[index].name;
         if incarnation != self.processes[index].incarnation {
             // A report from an incarnation that has since been replaced.
@@ -866,8 +1003,12 @@ impl<'a> Supervisor<'a> {
             }
             Some(ChildEvent::Ready) => {
                 self.processes[index].ready = true;
+                self.processes[index].ready_since = Some(Instant::now());
                 if incarnation > 0 {
                     let ns = now_ns();
+                    if let Some(r) = self.restarts.iter_mut().rev().find(|r| r.process == name) {
+                        r.ready_ns.get_or_insert(ns);
+                    }
                     for i in self.fault_indices(name, FaultKind::Kill) {
                         if self.faults[i].restarted_ns.is_none() {
                             self.faults[i].restarted_ns = Some(ns);
@@ -928,7 +1069,11 @@ impl<'a> Supervisor<'a> {
         let ns = now_ns();
         let process = &mut self.processes[index];
         let name = process.name;
+        let healthy = process
+            .ready_since
+            .is_some_and(|t| t.elapsed().as_secs_f64() >= self.config.supervision.backoff_reset_s);
         process.ready = false;
+        process.ready_since = None;
         process.stopped = false;
         if name == "plant" {
             // A pause belongs to the plant that asked; its successor asks again at the same tick.
@@ -954,9 +1099,10 @@ impl<'a> Supervisor<'a> {
                 self.faults[i].detected_by = Some("the process exited");
             }
         }
-        // Free what the dead process held in shared memory before its successor opens it.
-        if let Ok(removed) = ipc::remove_dead_nodes(&self.run_id) {
-            self.removed_dead_nodes += removed;
+        // Free what the dead process held in shared memory before its successor opens it, on the
+        // clean-up thread.
+        if let Some(cleaner) = &self.cleaner {
+            let _ = cleaner.send(index);
         }
         let process = &mut self.processes[index];
         let restarts = process.runs.len() as u32 - 1;
@@ -967,10 +1113,26 @@ impl<'a> Supervisor<'a> {
             Restart::Always => true,
         };
         if wanted && restarts < policy.max_restarts {
-            let backoff =
-                Duration::from_secs_f64(policy.backoff_s).saturating_mul(1 << restarts.min(20)).min(MAX_BACKOFF);
-            process.restart_at = Some(Instant::now() + backoff);
-            self.note(ns, format!("{exit}; restart in {:.0} ms", backoff.as_secs_f64() * 1e3));
+            if healthy {
+                process.quick_restarts = 0;
+            }
+            // backoff_s is checked at load to be a small number of seconds.
+            let backoff = Duration::try_from_secs_f64(policy.backoff_s)
+                .unwrap_or(MAX_BACKOFF)
+                .saturating_mul(1 << process.quick_restarts.min(20))
+                .min(MAX_BACKOFF);
+            process.quick_restarts += 1;
+            process.restart = Some(PendingRestart { not_before: Instant::now() + backoff, cleaned: false });
+            self.restarts.push(RestartRecord {
+                process: name,
+                incarnation: process.runs.len(),
+                backoff,
+                died_ns: ns,
+                cleaned_ns: None,
+                spawned_ns: None,
+                ready_ns: None,
+            });
+            self.note(ns, format!("{exit}; restart after its clean-up and {:.0} ms of backoff", backoff.as_secs_f64() * 1e3));
             return None;
         }
         let why = if wanted {
@@ -985,6 +1147,22 @@ impl<'a> Supervisor<'a> {
             return None;
         }
         Some(Outcome::Failed(format!("{why}; see logs/{name}.log")))
+    }
+
+    /// The clean-up after a death of process `index` is done: its restart may go ahead.
+    fn cleaned(&mut self, index: usize, removed: u64) {
+        let ns = now_ns();
+        self.removed_dead_nodes += removed;
+        let name = self.processes[index].name;
+        if let Some(restart) = &mut self.processes[index].restart
+            && !restart.cleaned
+        {
+            restart.cleaned = true;
+            if let Some(r) = self.restarts.iter_mut().rev().find(|r| r.process == name) {
+                r.cleaned_ns = Some(ns);
+            }
+            self.note(ns, format!("{name}: its iceoryx2 resources removed ({removed} dead node(s))"));
+        }
     }
 
     fn show(&self, status: &MonitorStatus) {
@@ -1047,8 +1225,13 @@ impl<'a> Supervisor<'a> {
             let timeout = if name == "monitor" { MONITOR_STOP_TIMEOUT } else { STOP_TIMEOUT };
             let until = Instant::now() + timeout;
             while !self.processes[index].try_reap() {
-                if Instant::now() > until {
-                    eprintln!("looplab: {name} did not stop within {} s; killing it", timeout.as_secs());
+                let urgent = self.stop.urgent();
+                if urgent || Instant::now() > until {
+                    if urgent {
+                        eprintln!("looplab: second stop request; killing {name}");
+                    } else {
+                        eprintln!("looplab: {name} did not stop within {} s; killing it", timeout.as_secs());
+                    }
                     self.processes[index].signal(libc::SIGKILL);
                     while !self.processes[index].try_reap() {
                         std::thread::sleep(Duration::from_millis(5));
@@ -1180,6 +1363,22 @@ impl<'a> Supervisor<'a> {
             error_measure: scenario.error_measure().describe(),
             faults,
             timeline: self.timeline.clone(),
+            restart_steps: self
+                .restarts
+                .iter()
+                .map(|r| {
+                    let after = |ns: Option<u64>| ns.map(|ns| (ns as f64 - r.died_ns as f64) / 1e6);
+                    report::RestartSteps {
+                        process: r.process.into(),
+                        incarnation: r.incarnation as u32,
+                        died_at_ms: self.since_start_ms(r.died_ns),
+                        cleaned_after_ms: after(r.cleaned_ns),
+                        backoff_ms: r.backoff.as_secs_f64() * 1e3,
+                        spawned_after_ms: after(r.spawned_ns),
+                        ready_after_ms: after(r.ready_ns),
+                    }
+                })
+                .collect(),
             shared_memory: SharedMemoryCheck {
                 clean: cleanup.leftover.is_empty(),
                 removed_dead_nodes: cleanup.removed_dead_nodes + self.removed_dead_nodes,

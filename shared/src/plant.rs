@@ -311,8 +311,12 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
             let timer = TickTimer::new(start_ns + (p.k + 1) * period_ns, period_ns)?;
             let _tick = ws.attach_notification(&timer).map_err(|e| anyhow!("cannot attach the tick timer: {e:?}"))?;
             let mut previous_wake = woke;
-            let first = TickTiming { scheduled_ns: start_ns + p.k * period_ns, wake_ns: woke, period_ns: 0 };
-            p.publish_state(first)?;
+            // A plant killed after publishing the last tick of the run, and restarted after the
+            // run's end, has no tick left to publish: that state went out already.
+            if p.published_k != Some(p.k) {
+                let first = TickTiming { scheduled_ns: start_ns + p.k * period_ns, wake_ns: woke, period_ns: 0 };
+                p.publish_state(first)?;
+            }
             let mut waiter = Waiter::new(&context.config.wait, "plant", true);
             while p.k < loops && !context.stop.requested() {
                 // Next: command k, if its state went out and it is not in yet, else the tick.

@@ -65,6 +65,9 @@ pub struct Summary {
     pub faults: Vec<FaultReport>,
     /// What the launcher saw, in order: injections, exits, restarts, stalls.
     pub timeline: Vec<TimelineEntry>,
+    /// Each restart, step by step, so that a slow one shows where its time went.
+    #[serde(default)]
+    pub restart_steps: Vec<RestartSteps>,
     pub shared_memory: SharedMemoryCheck,
 }
 
@@ -249,6 +252,7 @@ pub fn render(s: &Summary) -> String {
     }
 
     render_faults(&mut out, s);
+    render_restarts(&mut out, s);
 
     let _ = writeln!(out, "\n  metrics");
     for (name, value) in &s.metrics {
@@ -327,5 +331,45 @@ fn render_faults(out: &mut String, s: &Summary) {
         for entry in &s.timeline {
             let _ = writeln!(out, "  {:>10.1}  {}", entry.at_ms, entry.event);
         }
+    }
+}
+
+/// One restart, in wall-clock ms after the launcher saw the process die (its output closed and
+/// it was reaped): its dead node's resources removed, the backoff, the new process started, its
+/// ports up. `null` for a step that never came (the run ended first).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct RestartSteps {
+    pub process: String,
+    /// The incarnation that was started.
+    pub incarnation: u32,
+    /// When the death was seen, ms after tick 0.
+    pub died_at_ms: f64,
+    pub cleaned_after_ms: Option<f64>,
+    pub backoff_ms: f64,
+    pub spawned_after_ms: Option<f64>,
+    pub ready_after_ms: Option<f64>,
+}
+
+fn render_restarts(out: &mut String, s: &Summary) {
+    if s.restart_steps.is_empty() {
+        return;
+    }
+    let _ = writeln!(out, "\n  restarts (wall-clock ms after the death was seen)");
+    let _ = writeln!(
+        out,
+        "  {:<12}  {:>11}  {:>10}  {:>10}  {:>10}  {:>10}",
+        "process", "died at", "cleaned", "backoff", "started", "ready"
+    );
+    for r in &s.restart_steps {
+        let _ = writeln!(
+            out,
+            "  {:<12}  {:>11.1}  {:>10}  {:>10.1}  {:>10}  {:>10}",
+            r.process,
+            r.died_at_ms,
+            ms(r.cleaned_after_ms),
+            r.backoff_ms,
+            ms(r.spawned_after_ms),
+            ms(r.ready_after_ms)
+        );
     }
 }

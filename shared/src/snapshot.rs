@@ -2,15 +2,17 @@
 //! last one stopped. The plant keeps the truth in one (the physical system does not stop when
 //! its simulator dies), the estimator its slow calibration states.
 //!
-//! The file is in the shared-memory folder and named with the run's prefix, so the launcher's
-//! leftover check covers it and its clean-up removes it.
+//! The file is in the run's private folder on tmpfs ([`crate::ipc::run_folder`]), so no other
+//! user can read or forge it, the launcher's leftover check covers it and its clean-up removes it.
 
 use std::path::PathBuf;
 
 use anyhow::{Context as _, Result, anyhow};
 
-fn path(run_id: &str, process: &str) -> PathBuf {
-    PathBuf::from(crate::ipc::SHM_DIR).join(format!("{}{process}.snapshot", crate::ipc::file_prefix(run_id)))
+fn path(run_id: &str, process: &str) -> Result<PathBuf> {
+    let folder = crate::ipc::run_folder(run_id);
+    crate::ipc::check_private(&folder)?;
+    Ok(folder.join(format!("{process}.snapshot")))
 }
 
 /// Two slots written in turn, each between two copies of its sequence number: a kill in the
@@ -31,12 +33,16 @@ impl<T: Copy> Snapshot<T> {
     /// Opens (or creates) the snapshot of `process` in run `run_id`.
     pub fn open(run_id: &str, process: &str) -> Result<Self> {
         use std::os::fd::AsRawFd;
-        let path = &path(run_id, process);
+        use std::os::unix::fs::OpenOptionsExt;
+        let path = &path(run_id, process)?;
+        // Never through a symbolic link, and the owner's alone.
         let file = std::fs::OpenOptions::new()
             .read(true)
             .write(true)
             .create(true)
             .truncate(false)
+            .mode(0o600)
+            .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
             .open(path)
             .with_context(|| format!("open {}", path.display()))?;
         let size = std::mem::size_of::<[Slot<T>; 2]>();

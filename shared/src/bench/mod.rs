@@ -347,6 +347,21 @@ fn in_process_loops_per_s(loops: u64) -> Result<f64> {
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
+    // The ping-pongs' iceoryx2 files live in a run of their own (the loop runs clean up after
+    // themselves); whatever happens to the parts, they go at the end.
+    let run_id = crate::launcher::new_run_id();
+    let lock = crate::ipc::create_run_storage(&run_id)?;
+    let result = run_parts(args, &run_id);
+    let cleanup = crate::ipc::clean_up_run(&run_id);
+    drop(lock);
+    let leftover = cleanup?.leftover;
+    if result.is_ok() && !leftover.is_empty() {
+        return Err(anyhow!("files left in shared memory: {}", leftover.join(", ")));
+    }
+    result
+}
+
+fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let began = Instant::now();
     let quick = args.quick;
     let seconds = args.seconds.unwrap_or(if quick { 4.0 } else { 60.0 });
@@ -355,8 +370,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let out = crate::launcher::create_run_dir(args.out.as_deref(), "bench")?;
     let exe = std::env::current_exe()?;
     let binaries = crate::launcher::locate_binaries()?;
-    let run_id = format!("bench{}", std::process::id());
-    let setup = pingpong::Setup { exe: &exe, run_id: &run_id, scratch: &out };
+    let setup = pingpong::Setup { exe: &exe, run_id, scratch: &out };
     let message_bytes = std::mem::size_of::<PlantState>();
     eprintln!("looplab bench: {rounds} round(s) of {segment} s per loop configuration; writing {}", out.display());
 
@@ -408,11 +422,6 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let dir = crate::launcher::create_run_dir(Some(&out.join("lockstep")), "pendulum")?;
     let (lockstep, _) = crate::launcher::run_once(&config, scenario.as_ref(), &binaries, &dir, true)?;
     let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 })?;
-    // The ping-pongs' iceoryx2 files (the loop runs clean up after themselves).
-    let cleanup = crate::ipc::clean_up_run(&run_id)?;
-    if !cleanup.leftover.is_empty() {
-        return Err(anyhow!("files left in shared memory: {}", cleanup.leftover.join(", ")));
-    }
 
     let mut loops: Vec<LoopBench> =
         LOOP_CONFIGS.iter().filter_map(|c| ours.remove(c.name).map(|acc| acc.finish(c.name, c.rate_hz))).collect();
