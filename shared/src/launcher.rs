@@ -36,7 +36,7 @@ const STOP_TIMEOUT: Duration = Duration::from_secs(5);
 /// The monitor writes its files on exit, so it gets longer.
 const MONITOR_STOP_TIMEOUT: Duration = Duration::from_secs(60);
 const EXIT_BAD_INPUT: u8 = 2;
-const EXIT_INTERRUPTED: u8 = 130;
+pub(crate) const EXIT_INTERRUPTED: u8 = 130;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -227,6 +227,10 @@ fn clean() -> ExitCode {
 fn report_failure(result: Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.is::<crate::signals::Interrupted>() => {
+            eprintln!("looplab: interrupted; stopped in order, nothing left behind");
+            ExitCode::from(EXIT_INTERRUPTED)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
@@ -403,6 +407,25 @@ pub(crate) fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathB
     std::fs::create_dir_all(dir.join("logs"))
         .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
     Ok(dir)
+}
+
+/// Makes `command` a child that this process stops: in its own process group, so that a Ctrl-C
+/// in the terminal reaches only us and we stop the children in order; and asked to stop
+/// (SIGTERM) if we die, so that nothing is orphaned.
+pub(crate) fn supervised(command: &mut std::process::Command) {
+    command.process_group(0);
+    let parent = std::process::id() as libc::pid_t;
+    // SAFETY: prctl and getppid are async-signal-safe. If the parent died before prctl took
+    // effect, the child does not start at all.
+    unsafe {
+        command.pre_exec(move || {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            if libc::getppid() != parent {
+                return Err(std::io::Error::other("the parent is gone"));
+            }
+            Ok(())
+        });
+    }
 }
 
 /// A new run id: 64 random bits from the kernel, so that no one can guess the names of a run's
@@ -735,23 +758,8 @@ impl<'a> Supervisor<'a> {
             .arg(incarnation.to_string())
             .stdin(if name == "plant" { Stdio::piped() } else { Stdio::null() })
             .stdout(Stdio::piped())
-            .stderr(log)
-            // Its own process group: a Ctrl-C in the terminal reaches only the launcher,
-            // which then stops the loop in order.
-            .process_group(0);
-        // SAFETY: prctl and getppid are async-signal-safe. If the launcher dies, the child
-        // is asked to stop, so nothing is orphaned; if it died before prctl took effect,
-        // the child does not start at all.
-        let launcher = std::process::id() as libc::pid_t;
-        unsafe {
-            command.pre_exec(move || {
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
-                if libc::getppid() != launcher {
-                    return Err(std::io::Error::other("the launcher is gone"));
-                }
-                Ok(())
-            });
-        }
+            .stderr(log);
+        supervised(&mut command);
         let mut child = command.spawn().with_context(|| format!("cannot start {}", self.binaries[name].display()))?;
         let stdout = child.stdout.take().expect("stdout is piped");
         let tx = self.tx.clone();

@@ -3,22 +3,31 @@
 //! shared memory removed. The flag counts them: a second one asks to hurry (the launcher then
 //! kills what is left instead of waiting for it, and still cleans up).
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 #[derive(Clone, Debug)]
 pub struct StopFlag(Arc<AtomicUsize>);
 
 impl StopFlag {
-    /// Installs the handlers for SIGTERM and SIGINT.
+    /// Installs the handlers for SIGTERM and SIGINT, once per process: every caller shares one
+    /// count, so a stop request reaches whatever part of a command (a sweep's next run, a
+    /// bench's next part) looks next.
     pub fn install() -> std::io::Result<Self> {
+        static INSTALLED: Mutex<Option<StopFlag>> = Mutex::new(None);
+        let mut installed = INSTALLED.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(flag) = installed.as_ref() {
+            return Ok(flag.clone());
+        }
         let count = Arc::new(AtomicUsize::new(0));
         for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
             let count = count.clone();
             // SAFETY: the handler only increments an atomic, which is async-signal-safe.
             unsafe { signal_hook::low_level::register(signal, move || _ = count.fetch_add(1, Ordering::Relaxed)) }?;
         }
-        Ok(Self(count))
+        let flag = Self(count);
+        *installed = Some(flag.clone());
+        Ok(flag)
     }
 
     pub fn requested(&self) -> bool {
@@ -30,3 +39,15 @@ impl StopFlag {
         self.0.load(Ordering::Relaxed) > 1
     }
 }
+
+/// The error a command returns when a stop request ended it (exit code 130).
+#[derive(Debug)]
+pub struct Interrupted;
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("interrupted by a signal")
+    }
+}
+
+impl std::error::Error for Interrupted {}

@@ -116,10 +116,26 @@ pub fn run(args: SweepArgs) -> ExitCode {
     }
 
     eprintln!("sweeping {} over {} values, {} at a time, in lockstep mode", args.param, values.len(), args.jobs);
-    let results = run_all(&configs, &binaries, &out, &args.param, args.jobs.max(1));
+    let stop = match crate::signals::StopFlag::install() {
+        Ok(stop) => stop,
+        Err(e) => {
+            eprintln!("error: cannot install the signal handlers: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let results = run_all(&configs, &binaries, &out, &args.param, args.jobs.max(1), &stop);
+    if stop.requested() {
+        let done = results.iter().filter(|r| r.is_some()).count();
+        eprintln!(
+            "sweep interrupted after {done} of {} values; no verdict. Their run folders are in {}",
+            configs.len(),
+            out.display()
+        );
+        return ExitCode::from(crate::launcher::EXIT_INTERRUPTED);
+    }
     let mut points = vec![];
     for ((value, _, _), result) in configs.iter().zip(results) {
-        match result {
+        match result.expect("without a stop request every value runs") {
             Ok((summary, outcome)) => points.push(point(*value, &summary, &outcome, fault_index)),
             Err(e) => {
                 eprintln!("error: the run for {} = {} failed: {e:#}", args.param, value_text(*value));
@@ -148,14 +164,16 @@ pub fn run(args: SweepArgs) -> ExitCode {
     if report.points.iter().any(|p| p.verdict == "failed") { ExitCode::FAILURE } else { ExitCode::SUCCESS }
 }
 
-/// Runs every value, `jobs` at a time; results in the order of `configs`.
+/// Runs every value, `jobs` at a time, until a stop request; results in the order of `configs`
+/// (None: not run, or interrupted).
 fn run_all(
     configs: &[(f64, LaunchConfig, Box<dyn Scenario>)],
     binaries: &BTreeMap<&'static str, PathBuf>,
     out: &Path,
     param: &str,
     jobs: usize,
-) -> Vec<Result<(Summary, Outcome)>> {
+    stop: &crate::signals::StopFlag,
+) -> Vec<Option<Result<(Summary, Outcome)>>> {
     let next = std::sync::atomic::AtomicUsize::new(0);
     type Slot = std::sync::Mutex<Option<Result<(Summary, Outcome)>>>;
     let results: Vec<Slot> = configs.iter().map(|_| std::sync::Mutex::new(None)).collect();
@@ -165,9 +183,15 @@ fn run_all(
                 loop {
                     let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     let Some((value, config, scenario)) = configs.get(i) else { break };
+                    if stop.requested() {
+                        break;
+                    }
                     let dir = out.join(format!("{param}={}", value_text(*value)));
                     let result = crate::launcher::create_run_dir(Some(&dir), &config.scenario)
                         .and_then(|dir| run_once(config, scenario.as_ref(), binaries, &dir, true));
+                    if matches!(result, Ok((_, Outcome::Interrupted))) {
+                        break;
+                    }
                     if let Ok((summary, _)) = &result {
                         eprintln!("  {param} = {}: {} loops", value_text(*value), summary.loops);
                     }
@@ -176,7 +200,7 @@ fn run_all(
             });
         }
     });
-    results.into_iter().map(|r| r.into_inner().expect("not poisoned").expect("every value ran")).collect()
+    results.into_iter().map(|r| r.into_inner().expect("not poisoned")).collect()
 }
 
 fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>) -> SweepPoint {

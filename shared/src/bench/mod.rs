@@ -27,6 +27,7 @@ use serde::Serialize;
 use self::pingpong::Transport;
 use crate::clock::{TickTimer, now_ns};
 use crate::launch::{self, Override};
+use crate::signals::{Interrupted, StopFlag};
 use crate::msg::{PlantState, SensorReading};
 use crate::report::Summary;
 use crate::wait::Strategy;
@@ -317,7 +318,10 @@ fn looplab_run(
         n += 1;
     };
     let dir = crate::launcher::create_run_dir(Some(&dir), "pendulum")?;
-    let (summary, _) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
+    let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
+    if matches!(outcome, crate::launcher::Outcome::Interrupted) {
+        return Err(Interrupted.into());
+    }
     Ok((summary, dir))
 }
 
@@ -361,7 +365,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     result
 }
 
+/// Ends the bench when a stop request came (Ctrl-C, SIGTERM).
+fn check(stop: &StopFlag) -> Result<()> {
+    if stop.requested() { Err(Interrupted.into()) } else { Ok(()) }
+}
+
 fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
+    let stop = StopFlag::install()?;
     let began = Instant::now();
     let quick = args.quick;
     let seconds = args.seconds.unwrap_or(if quick { 4.0 } else { 60.0 });
@@ -384,6 +394,7 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         for mode in MODES {
             let series = pingpong::ping(&setup, Transport::Iox, mode, message_bytes, floor_rounds, 1_000_000)?;
             floor.entry(mode.name().into()).or_default().extend(series.one_way_ns);
+            check(&stop)?;
         }
         for c in &LOOP_CONFIGS {
             let (summary, dir) = looplab_run(&out, c, segment, &binaries)?;
@@ -391,6 +402,7 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         }
         let loops = (segment * 1000.0).round() as u64;
         let result = uds_loop::run(&exe, &out.join("uds"), 1000.0, loops)?;
+        check(&stop)?;
         baseline.traces.extend(result.traces);
         baseline.loops += result.loops;
         baseline.misses += result.deadline_misses;
@@ -407,6 +419,7 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     for &bytes in &sizes {
         let iox = pingpong::ping(&setup, Transport::Iox, Strategy::Block, bytes, samples, 0)?;
         let uds = pingpong::ping(&setup, Transport::Uds, Strategy::Block, bytes, samples, 0)?;
+        check(&stop)?;
         payload.push(PayloadPoint {
             bytes,
             iceoryx2_us: Dist::of(&sorted(iox.one_way_ns)),
@@ -420,7 +433,10 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
     let (config, scenario) = launch::resolve("pendulum", &overrides)?;
     let dir = crate::launcher::create_run_dir(Some(&out.join("lockstep")), "pendulum")?;
-    let (lockstep, _) = crate::launcher::run_once(&config, scenario.as_ref(), &binaries, &dir, true)?;
+    let (lockstep, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), &binaries, &dir, true)?;
+    if matches!(outcome, crate::launcher::Outcome::Interrupted) {
+        return Err(Interrupted.into());
+    }
     let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 })?;
 
     let mut loops: Vec<LoopBench> =

@@ -212,14 +212,10 @@ pub struct Series {
 }
 
 fn spawn_echo(exe: &Path, args: &[String]) -> Result<Child> {
-    Command::new(exe)
-        .arg("bench-echo")
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .context("start the echo process")
+    let mut command = Command::new(exe);
+    command.arg("bench-echo").args(args).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::inherit());
+    crate::launcher::supervised(&mut command);
+    command.spawn().context("start the echo process")
 }
 
 /// Where a ping-pong runs: the looplab executable (for the echo process), the bench's run id
@@ -242,6 +238,8 @@ pub fn ping(
 ) -> Result<Series> {
     let Setup { exe, run_id, scratch } = *setup;
     let bytes = bytes.max(STAMPS);
+    // A stop request ends the series early, the echo process told to go as usual.
+    let stop = crate::signals::StopFlag::install()?;
     let mut args = vec![
         "--run-id".into(),
         run_id.into(),
@@ -272,6 +270,9 @@ pub fn ping(
             end.subscriber.update_connections().map_err(|e| anyhow!("{e:?}"))?;
             let first = now_ns() + 10_000_000;
             for k in 0..(warm_up + rounds) as u64 {
+                if stop.requested() {
+                    break;
+                }
                 if period_ns > 0 {
                     sleep_until(first + k * period_ns);
                 }
@@ -307,6 +308,9 @@ pub fn ping(
             let mut buffer = Vec::new();
             let first = now_ns() + 10_000_000;
             for k in 0..(warm_up + rounds) as u64 {
+                if stop.requested() {
+                    break;
+                }
                 if period_ns > 0 {
                     sleep_until(first + k * period_ns);
                 }
@@ -324,6 +328,9 @@ pub fn ping(
             child.wait()?;
             let _ = std::fs::remove_file(&socket);
         }
+    }
+    if stop.requested() {
+        return Err(crate::signals::Interrupted.into());
     }
     Ok(Series { one_way_ns: one_way })
 }

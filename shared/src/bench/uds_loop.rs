@@ -121,14 +121,15 @@ pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResul
     let plant_socket = UnixDatagram::bind(dir.join("plant.sock"))?;
     let mut children = Vec::new();
     for role in ROLES {
-        let mut child = Command::new(exe)
+        let mut command = Command::new(exe);
+        command
             .args(["bench-uds-stage", "--role", role, "--dir"])
             .arg(dir)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .context("start a baseline stage")?;
+            .stderr(Stdio::inherit());
+        crate::launcher::supervised(&mut command);
+        let mut child = command.spawn().context("start a baseline stage")?;
         let mut line = String::new();
         std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.take().expect("piped")), &mut line)?;
         children.push(child);
@@ -156,10 +157,13 @@ pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResul
         }
     });
     let sensors = dir.join("sensors.sock");
+    let stop = crate::signals::StopFlag::install()?;
+    let send_stop = stop.clone();
     let send = std::thread::spawn(move || -> Result<f64> {
         let mut out = Vec::new();
         let floats = floats_sent_by("plant");
-        for k in 0..loops {
+        // A stop request ends the loop early; the stages are told to go as usual.
+        for k in (0..loops).take_while(|_| !send_stop.requested()) {
             sleep_until(start + k * period);
             let mut message = LoopMessage { k, stamps: [0; 8], data: vec![0.0; floats] };
             message.stamps[0] = now_ns();
@@ -179,6 +183,9 @@ pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResul
     }
     for role in ["plant", "sensors", "estimator", "controller"] {
         let _ = std::fs::remove_file(dir.join(format!("{role}.sock")));
+    }
+    if stop.requested() {
+        return Err(crate::signals::Interrupted.into());
     }
     Ok(LoopResult { traces, loops, deadline_misses, cpu_s })
 }
