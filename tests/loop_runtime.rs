@@ -321,3 +321,80 @@ fn a_killed_launcher_leaves_no_process_and_no_file_behind() {
     assert_no_files_left(&run_id);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The run id from a loop process's command line.
+fn run_id_of(children: &[(String, i32, String)]) -> String {
+    let cmdline = &children[0].2;
+    cmdline.split_whitespace().skip_while(|a| *a != "--run-id").nth(1).expect("--run-id").to_owned()
+}
+
+#[test]
+fn a_run_killed_all_at_once_is_removed_by_looplab_clean_with_its_frozen_orphan() {
+    let (launcher, dir) = start_long_run("all-killed", &[]);
+    let children = children_of(launcher.id());
+    assert_eq!(children.len(), 5, "{children:?}");
+    let run_id = run_id_of(&children);
+    // The monitor frozen (it cannot act on the launcher's death), everything else killed at once:
+    // nobody is left to tidy up.
+    let monitor = children.iter().find(|(name, _, _)| name == "monitor").expect("the monitor runs").1;
+    unsafe { libc::kill(monitor, libc::SIGSTOP) };
+    unsafe { libc::kill(launcher.id() as i32, libc::SIGKILL) };
+    for (_, pid, _) in children.iter().filter(|(_, pid, _)| *pid != monitor) {
+        unsafe { libc::kill(*pid, libc::SIGKILL) };
+    }
+    wait_exit(launcher);
+    let until = Instant::now() + Duration::from_secs(20);
+    while children.iter().any(|(_, pid, _)| *pid != monitor && alive(i64::from(*pid))) {
+        assert!(Instant::now() < until, "killed children still alive: {children:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(alive(i64::from(monitor)), "the frozen monitor is an orphan now");
+    assert!(!looplab_shared::ipc::files_of_run(&run_id).is_empty(), "a run killed at once leaves its files");
+
+    let output = looplab().arg("clean").output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "looplab clean: {stderr}");
+    assert!(stderr.contains(&run_id), "looplab clean names the run it removed: {stderr}");
+    let until = Instant::now() + Duration::from_secs(20);
+    while alive(i64::from(monitor)) {
+        assert!(Instant::now() < until, "looplab clean left the orphaned monitor running");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_no_files_left(&run_id);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_second_stop_request_kills_what_is_left_and_still_cleans_up() {
+    let (child, dir) = start_long_run("second-sigint", &[]);
+    let children = children_of(child.id());
+    let run_id = run_id_of(&children);
+    // A frozen controller cannot act on SIGTERM until it is continued; the second Ctrl-C must
+    // not wait for it.
+    let controller = children.iter().find(|(name, _, _)| name == "controller").expect("the controller runs").1;
+    unsafe { libc::kill(controller, libc::SIGSTOP) };
+    // Two different signals, so that neither is merged into the other while pending.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let status = wait_exit(child);
+    assert_eq!(status.code(), Some(130));
+    let s = read_summary(&dir);
+    assert_eq!(s["stopped_because"], "interrupted by a signal");
+    for p in s["processes"].as_array().unwrap() {
+        assert_eq!(p["exit"], "signal 9", "every process is killed, none asked: {p}");
+    }
+    assert_processes_gone(&s);
+    assert_no_files_left(&run_id);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_plant_killed_at_the_last_tick_still_makes_a_complete_run() {
+    // The plant dies after publishing one of the last ticks, and its successor starts after the
+    // run's end: no tick may count twice, and the run completed.
+    let r = run("kill-last-tick", &["--duration", "2", "--fault", "kill plant at 1.999"]);
+    let s = &r.summary;
+    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
+    assert_eq!(s["loops"], 2000);
+    assert_eq!(s["restarts"]["plant"], 1);
+}

@@ -1229,7 +1229,10 @@ impl<'a> Supervisor<'a> {
             if self.processes[index].try_reap() {
                 continue;
             }
-            self.processes[index].signal(libc::SIGTERM);
+            // After a second stop request, nothing is asked: everything left is killed.
+            if !self.stop.urgent() {
+                self.processes[index].signal(libc::SIGTERM);
+            }
             let timeout = if name == "monitor" { MONITOR_STOP_TIMEOUT } else { STOP_TIMEOUT };
             let until = Instant::now() + timeout;
             while !self.processes[index].try_reap() {

@@ -311,9 +311,9 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
             let timer = TickTimer::new(start_ns + (p.k + 1) * period_ns, period_ns)?;
             let _tick = ws.attach_notification(&timer).map_err(|e| anyhow!("cannot attach the tick timer: {e:?}"))?;
             let mut previous_wake = woke;
-            // A plant killed after publishing the last tick of the run, and restarted after the
-            // run's end, has no tick left to publish: that state went out already.
-            if p.published_k != Some(p.k) {
+            // A plant killed after publishing its newest tick (or after the run's last tick), and
+            // restarted before the next is due, has no tick to publish: that state went out.
+            if p.k < loops && p.published_k != Some(p.k) {
                 let first = TickTiming { scheduled_ns: start_ns + p.k * period_ns, wake_ns: woke, period_ns: 0 };
                 p.publish_state(first)?;
             }
@@ -340,8 +340,10 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                 if advanced == 0 {
                     continue;
                 }
-                // Only the newest state goes out; the ticks passed over have none.
+                // Only the newest state goes out; the ticks passed over have none. Saved at
+                // once: after the run's last tick no state goes out to save it.
                 p.counters.skipped_ticks += advanced - 1;
+                p.save();
                 if p.k < loops {
                     let timing = TickTiming {
                         scheduled_ns: start_ns + p.k * period_ns,

@@ -78,10 +78,17 @@ pub fn process_main(name: &str, body: fn(&Context) -> Result<ChildEvent>) -> Exi
         emit(&report)
     })();
     // Our node is gone now. If the launcher died (we were stopped by PR_SET_PDEATHSIG), nobody
-    // else will tidy up: the last process of the run to go removes what is left of it.
+    // else will tidy up: the last process of the run to go removes what is left of it. The others
+    // are exiting at the same moment, so each waits a little for them to go (a frozen one never
+    // goes: `looplab clean`, and every `looplab run`, removes the run once its launcher is gone).
     // SAFETY: as above.
     if unsafe { libc::getppid() } != launcher {
-        let _ = crate::ipc::clean_up_run(&args.run_id);
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
+        while crate::ipc::clean_up_run(&args.run_id).is_ok_and(|c| !c.leftover.is_empty())
+            && std::time::Instant::now() < until
+        {
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
     }
     match result {
         Ok(()) => ExitCode::SUCCESS,
