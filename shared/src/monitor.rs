@@ -12,13 +12,13 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context as _, Result, anyhow};
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use hdrhistogram::Histogram;
 use hdrhistogram::serialization::V2DeflateSerializer;
-use hdrhistogram::serialization::interval_log::{IntervalLogWriterBuilder, Tag};
+use hdrhistogram::serialization::interval_log::{IntervalLogIterator, IntervalLogWriterBuilder, LogEntry, Tag};
 use serde::{Deserialize, Serialize};
 
 use crate::clock::now_ns;
@@ -493,7 +493,7 @@ struct Writer {
     metrics: Box<dyn Metrics>,
     trajectory: BufWriter<File>,
     loops: BufWriter<File>,
-    hlog: BufWriter<File>,
+    hlog: IntervalLog,
     pending: BTreeMap<u64, Partial>,
     /// The next loop to write.
     next_k: u64,
@@ -504,11 +504,8 @@ struct Writer {
     jitter: Recorder,
     wake: Recorder,
     data_age: Vec<Recorder>,
-    /// Start of the current interval-log interval (CLOCK_MONOTONIC), and of the run.
+    /// Start of the current interval-log interval (CLOCK_MONOTONIC).
     interval_start: Option<u64>,
-    first_publish: Option<u64>,
-    /// Whether `latency.hlog` has its header yet.
-    hlog_started: bool,
     last_counters: PlantCounters,
     report: MonitorReport,
     last_status: Instant,
@@ -531,6 +528,87 @@ fn create(dir: &Path, name: &str, restarted: bool) -> Result<(BufWriter<File>, b
         .open(&path)
         .with_context(|| format!("create {}", path.display()))?;
     Ok((BufWriter::new(file), !append))
+}
+
+/// The wall-clock time of a CLOCK_MONOTONIC time stamp.
+fn wall_time(monotonic_ns: u64) -> SystemTime {
+    SystemTime::now() - Duration::from_nanos(now_ns().saturating_sub(monotonic_ns))
+}
+
+/// `latency.hlog`. Interval time stamps count from its BaseTime, the run's first loop record: a
+/// restarted monitor appends and reads the BaseTime back, so its time stamps go on from the last
+/// monitor's instead of starting again from zero.
+struct IntervalLog {
+    file: BufWriter<File>,
+    /// The log's BaseTime, once its header is written.
+    base: Option<SystemTime>,
+}
+
+impl IntervalLog {
+    fn open(dir: &Path, restarted: bool) -> Result<Self> {
+        let (file, new) = create(dir, "latency.hlog", restarted)?;
+        let base = if new {
+            None
+        } else {
+            let path = dir.join("latency.hlog");
+            let text = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
+            // Only the header matters; a killed monitor may have left a broken last line.
+            IntervalLogIterator::new(&text).map_while(Result::ok).find_map(|entry| match entry {
+                LogEntry::BaseTime(since_epoch) => Some(UNIX_EPOCH + since_epoch),
+                _ => None,
+            })
+        };
+        Ok(Self { file, base })
+    }
+
+    /// Writes the header with `first` as the time base, unless the log has one. Flushed at
+    /// once, so that a monitor killed right after still leaves the base for the next.
+    fn begin(&mut self, first: SystemTime) -> Result<()> {
+        if self.base.is_some() {
+            return Ok(());
+        }
+        // The header keeps milliseconds; the base is what a restarted monitor will read back.
+        let since_epoch = first.duration_since(UNIX_EPOCH).unwrap_or_default();
+        let base = UNIX_EPOCH + Duration::from_millis(since_epoch.as_millis() as u64);
+        IntervalLogWriterBuilder::new()
+            .add_comment("LoopLab latency per hop and end to end, in ns")
+            .add_comment(
+                "Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time",
+            )
+            .with_start_time(base)
+            .with_base_time(base)
+            .begin_log_with(&mut self.file, &mut V2DeflateSerializer::new())?;
+        writeln!(
+            self.file,
+            "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\""
+        )?;
+        self.file.flush()?;
+        self.base = Some(base);
+        Ok(())
+    }
+
+    /// Writes each non-empty histogram as the interval from `start`, `length` long, and resets it.
+    fn write<'a>(
+        &mut self,
+        start: SystemTime,
+        length: Duration,
+        histograms: impl Iterator<Item = (&'a str, &'a mut Histogram<u64>)>,
+    ) -> Result<()> {
+        self.begin(start)?;
+        let base = self.base.unwrap_or(start);
+        let offset = start.duration_since(base).unwrap_or_default();
+        let mut serializer = V2DeflateSerializer::new();
+        let mut log = IntervalLogWriterBuilder::new().begin_log_with(&mut self.file, &mut serializer)?;
+        for (tag, histogram) in histograms {
+            if histogram.is_empty() {
+                continue;
+            }
+            log.write_histogram(histogram, offset, length, Tag::new(tag))
+                .map_err(|e| anyhow!("write latency.hlog: {e}"))?;
+            histogram.reset();
+        }
+        Ok(())
+    }
 }
 
 impl Writer {
@@ -568,7 +646,7 @@ impl Writer {
             writeln!(loops, "{}", columns.join(","))?;
         }
 
-        let (hlog, new_hlog) = create(dir, "latency.hlog", restarted)?;
+        let hlog = IntervalLog::open(dir, restarted)?;
 
         Ok(Self {
             mode: config.mode,
@@ -594,8 +672,6 @@ impl Writer {
             jitter: Recorder::new(),
             wake: Recorder::new(),
             interval_start: None,
-            first_publish: None,
-            hlog_started: !new_hlog,
             last_counters: PlantCounters::default(),
             report: MonitorReport::default(),
             last_status: Instant::now(),
@@ -615,7 +691,7 @@ impl Writer {
             if self.last_status.elapsed() >= STATUS_PERIOD {
                 self.last_status = Instant::now();
                 self.status()?;
-                for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog] {
+                for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog.file] {
                     file.flush().with_context(|| format!("write to {}", self.run_dir.display()))?;
                 }
             }
@@ -785,48 +861,25 @@ impl Writer {
 
     /// Closes the interval-log interval when a record starts past its end.
     fn interval_log(&mut self, publish_ns: u64) -> Result<()> {
-        let first = *self.first_publish.get_or_insert(publish_ns);
-        let start = *self.interval_start.get_or_insert(publish_ns);
+        let Some(start) = self.interval_start else {
+            // The first record of this monitor: the log's time base, unless an earlier monitor
+            // of the run set it.
+            self.hlog.begin(wall_time(publish_ns))?;
+            self.interval_start = Some(publish_ns);
+            return Ok(());
+        };
         if publish_ns >= start + HLOG_INTERVAL_NS {
-            self.flush_interval(first, start, publish_ns)?;
+            self.flush_interval(start, publish_ns)?;
             self.interval_start = Some(publish_ns);
         }
         Ok(())
     }
 
-    fn flush_interval(&mut self, first: u64, start: u64, end: u64) -> Result<()> {
-        let mut serializer = V2DeflateSerializer::new();
-        if !self.hlog_started {
-            // Timestamps count from the first state the plant published.
-            let first_wall = SystemTime::now() - Duration::from_nanos(now_ns().saturating_sub(first));
-            IntervalLogWriterBuilder::new()
-                .add_comment("LoopLab latency per hop and end to end, in ns")
-                .add_comment(
-                    "Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time",
-                )
-                .with_start_time(first_wall)
-                .with_base_time(first_wall)
-                .begin_log_with(&mut self.hlog, &mut serializer)?;
-            writeln!(
-                self.hlog,
-                "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\""
-            )?;
-            self.hlog_started = true;
-        }
-        let mut log = IntervalLogWriterBuilder::new().begin_log_with(&mut self.hlog, &mut serializer)?;
-        let offset = Duration::from_nanos(start - first);
+    fn flush_interval(&mut self, start: u64, end: u64) -> Result<()> {
         let length = Duration::from_nanos(end.saturating_sub(start).max(1));
         let recorders = std::iter::once(("end_to_end", &mut self.end_to_end))
             .chain(HOPS.iter().map(|h| h.0).zip(self.hops.iter_mut()));
-        for (tag, recorder) in recorders {
-            if recorder.interval.is_empty() {
-                continue;
-            }
-            log.write_histogram(&recorder.interval, offset, length, Tag::new(tag))
-                .map_err(|e| anyhow!("write latency.hlog: {e}"))?;
-            recorder.interval.reset();
-        }
-        Ok(())
+        self.hlog.write(wall_time(start), length, recorders.map(|(tag, r)| (tag, &mut r.interval)))
     }
 
     fn status(&self) -> Result<()> {
@@ -839,10 +892,10 @@ impl Writer {
     }
 
     fn finish(mut self) -> Result<MonitorReport> {
-        if let (Some(first), Some(start)) = (self.first_publish, self.interval_start) {
-            self.flush_interval(first, start, now_ns())?;
+        if let Some(start) = self.interval_start {
+            self.flush_interval(start, now_ns())?;
         }
-        for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog] {
+        for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog.file] {
             file.flush().with_context(|| format!("write to {}", self.run_dir.display()))?;
         }
         let mut report = self.report;
@@ -856,5 +909,57 @@ impl Writer {
         report.notes = self.metrics.notes();
         report.faults = self.faults.into_iter().map(|f| f.finish(self.dt)).collect();
         Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The start time stamps of the intervals in a log, and its BaseTime entries.
+    fn read_log(path: &Path) -> (Vec<Duration>, usize) {
+        let text = std::fs::read(path).unwrap();
+        let (mut starts, mut bases) = (vec![], 0);
+        for entry in IntervalLogIterator::new(&text) {
+            match entry.expect("a valid interval log") {
+                LogEntry::Interval(interval) => starts.push(interval.start_timestamp()),
+                LogEntry::BaseTime(_) => bases += 1,
+                LogEntry::StartTime(_) => {}
+            }
+        }
+        (starts, bases)
+    }
+
+    fn write_interval(log: &mut IntervalLog, start: SystemTime) {
+        let mut histogram = Recorder::new().interval;
+        histogram.record(1000).unwrap();
+        log.write(start, Duration::from_secs(1), std::iter::once(("end_to_end", &mut histogram))).unwrap();
+        log.file.flush().unwrap();
+    }
+
+    #[test]
+    fn a_restarted_monitor_continues_the_interval_log_time_base() {
+        let dir = std::env::temp_dir().join(format!("looplab-hlog-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let run_start = UNIX_EPOCH + Duration::from_millis(1_700_000_000_123);
+        let at = |ms: u64| run_start + Duration::from_millis(ms);
+
+        let mut first = IntervalLog::open(&dir, false).unwrap();
+        first.begin(at(0)).unwrap();
+        write_interval(&mut first, at(0));
+        write_interval(&mut first, at(1000));
+        drop(first);
+
+        // The restarted monitor's first record comes 2.5 s into the run.
+        let mut second = IntervalLog::open(&dir, true).unwrap();
+        second.begin(at(2500)).unwrap();
+        write_interval(&mut second, at(2500));
+        write_interval(&mut second, at(3500));
+        drop(second);
+
+        let (starts, bases) = read_log(&dir.join("latency.hlog"));
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(bases, 1, "one header, the first monitor's");
+        assert_eq!(starts, [0, 1000, 2500, 3500].map(Duration::from_millis));
     }
 }
