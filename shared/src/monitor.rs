@@ -115,15 +115,18 @@ impl Recorder {
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct MonitorReport {
-    /// Loop records (whole loops, plant to plant) received.
+    /// Loops written with their loop record (whole loops, plant to plant). A record that comes
+    /// after its loop was written is only counted as received.
     pub records: u64,
     /// Loops the monitor saw any message of: 0 up to the newest k, plus one.
     pub loops_seen: u64,
     /// Samples received per topic.
     pub received: BTreeMap<String, u64>,
-    /// Loops without a record, as inclusive [first, last] ranges (at most 100 listed), within
-    /// the loops the monitor saw anything of.
-    pub missing_records: Vec<[u64; 2]>,
+    /// Loops without a record, within the loops the monitor saw anything of.
+    pub missing: MissingLoops,
+    /// Loop records the plant published before this monitor's first one: 0 for the first
+    /// monitor, which is up before the loop starts; a restarted one never could receive them.
+    pub records_before_start: u64,
     pub end_to_end: Stats,
     pub hops: BTreeMap<String, Stats>,
     /// |actual tick period − dt| (real-time mode).
@@ -139,6 +142,60 @@ pub struct MonitorReport {
     pub notes: Vec<String>,
     /// What each fault of the launch file did to the loop, in its order.
     pub faults: Vec<FaultEffect>,
+}
+
+impl MonitorReport {
+    /// Of the `published` loop records, those that never reached this monitor though it was
+    /// there to receive them (its buffer overflowed).
+    pub fn lost_records(&self, published: u64) -> u64 {
+        let received = self.received.get(Topic::Loop.name()).copied().unwrap_or(0);
+        published.saturating_sub(self.records_before_start + received)
+    }
+}
+
+/// Loops without a loop record: every one counted, the first [`MAX_MISSING_RANGES`] ranges
+/// listed. Serialized flat into the summary's `monitor` object.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MissingLoops {
+    /// Inclusive [first, last] ranges, in order.
+    #[serde(rename = "missing")]
+    pub ranges: Vec<[u64; 2]>,
+    /// All loops without a record, listed or not.
+    pub missing_loops: u64,
+    /// Ranges left out of the list.
+    pub missing_ranges_omitted: u64,
+    /// Of `missing_loops`, those before the first loop of a restarted monitor: their records
+    /// went to an earlier monitor (whose report died with it) or came while none ran.
+    pub missing_before_restart: u64,
+    /// The newest missing loop, listed or not: an omitted range grows while loops go on missing.
+    #[serde(skip)]
+    last: Option<u64>,
+}
+
+impl MissingLoops {
+    /// Adds the loops `first..=last`, which come after every loop added so far.
+    fn add(&mut self, first: u64, last: u64) {
+        self.missing_loops += last - first + 1;
+        let adjacent = self.last.is_some_and(|newest| newest + 1 == first);
+        self.last = Some(last);
+        let listed = self.ranges.len();
+        match self.ranges.last_mut() {
+            Some(range) if adjacent && range[1] + 1 == first => range[1] = last,
+            // The range goes on past the list's end: it is counted already.
+            _ if adjacent => {}
+            _ if listed < MAX_MISSING_RANGES => self.ranges.push([first, last]),
+            _ => self.missing_ranges_omitted += 1,
+        }
+    }
+
+    /// With the loops from `loops_seen` up to the run's last loop added: the monitor saw nothing
+    /// of those.
+    pub fn up_to(mut self, loops_seen: u64, loops: u64) -> Self {
+        if loops_seen < loops {
+            self.add(loops_seen, loops - 1);
+        }
+        self
+    }
 }
 
 /// What one fault did to the loop and to the physical system, in simulation time.
@@ -513,6 +570,7 @@ struct Writer {
     faults: Vec<FaultTracker>,
     /// A restarted monitor starts at the first loop it sees; the first one starts at 0.
     started: bool,
+    restarted: bool,
 }
 
 /// Creates an output file, or, for a restarted monitor, appends to what the last one wrote;
@@ -678,6 +736,7 @@ impl Writer {
             measure: scenario.error_measure(),
             faults: FaultTracker::new(config),
             started: context.incarnation == 0,
+            restarted: context.incarnation > 0,
         })
     }
 
@@ -714,13 +773,19 @@ impl Writer {
             self.started = true;
             self.next_k = k;
             if k > 0 {
-                self.report.missing_records.push([0, k - 1]);
+                self.report.missing.add(0, k - 1);
+                self.report.missing.missing_before_restart = k;
             }
         }
-        *self.report.received.entry(TOPICS[topic].name().to_owned()).or_default() += 1;
-        if TOPICS[topic] == Topic::Loop {
-            self.report.records += 1;
+        if let Sample::Record(record) = &sample
+            && self.restarted
+            && !self.report.received.contains_key(Topic::Loop.name())
+        {
+            // The first record: those before it went out before this monitor was up. (The
+            // first monitor is up before the loop starts.)
+            self.report.records_before_start = record.sequence.saturating_sub(1);
         }
+        *self.report.received.entry(TOPICS[topic].name().to_owned()).or_default() += 1;
         self.newest[topic] = self.newest[topic].max(Some(k));
         if k < self.next_k {
             // That loop was written without this part, which came too late; it stays counted
@@ -766,18 +831,11 @@ impl Writer {
 
         let end_to_end = match &part.record {
             None => {
-                let missing = &mut self.report.missing_records;
-                match missing.last_mut() {
-                    Some(range) if range[1] + 1 == k => range[1] = k,
-                    _ => {
-                        if missing.len() < MAX_MISSING_RANGES {
-                            missing.push([k, k]);
-                        }
-                    }
-                }
+                self.report.missing.add(k, k);
                 None
             }
             Some(record) => {
+                self.report.records += 1;
                 let stamps = record.header.trace.stamps();
                 let e2e = stamps[7].saturating_sub(stamps[0]);
                 self.end_to_end.record(e2e);
@@ -935,6 +993,24 @@ mod tests {
         histogram.record(1000).unwrap();
         log.write(start, Duration::from_secs(1), std::iter::once(("end_to_end", &mut histogram))).unwrap();
         log.file.flush().unwrap();
+    }
+
+    #[test]
+    fn missing_loops_are_all_counted_when_the_list_is_full() {
+        let mut missing = MissingLoops::default();
+        missing.add(0, 9);
+        for k in (20..20 + 2 * MAX_MISSING_RANGES as u64).step_by(2) {
+            missing.add(k, k);
+        }
+        // A long run of missing loops past the list's end is one omitted range.
+        for k in 1000..1010 {
+            missing.add(k, k);
+        }
+        let missing = missing.up_to(1010, 1100);
+        assert_eq!(missing.ranges.len(), MAX_MISSING_RANGES);
+        assert_eq!(missing.ranges[..2], [[0, 9], [20, 20]]);
+        assert_eq!(missing.missing_ranges_omitted, 2, "loop 218, then 1000–1099");
+        assert_eq!(missing.missing_loops, 10 + MAX_MISSING_RANGES as u64 + 100);
     }
 
     #[test]

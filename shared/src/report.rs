@@ -141,13 +141,16 @@ pub struct Jitter {
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct MonitorCounts {
-    /// Loop records the monitor got.
+    /// Loops with their loop record (the last monitor's, after restarts).
     pub records: u64,
-    /// Loop records the plant published that never reached the monitor.
+    /// Loop records the plant published that never reached the monitor while it ran.
     pub lost: u64,
-    /// Which loops have no record, as inclusive ranges (at most 100); skipped ticks (no state
-    /// published) have none either.
-    pub missing: Vec<[u64; 2]>,
+    /// Which loops have no record (`missing`, as inclusive ranges, the first 100 listed), how
+    /// many (`missing_loops`: `records` + `missing_loops` = `loops`), and why: not published
+    /// (skipped ticks, loops without command), lost, or before a restarted monitor's first
+    /// loop (`missing_before_restart`).
+    #[serde(flatten)]
+    pub missing: crate::monitor::MissingLoops,
     /// Samples the monitor received per topic.
     pub received: BTreeMap<String, u64>,
     /// Trajectory rows with some part missing.
@@ -212,14 +215,7 @@ pub fn render(s: &Summary) -> String {
         s.monitor.lost,
         s.loops_without_command,
         s.skipped_ticks,
-        if s.monitor.missing.is_empty() {
-            String::new()
-        } else {
-            format!(
-                "; no record for loops {}",
-                s.monitor.missing.iter().map(|[a, b]| format!("{a}–{b}")).collect::<Vec<_>>().join(", ")
-            )
-        }
+        missing_text(&s.monitor.missing)
     );
 
     let _ = writeln!(
@@ -276,6 +272,23 @@ pub fn render(s: &Summary) -> String {
     };
     let _ = writeln!(out, "  run folder: {}", s.run_dir);
     out
+}
+
+/// The loops without a record, for the report's monitor line.
+fn missing_text(m: &crate::monitor::MissingLoops) -> String {
+    if m.missing_loops == 0 {
+        return String::new();
+    }
+    let ranges: Vec<String> = m.ranges.iter().map(|[a, b]| format!("{a}–{b}")).collect();
+    let omitted = match m.missing_ranges_omitted {
+        0 => String::new(),
+        n => format!(" and {n} more ranges"),
+    };
+    let before_restart = match m.missing_before_restart {
+        0 => String::new(),
+        n => format!("; the first {n} were before the monitor restarted"),
+    };
+    format!("; no record for {} loops: {}{omitted}{before_restart}", m.missing_loops, ranges.join(", "))
 }
 
 fn ms(value: Option<f64>) -> String {
