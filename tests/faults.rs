@@ -241,6 +241,45 @@ fn a_random_storm_of_kills_and_stops_leaves_every_process_alive_and_nothing_behi
     assert_clean(s);
 }
 
+#[test]
+fn a_restarted_monitor_accounts_for_every_loop_and_continues_the_latency_log() {
+    let r = run(
+        "kill-monitor",
+        &["--mode", "lockstep", "--duration", "4", "--fault", "kill monitor at 1s", "--fault", "kill monitor at 2.5s"],
+    );
+    let s = &r.summary;
+    let m = &s["monitor"];
+    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
+    assert_eq!(s["restarts"]["monitor"], 2);
+    let loops = s["loops"].as_u64().unwrap();
+    assert_eq!(loops, 4000);
+    let count = |key: &str| m[key].as_u64().unwrap_or_else(|| panic!("no monitor.{key}: {m}"));
+    // Every loop is either recorded or accounted for as missing; lockstep loses no record.
+    assert_eq!(count("records") + count("missing_loops"), loops, "{m}");
+    assert_eq!(count("lost"), 0, "{m}");
+    assert_eq!(count("missing_ranges_omitted"), 0, "{m}");
+    let listed: u64 =
+        m["missing"].as_array().unwrap().iter().map(|r| r[1].as_u64().unwrap() - r[0].as_u64().unwrap() + 1).sum();
+    assert_eq!(listed, count("missing_loops"), "{m}");
+    // The last monitor started after the second kill, at 2.5 s: the loops before it are its
+    // missing ones, with that reason.
+    assert!(count("missing_before_restart") >= 2500, "{m}");
+    assert_eq!(m["missing"][0], serde_json::json!([0, count("missing_before_restart") - 1]), "{m}");
+
+    // The interval log's time stamps go on across the restarts.
+    let hlog = std::fs::read(r.dir.join("latency.hlog")).unwrap();
+    let starts: Vec<std::time::Duration> = hdrhistogram::serialization::interval_log::IntervalLogIterator::new(&hlog)
+        .filter_map(|entry| match entry.expect("a valid interval log") {
+            hdrhistogram::serialization::interval_log::LogEntry::Interval(i) => Some(i.start_timestamp()),
+            _ => None,
+        })
+        .collect();
+    assert!(!starts.is_empty(), "latency.hlog has no interval");
+    assert!(starts.windows(2).all(|w| w[0] <= w[1]), "interval start times go back: {starts:?}");
+    assert_every_process_ended_alive(s);
+    assert_clean(s);
+}
+
 /// Runs `looplab run` expecting the run to fail (exit 1); returns its summary.
 fn run_failing(name: &str, args: &[&str]) -> serde_json::Value {
     let dir = fresh_dir(name);

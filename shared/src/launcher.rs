@@ -1279,11 +1279,7 @@ impl<'a> Supervisor<'a> {
             Outcome::Interrupted => Some("interrupted by a signal".into()),
             Outcome::Failed(why) => Some(why.clone()),
         };
-        let mut missing = monitor.missing_records.clone();
-        if monitor.loops_seen < plant.loops && missing.len() < 100 {
-            // Loops after the last one the monitor saw anything of.
-            missing.push([monitor.loops_seen, plant.loops - 1]);
-        }
+        let missing = monitor.missing.clone().up_to(monitor.loops_seen, plant.loops);
         let stage_total = |f: fn(&StageReport) -> u64| -> u64 { self.reports.stages.values().flatten().map(f).sum() };
         let mut processes = vec![];
         for p in &self.processes {
@@ -1362,7 +1358,7 @@ impl<'a> Supervisor<'a> {
             data_age_ns: monitor.data_age.clone(),
             monitor: MonitorCounts {
                 records: monitor.records,
-                lost: plant.commands.saturating_sub(monitor.records),
+                lost: monitor.lost_records(plant.commands),
                 missing,
                 received: monitor.received.clone(),
                 partial_rows: monitor.partial_rows,

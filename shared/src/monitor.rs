@@ -12,13 +12,13 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context as _, Result, anyhow};
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use hdrhistogram::Histogram;
 use hdrhistogram::serialization::V2DeflateSerializer;
-use hdrhistogram::serialization::interval_log::{IntervalLogWriterBuilder, Tag};
+use hdrhistogram::serialization::interval_log::{IntervalLogIterator, IntervalLogWriterBuilder, LogEntry, Tag};
 use serde::{Deserialize, Serialize};
 
 use crate::clock::now_ns;
@@ -115,15 +115,18 @@ impl Recorder {
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct MonitorReport {
-    /// Loop records (whole loops, plant to plant) received.
+    /// Loops written with their loop record (whole loops, plant to plant). A record that comes
+    /// after its loop was written is only counted as received.
     pub records: u64,
     /// Loops the monitor saw any message of: 0 up to the newest k, plus one.
     pub loops_seen: u64,
     /// Samples received per topic.
     pub received: BTreeMap<String, u64>,
-    /// Loops without a record, as inclusive [first, last] ranges (at most 100 listed), within
-    /// the loops the monitor saw anything of.
-    pub missing_records: Vec<[u64; 2]>,
+    /// Loops without a record, within the loops the monitor saw anything of.
+    pub missing: MissingLoops,
+    /// Loop records the plant published before this monitor's first one: 0 for the first
+    /// monitor, which is up before the loop starts; a restarted one never could receive them.
+    pub records_before_start: u64,
     pub end_to_end: Stats,
     pub hops: BTreeMap<String, Stats>,
     /// |actual tick period − dt| (real-time mode).
@@ -139,6 +142,60 @@ pub struct MonitorReport {
     pub notes: Vec<String>,
     /// What each fault of the launch file did to the loop, in its order.
     pub faults: Vec<FaultEffect>,
+}
+
+impl MonitorReport {
+    /// Of the `published` loop records, those that never reached this monitor though it was
+    /// there to receive them (its buffer overflowed).
+    pub fn lost_records(&self, published: u64) -> u64 {
+        let received = self.received.get(Topic::Loop.name()).copied().unwrap_or(0);
+        published.saturating_sub(self.records_before_start + received)
+    }
+}
+
+/// Loops without a loop record: every one counted, the first [`MAX_MISSING_RANGES`] ranges
+/// listed. Serialized flat into the summary's `monitor` object.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MissingLoops {
+    /// Inclusive [first, last] ranges, in order.
+    #[serde(rename = "missing")]
+    pub ranges: Vec<[u64; 2]>,
+    /// All loops without a record, listed or not.
+    pub missing_loops: u64,
+    /// Ranges left out of the list.
+    pub missing_ranges_omitted: u64,
+    /// Of `missing_loops`, those before the first loop of a restarted monitor: their records
+    /// went to an earlier monitor (whose report died with it) or came while none ran.
+    pub missing_before_restart: u64,
+    /// The newest missing loop, listed or not: an omitted range grows while loops go on missing.
+    #[serde(skip)]
+    last: Option<u64>,
+}
+
+impl MissingLoops {
+    /// Adds the loops `first..=last`, which come after every loop added so far.
+    fn add(&mut self, first: u64, last: u64) {
+        self.missing_loops += last - first + 1;
+        let adjacent = self.last.is_some_and(|newest| newest + 1 == first);
+        self.last = Some(last);
+        let listed = self.ranges.len();
+        match self.ranges.last_mut() {
+            Some(range) if adjacent && range[1] + 1 == first => range[1] = last,
+            // The range goes on past the list's end: it is counted already.
+            _ if adjacent => {}
+            _ if listed < MAX_MISSING_RANGES => self.ranges.push([first, last]),
+            _ => self.missing_ranges_omitted += 1,
+        }
+    }
+
+    /// With the loops from `loops_seen` up to the run's last loop added: the monitor saw nothing
+    /// of those.
+    pub fn up_to(mut self, loops_seen: u64, loops: u64) -> Self {
+        if loops_seen < loops {
+            self.add(loops_seen, loops - 1);
+        }
+        self
+    }
 }
 
 /// What one fault did to the loop and to the physical system, in simulation time.
@@ -493,7 +550,7 @@ struct Writer {
     metrics: Box<dyn Metrics>,
     trajectory: BufWriter<File>,
     loops: BufWriter<File>,
-    hlog: BufWriter<File>,
+    hlog: IntervalLog,
     pending: BTreeMap<u64, Partial>,
     /// The next loop to write.
     next_k: u64,
@@ -504,11 +561,8 @@ struct Writer {
     jitter: Recorder,
     wake: Recorder,
     data_age: Vec<Recorder>,
-    /// Start of the current interval-log interval (CLOCK_MONOTONIC), and of the run.
+    /// Start of the current interval-log interval (CLOCK_MONOTONIC).
     interval_start: Option<u64>,
-    first_publish: Option<u64>,
-    /// Whether `latency.hlog` has its header yet.
-    hlog_started: bool,
     last_counters: PlantCounters,
     report: MonitorReport,
     last_status: Instant,
@@ -516,6 +570,7 @@ struct Writer {
     faults: Vec<FaultTracker>,
     /// A restarted monitor starts at the first loop it sees; the first one starts at 0.
     started: bool,
+    restarted: bool,
 }
 
 /// Creates an output file, or, for a restarted monitor, appends to what the last one wrote;
@@ -531,6 +586,87 @@ fn create(dir: &Path, name: &str, restarted: bool) -> Result<(BufWriter<File>, b
         .open(&path)
         .with_context(|| format!("create {}", path.display()))?;
     Ok((BufWriter::new(file), !append))
+}
+
+/// The wall-clock time of a CLOCK_MONOTONIC time stamp.
+fn wall_time(monotonic_ns: u64) -> SystemTime {
+    SystemTime::now() - Duration::from_nanos(now_ns().saturating_sub(monotonic_ns))
+}
+
+/// `latency.hlog`. Interval time stamps count from its BaseTime, the run's first loop record: a
+/// restarted monitor appends and reads the BaseTime back, so its time stamps go on from the last
+/// monitor's instead of starting again from zero.
+struct IntervalLog {
+    file: BufWriter<File>,
+    /// The log's BaseTime, once its header is written.
+    base: Option<SystemTime>,
+}
+
+impl IntervalLog {
+    fn open(dir: &Path, restarted: bool) -> Result<Self> {
+        let (file, new) = create(dir, "latency.hlog", restarted)?;
+        let base = if new {
+            None
+        } else {
+            let path = dir.join("latency.hlog");
+            let text = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
+            // Only the header matters; a killed monitor may have left a broken last line.
+            IntervalLogIterator::new(&text).map_while(Result::ok).find_map(|entry| match entry {
+                LogEntry::BaseTime(since_epoch) => Some(UNIX_EPOCH + since_epoch),
+                _ => None,
+            })
+        };
+        Ok(Self { file, base })
+    }
+
+    /// Writes the header with `first` as the time base, unless the log has one. Flushed at
+    /// once, so that a monitor killed right after still leaves the base for the next.
+    fn begin(&mut self, first: SystemTime) -> Result<()> {
+        if self.base.is_some() {
+            return Ok(());
+        }
+        // The header keeps milliseconds; the base is what a restarted monitor will read back.
+        let since_epoch = first.duration_since(UNIX_EPOCH).unwrap_or_default();
+        let base = UNIX_EPOCH + Duration::from_millis(since_epoch.as_millis() as u64);
+        IntervalLogWriterBuilder::new()
+            .add_comment("LoopLab latency per hop and end to end, in ns")
+            .add_comment(
+                "Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time",
+            )
+            .with_start_time(base)
+            .with_base_time(base)
+            .begin_log_with(&mut self.file, &mut V2DeflateSerializer::new())?;
+        writeln!(
+            self.file,
+            "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\""
+        )?;
+        self.file.flush()?;
+        self.base = Some(base);
+        Ok(())
+    }
+
+    /// Writes each non-empty histogram as the interval from `start`, `length` long, and resets it.
+    fn write<'a>(
+        &mut self,
+        start: SystemTime,
+        length: Duration,
+        histograms: impl Iterator<Item = (&'a str, &'a mut Histogram<u64>)>,
+    ) -> Result<()> {
+        self.begin(start)?;
+        let base = self.base.unwrap_or(start);
+        let offset = start.duration_since(base).unwrap_or_default();
+        let mut serializer = V2DeflateSerializer::new();
+        let mut log = IntervalLogWriterBuilder::new().begin_log_with(&mut self.file, &mut serializer)?;
+        for (tag, histogram) in histograms {
+            if histogram.is_empty() {
+                continue;
+            }
+            log.write_histogram(histogram, offset, length, Tag::new(tag))
+                .map_err(|e| anyhow!("write latency.hlog: {e}"))?;
+            histogram.reset();
+        }
+        Ok(())
+    }
 }
 
 impl Writer {
@@ -568,7 +704,7 @@ impl Writer {
             writeln!(loops, "{}", columns.join(","))?;
         }
 
-        let (hlog, new_hlog) = create(dir, "latency.hlog", restarted)?;
+        let hlog = IntervalLog::open(dir, restarted)?;
 
         Ok(Self {
             mode: config.mode,
@@ -594,14 +730,13 @@ impl Writer {
             jitter: Recorder::new(),
             wake: Recorder::new(),
             interval_start: None,
-            first_publish: None,
-            hlog_started: !new_hlog,
             last_counters: PlantCounters::default(),
             report: MonitorReport::default(),
             last_status: Instant::now(),
             measure: scenario.error_measure(),
             faults: FaultTracker::new(config),
             started: context.incarnation == 0,
+            restarted: context.incarnation > 0,
         })
     }
 
@@ -615,7 +750,7 @@ impl Writer {
             if self.last_status.elapsed() >= STATUS_PERIOD {
                 self.last_status = Instant::now();
                 self.status()?;
-                for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog] {
+                for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog.file] {
                     file.flush().with_context(|| format!("write to {}", self.run_dir.display()))?;
                 }
             }
@@ -638,13 +773,19 @@ impl Writer {
             self.started = true;
             self.next_k = k;
             if k > 0 {
-                self.report.missing_records.push([0, k - 1]);
+                self.report.missing.add(0, k - 1);
+                self.report.missing.missing_before_restart = k;
             }
         }
-        *self.report.received.entry(TOPICS[topic].name().to_owned()).or_default() += 1;
-        if TOPICS[topic] == Topic::Loop {
-            self.report.records += 1;
+        if let Sample::Record(record) = &sample
+            && self.restarted
+            && !self.report.received.contains_key(Topic::Loop.name())
+        {
+            // The first record: those before it went out before this monitor was up. (The
+            // first monitor is up before the loop starts.)
+            self.report.records_before_start = record.sequence.saturating_sub(1);
         }
+        *self.report.received.entry(TOPICS[topic].name().to_owned()).or_default() += 1;
         self.newest[topic] = self.newest[topic].max(Some(k));
         if k < self.next_k {
             // That loop was written without this part, which came too late; it stays counted
@@ -690,18 +831,11 @@ impl Writer {
 
         let end_to_end = match &part.record {
             None => {
-                let missing = &mut self.report.missing_records;
-                match missing.last_mut() {
-                    Some(range) if range[1] + 1 == k => range[1] = k,
-                    _ => {
-                        if missing.len() < MAX_MISSING_RANGES {
-                            missing.push([k, k]);
-                        }
-                    }
-                }
+                self.report.missing.add(k, k);
                 None
             }
             Some(record) => {
+                self.report.records += 1;
                 let stamps = record.header.trace.stamps();
                 let e2e = stamps[7].saturating_sub(stamps[0]);
                 self.end_to_end.record(e2e);
@@ -785,48 +919,25 @@ impl Writer {
 
     /// Closes the interval-log interval when a record starts past its end.
     fn interval_log(&mut self, publish_ns: u64) -> Result<()> {
-        let first = *self.first_publish.get_or_insert(publish_ns);
-        let start = *self.interval_start.get_or_insert(publish_ns);
+        let Some(start) = self.interval_start else {
+            // The first record of this monitor: the log's time base, unless an earlier monitor
+            // of the run set it.
+            self.hlog.begin(wall_time(publish_ns))?;
+            self.interval_start = Some(publish_ns);
+            return Ok(());
+        };
         if publish_ns >= start + HLOG_INTERVAL_NS {
-            self.flush_interval(first, start, publish_ns)?;
+            self.flush_interval(start, publish_ns)?;
             self.interval_start = Some(publish_ns);
         }
         Ok(())
     }
 
-    fn flush_interval(&mut self, first: u64, start: u64, end: u64) -> Result<()> {
-        let mut serializer = V2DeflateSerializer::new();
-        if !self.hlog_started {
-            // Timestamps count from the first state the plant published.
-            let first_wall = SystemTime::now() - Duration::from_nanos(now_ns().saturating_sub(first));
-            IntervalLogWriterBuilder::new()
-                .add_comment("LoopLab latency per hop and end to end, in ns")
-                .add_comment(
-                    "Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time",
-                )
-                .with_start_time(first_wall)
-                .with_base_time(first_wall)
-                .begin_log_with(&mut self.hlog, &mut serializer)?;
-            writeln!(
-                self.hlog,
-                "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\""
-            )?;
-            self.hlog_started = true;
-        }
-        let mut log = IntervalLogWriterBuilder::new().begin_log_with(&mut self.hlog, &mut serializer)?;
-        let offset = Duration::from_nanos(start - first);
+    fn flush_interval(&mut self, start: u64, end: u64) -> Result<()> {
         let length = Duration::from_nanos(end.saturating_sub(start).max(1));
         let recorders = std::iter::once(("end_to_end", &mut self.end_to_end))
             .chain(HOPS.iter().map(|h| h.0).zip(self.hops.iter_mut()));
-        for (tag, recorder) in recorders {
-            if recorder.interval.is_empty() {
-                continue;
-            }
-            log.write_histogram(&recorder.interval, offset, length, Tag::new(tag))
-                .map_err(|e| anyhow!("write latency.hlog: {e}"))?;
-            recorder.interval.reset();
-        }
-        Ok(())
+        self.hlog.write(wall_time(start), length, recorders.map(|(tag, r)| (tag, &mut r.interval)))
     }
 
     fn status(&self) -> Result<()> {
@@ -839,10 +950,10 @@ impl Writer {
     }
 
     fn finish(mut self) -> Result<MonitorReport> {
-        if let (Some(first), Some(start)) = (self.first_publish, self.interval_start) {
-            self.flush_interval(first, start, now_ns())?;
+        if let Some(start) = self.interval_start {
+            self.flush_interval(start, now_ns())?;
         }
-        for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog] {
+        for file in [&mut self.trajectory, &mut self.loops, &mut self.hlog.file] {
             file.flush().with_context(|| format!("write to {}", self.run_dir.display()))?;
         }
         let mut report = self.report;
@@ -856,5 +967,75 @@ impl Writer {
         report.notes = self.metrics.notes();
         report.faults = self.faults.into_iter().map(|f| f.finish(self.dt)).collect();
         Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The start time stamps of the intervals in a log, and its BaseTime entries.
+    fn read_log(path: &Path) -> (Vec<Duration>, usize) {
+        let text = std::fs::read(path).unwrap();
+        let (mut starts, mut bases) = (vec![], 0);
+        for entry in IntervalLogIterator::new(&text) {
+            match entry.expect("a valid interval log") {
+                LogEntry::Interval(interval) => starts.push(interval.start_timestamp()),
+                LogEntry::BaseTime(_) => bases += 1,
+                LogEntry::StartTime(_) => {}
+            }
+        }
+        (starts, bases)
+    }
+
+    fn write_interval(log: &mut IntervalLog, start: SystemTime) {
+        let mut histogram = Recorder::new().interval;
+        histogram.record(1000).unwrap();
+        log.write(start, Duration::from_secs(1), std::iter::once(("end_to_end", &mut histogram))).unwrap();
+        log.file.flush().unwrap();
+    }
+
+    #[test]
+    fn missing_loops_are_all_counted_when_the_list_is_full() {
+        let mut missing = MissingLoops::default();
+        missing.add(0, 9);
+        for k in (20..20 + 2 * MAX_MISSING_RANGES as u64).step_by(2) {
+            missing.add(k, k);
+        }
+        // A long run of missing loops past the list's end is one omitted range.
+        for k in 1000..1010 {
+            missing.add(k, k);
+        }
+        let missing = missing.up_to(1010, 1100);
+        assert_eq!(missing.ranges.len(), MAX_MISSING_RANGES);
+        assert_eq!(missing.ranges[..2], [[0, 9], [20, 20]]);
+        assert_eq!(missing.missing_ranges_omitted, 2, "loop 218, then 1000–1099");
+        assert_eq!(missing.missing_loops, 10 + MAX_MISSING_RANGES as u64 + 100);
+    }
+
+    #[test]
+    fn a_restarted_monitor_continues_the_interval_log_time_base() {
+        let dir = std::env::temp_dir().join(format!("looplab-hlog-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let run_start = UNIX_EPOCH + Duration::from_millis(1_700_000_000_123);
+        let at = |ms: u64| run_start + Duration::from_millis(ms);
+
+        let mut first = IntervalLog::open(&dir, false).unwrap();
+        first.begin(at(0)).unwrap();
+        write_interval(&mut first, at(0));
+        write_interval(&mut first, at(1000));
+        drop(first);
+
+        // The restarted monitor's first record comes 2.5 s into the run.
+        let mut second = IntervalLog::open(&dir, true).unwrap();
+        second.begin(at(2500)).unwrap();
+        write_interval(&mut second, at(2500));
+        write_interval(&mut second, at(3500));
+        drop(second);
+
+        let (starts, bases) = read_log(&dir.join("latency.hlog"));
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(bases, 1, "one header, the first monitor's");
+        assert_eq!(starts, [0, 1000, 2500, 3500].map(Duration::from_millis));
     }
 }

@@ -188,6 +188,9 @@ pub struct LoopRecord {
     /// 1 if the command arrived marked lost (lockstep `drop` fault); the plant held its last.
     pub lost: u32,
     pub _reserved: u32,
+    /// 1 for the plant's first loop record of the run, then one more per record: a restarted
+    /// monitor knows from its first record how many it never had the chance to receive.
+    pub sequence: u64,
 }
 
 /// All-zero values: every message is plain numbers, so zero is a valid starting point.

@@ -126,6 +126,7 @@ impl PlantLoop {
             rejected: u32::from(!lost && !valid),
             lost: u32::from(lost),
             _reserved: 0,
+            sequence: self.report.commands,
         };
         record.header.trace.plant_receive = arrived;
         self.loop_out.send(&record)

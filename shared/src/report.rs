@@ -144,13 +144,16 @@ pub struct Jitter {
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct MonitorCounts {
-    /// Loop records the monitor got.
+    /// Loops with their loop record (the last monitor's, after restarts).
     pub records: u64,
-    /// Loop records the plant published that never reached the monitor.
+    /// Loop records the plant published that never reached the monitor while it ran.
     pub lost: u64,
-    /// Which loops have no record, as inclusive ranges (at most 100); skipped ticks (no state
-    /// published) have none either.
-    pub missing: Vec<[u64; 2]>,
+    /// Which loops have no record (`missing`, as inclusive ranges, the first 100 listed), how
+    /// many (`missing_loops`: `records` + `missing_loops` = `loops`), and why: not published
+    /// (skipped ticks, loops without command), lost, or before a restarted monitor's first
+    /// loop (`missing_before_restart`).
+    #[serde(flatten)]
+    pub missing: crate::monitor::MissingLoops,
     /// Samples the monitor received per topic.
     pub received: BTreeMap<String, u64>,
     /// Trajectory rows with some part missing.
@@ -215,14 +218,7 @@ pub fn render(s: &Summary) -> String {
         s.monitor.lost,
         s.loops_without_command,
         s.skipped_ticks,
-        if s.monitor.missing.is_empty() {
-            String::new()
-        } else {
-            format!(
-                "; no record for loops {}",
-                s.monitor.missing.iter().map(|[a, b]| format!("{a}–{b}")).collect::<Vec<_>>().join(", ")
-            )
-        }
+        missing_text(&s.monitor.missing)
     );
 
     let _ = writeln!(
@@ -282,8 +278,45 @@ pub fn render(s: &Summary) -> String {
     out
 }
 
+/// The loops without a record, for the report's monitor line.
+fn missing_text(m: &crate::monitor::MissingLoops) -> String {
+    if m.missing_loops == 0 {
+        return String::new();
+    }
+    let ranges: Vec<String> = m.ranges.iter().map(|[a, b]| format!("{a}–{b}")).collect();
+    let omitted = match m.missing_ranges_omitted {
+        0 => String::new(),
+        n => format!(" and {n} more ranges"),
+    };
+    let before_restart = match m.missing_before_restart {
+        0 => String::new(),
+        n => format!("; the first {n} were before the monitor restarted"),
+    };
+    format!("; no record for {} loops: {}{omitted}{before_restart}", m.missing_loops, ranges.join(", "))
+}
+
 fn ms(value: Option<f64>) -> String {
     value.map_or("-".into(), |v| format!("{v:.1}"))
+}
+
+/// Writes `rows` (the first is the header) as a table indented by two spaces, each column as
+/// wide as its widest cell and two spaces from the next; `right[i]` aligns column i right.
+fn write_table(out: &mut String, rows: &[Vec<String>], right: &[bool]) {
+    let mut widths = vec![0; right.len()];
+    for row in rows {
+        for (width, cell) in widths.iter_mut().zip(row) {
+            *width = (*width).max(cell.chars().count());
+        }
+    }
+    for row in rows {
+        let cells: Vec<String> = row
+            .iter()
+            .zip(&widths)
+            .zip(right)
+            .map(|((cell, &width), &right)| if right { format!("{cell:>width$}") } else { format!("{cell:<width$}") })
+            .collect();
+        let _ = writeln!(out, "  {}", cells.join("  ").trim_end());
+    }
 }
 
 /// The faults table and the timeline.
@@ -297,11 +330,11 @@ fn render_faults(out: &mut String, s: &Summary) {
         "\n  faults (wall-clock ms from the injection; error = {}, recovery band {}, limit {})",
         m.name, m.recovery_band, m.limit
     );
-    let _ = writeln!(
-        out,
-        "  {:<40}{:>10}{:>10}{:>9}{:>12}{:>12}{:>11}  limits",
-        "fault", "detected", "restarted", "outage", "worst in", "worst after", "recovery"
-    );
+    let mut rows = vec![
+        ["fault", "detected", "restarted", "outage", "worst in", "worst after", "recovery", "limits"]
+            .map(String::from)
+            .to_vec(),
+    ];
     for f in &s.faults {
         let back = f.restarted_after_ms.or(f.resumed_after_ms);
         let (outage, during, after, recovery, limits) = match &f.effect {
@@ -314,18 +347,19 @@ fn render_faults(out: &mut String, s: &Summary) {
             ),
             None => ("-".into(), "-".into(), "-".into(), "-".into(), "no record"),
         };
-        let _ = writeln!(
-            out,
-            "  {:<40}{:>10}{:>10}{:>9}{:>12}{:>12}{:>11}  {limits}",
-            f.fault,
+        rows.push(vec![
+            f.fault.clone(),
             ms(f.detected_after_ms),
             ms(back),
             outage,
             during,
             after,
-            recovery
-        );
+            recovery,
+            limits.into(),
+        ]);
     }
+    // The fault and the verdict are text; the columns between them are numbers.
+    write_table(out, &rows, &[false, true, true, true, true, true, true, false]);
     if !s.timeline.is_empty() {
         let _ = writeln!(out, "\n  timeline (wall-clock ms after tick 0)");
         for entry in &s.timeline {
@@ -355,21 +389,107 @@ fn render_restarts(out: &mut String, s: &Summary) {
         return;
     }
     let _ = writeln!(out, "\n  restarts (wall-clock ms after the death was seen)");
-    let _ = writeln!(
-        out,
-        "  {:<12}  {:>11}  {:>10}  {:>10}  {:>10}  {:>10}",
-        "process", "died at", "cleaned", "backoff", "started", "ready"
-    );
+    let mut rows = vec![["process", "died at", "cleaned", "backoff", "started", "ready"].map(String::from).to_vec()];
     for r in &s.restart_steps {
-        let _ = writeln!(
-            out,
-            "  {:<12}  {:>11.1}  {:>10}  {:>10.1}  {:>10}  {:>10}",
-            r.process,
-            r.died_at_ms,
+        rows.push(vec![
+            r.process.clone(),
+            format!("{:.1}", r.died_at_ms),
             ms(r.cleaned_after_ms),
-            r.backoff_ms,
+            format!("{:.1}", r.backoff_ms),
             ms(r.spawned_after_ms),
-            ms(r.ready_after_ms)
+            ms(r.ready_after_ms),
+        ]);
+    }
+    write_table(out, &rows, &[false, true, true, true, true, true]);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::monitor::FaultEffect;
+
+    fn summary_with_fault() -> Summary {
+        Summary {
+            scenario: "pendulum".into(),
+            title: "pendulum".into(),
+            mode: "lockstep".into(),
+            rate_hz: 200.0,
+            duration_s: 5.0,
+            seed: 1,
+            run_id: "r".into(),
+            run_dir: "/tmp/r".into(),
+            started_at: "2024-01-01T00:00:00Z".into(),
+            loops: 1000,
+            loops_planned: 1000,
+            completed: true,
+            stopped_because: None,
+            deadline_misses: 0,
+            rejected_commands: 0,
+            skipped_ticks: 0,
+            stale_ticks: 0,
+            lost_commands: 0,
+            loops_without_command: 0,
+            wall_time_s: 1.0,
+            loops_per_s: 1000.0,
+            restarts: BTreeMap::new(),
+            processes: vec![],
+            adaptive_waits: BTreeMap::new(),
+            latency_ns: Latency::default(),
+            jitter_ns: Jitter::default(),
+            data_age_ns: BTreeMap::new(),
+            monitor: MonitorCounts::default(),
+            metrics: BTreeMap::new(),
+            notes: vec![],
+            error_measure: ErrorMeasureInfo { name: "angle".into(), recovery_band: 0.05, limit: 1.0 },
+            // The widths that used to run together: "206.0" filled its column, "200 ticks" too.
+            faults: vec![FaultReport {
+                fault: "kill controller at 1s".into(),
+                kind: "kill".into(),
+                process: "controller".into(),
+                at_s: 1.0,
+                injected_at_ms: Some(1000.0),
+                detected_after_ms: Some(3.25),
+                detected_by: None,
+                restarted_after_ms: Some(206.0),
+                continued_after_ms: None,
+                resumed_after_ms: None,
+                effect: Some(FaultEffect {
+                    outage_ticks: 200,
+                    worst_error_during: Some(0.0123),
+                    worst_error_after: None,
+                    recovery_s: Some(0.5),
+                    within_limits: true,
+                    ..Default::default()
+                }),
+            }],
+            timeline: vec![],
+            restart_steps: vec![],
+            shared_memory: SharedMemoryCheck { clean: true, ..Default::default() },
+        }
+    }
+
+    /// A line's cells: the text between runs of two or more spaces.
+    fn cells(line: &str) -> Vec<String> {
+        line.trim().split("  ").map(str::trim).filter(|c| !c.is_empty()).map(String::from).collect()
+    }
+
+    #[test]
+    fn fault_table_columns_are_separated_and_aligned() {
+        let text = render(&summary_with_fault());
+        let lines: Vec<&str> = text.lines().collect();
+        let header = lines.iter().position(|l| l.trim_start().starts_with("fault ")).expect("fault table header");
+        assert_eq!(
+            cells(lines[header]),
+            ["fault", "detected", "restarted", "outage", "worst in", "worst after", "recovery", "limits"]
         );
+        assert_eq!(
+            cells(lines[header + 1]),
+            ["kill controller at 1s", "3.2", "206.0", "200 ticks", "0.0123", "-", "0.500 s", "kept"]
+        );
+        // Numbers are right-aligned: each ends where its header ends.
+        for (title, value) in [("restarted", "206.0"), ("outage", "200 ticks"), ("recovery", "0.500 s")] {
+            let end_of = |line: &str, cell: &str| line.find(cell).map(|i| i + cell.len());
+            assert_eq!(end_of(lines[header], title), end_of(lines[header + 1], value), "{title}");
+        }
     }
 }

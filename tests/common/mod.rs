@@ -90,7 +90,8 @@ impl Table {
         Self { columns, rows }
     }
 
-    /// A numeric column (panics on an empty cell: tests read complete runs).
+    /// A numeric column (panics on an empty cell: tests read complete runs). It parses the
+    /// whole column on every call: take it once, outside loops.
     pub fn col(&self, name: &str) -> Vec<f64> {
         let i = *self.columns.get(name).unwrap_or_else(|| panic!("no column {name}; have {:?}", self.columns.keys()));
         self.rows
