@@ -170,14 +170,28 @@ impl Quadcopter {
         positive(c, "model.rate_max_rad_s", model.rate_max_rad_s)?;
 
         let plant: PlantSection = c.section("plant")?;
-        if plant.substeps == 0 {
-            return Err(c.error("plant.substeps", "must be at least 1"));
-        }
+        super::check_substeps(c, "plant.substeps", plant.substeps)?;
         for (i, std) in plant.process_noise_std.iter().enumerate() {
             not_negative(c, &format!("plant.process_noise_std.{i}"), *std)?;
         }
         if plant.mass_step_kg <= -model.mass_kg {
             return Err(c.error("plant.mass_step_kg", "must leave a positive mass"));
+        }
+        not_negative(c, "plant.mass_step_at_s", plant.mass_step_at_s)?;
+        // Positive parameters can still overflow (a mass of 1e-300 kg): ξ = (1/m, b/m, ...) of
+        // the vehicle before and after the mass step must be finite.
+        for (key, mass) in [("model.mass_kg", model.mass_kg), ("plant.mass_step_kg", model.mass_kg + plant.mass_step_kg)]
+        {
+            let xi = model.xi(mass);
+            if !xi.iter().all(|x| x.is_finite()) {
+                return Err(c.error(
+                    key,
+                    format!(
+                        "with these mass, inertia and disturbance values ξ = (1/m, b/m, ...) is not finite: {xi:?}; \
+                         keep them within physical ranges"
+                    ),
+                ));
+            }
         }
 
         let estimator: EstimatorSection = c.section("estimator")?;
@@ -194,6 +208,8 @@ impl Quadcopter {
             positive(c, &format!("estimator.{name}.1"), q)?;
         }
         positive(c, "estimator.initial_mass_inertia_factor", estimator.initial_mass_inertia_factor)?;
+        // ξ̂₁(0) = factor · 1/m: the mass filter divides by it.
+        positive(c, "estimator.initial_xi_factor.0", estimator.initial_xi_factor[0])?;
 
         let controller: ControllerSection = c.section("controller")?;
         for (i, k) in controller.gains.iter().enumerate() {
