@@ -631,6 +631,20 @@ fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<String, String
                 _ => return Err(format!("`{path}` is a value, not a table, so it has no key `{part}`")),
             };
         }
+        // One item of a list (`model.inertia_kg_m2.1`).
+        if let toml::Value::Array(items) = value
+            && !o.append
+        {
+            let len = items.len();
+            let item = last.parse::<usize>().ok().and_then(|i| items.get_mut(i)).ok_or_else(|| {
+                format!("`{}` is a list of {len}; index it with 0 to {}", parents.join("."), len.saturating_sub(1))
+            })?;
+            *item = match (&*item, &o.value) {
+                (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
+                (_, v) => v.clone(),
+            };
+            return Ok(o.key.clone());
+        }
         let toml::Value::Table(table) = value else {
             return Err(format!("`{}` is not a table, so it has no key `{last}`", parents.join(".")));
         };
@@ -683,6 +697,11 @@ mod tests {
         assert_eq!(c.duration_s, 30.0);
         assert_eq!(c.mode, Mode::Lockstep);
         assert_eq!(c.document["estimator"]["kind"].as_str(), Some("no-bias"));
+
+        let c = run(&["controller.gains.1=-50"]).unwrap();
+        assert_eq!(c.document["controller"]["gains"][1].as_float(), Some(-50.0));
+        let e = run(&["controller.gains.3=1"]).unwrap_err();
+        assert!(e.message.contains("is a list of 3; index it with 0 to 2"), "{e}");
     }
 
     #[test]

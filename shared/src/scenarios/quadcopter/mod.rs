@@ -155,6 +155,19 @@ fn not_negative(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchErr
     }
 }
 
+/// The largest magnitude of an initial position, velocity or rate and of the process noise
+/// (SI units): far beyond any flight, and small enough that their products stay finite.
+const MAX_MOTION: f64 = 1e4;
+
+/// An error unless `value` is within ±[`MAX_MOTION`].
+fn at_most(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
+    if value.abs() <= MAX_MOTION {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be within ±{MAX_MOTION} (SI units), got {value}")))
+    }
+}
+
 impl Quadcopter {
     pub fn from_config(c: &LaunchConfig) -> Result<Self, LaunchError> {
         let model: Model = c.section("model")?;
@@ -173,6 +186,16 @@ impl Quadcopter {
         super::check_substeps(c, "plant.substeps", plant.substeps)?;
         for (i, std) in plant.process_noise_std.iter().enumerate() {
             not_negative(c, &format!("plant.process_noise_std.{i}"), *std)?;
+            at_most(c, &format!("plant.process_noise_std.{i}"), *std)?;
+        }
+        // Larger initial motion overflows the rigid body's products (ω × Jω) within a step.
+        let initial = &plant.initial;
+        for (name, values) in
+            [("position_m", initial.position_m), ("velocity_m_s", initial.velocity_m_s), ("rate_rad_s", initial.rate_rad_s)]
+        {
+            for (i, value) in values.iter().enumerate() {
+                at_most(c, &format!("plant.initial.{name}.{i}"), *value)?;
+            }
         }
         if plant.mass_step_kg <= -model.mass_kg {
             return Err(c.error("plant.mass_step_kg", "must leave a positive mass"));
