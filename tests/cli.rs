@@ -224,3 +224,15 @@ fn out_of_range_and_non_finite_inputs_are_one_clear_error() {
     rejects(&[file], &[file, "key `plant.initial.theta`", "finite"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_sweep_over_too_many_values_is_refused_before_any_run() {
+    let output = looplab()
+        .args(["sweep", "pendulum", "--param", "faults.0.delay_ticks", "--from", "0", "--to", "1e9"])
+        .args(["--fault", "delay controller by 0 ticks at 2s"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("at most 1000 are allowed"), "{stderr}");
+}

@@ -905,6 +905,17 @@ mod tests {
     }
 
     #[test]
+    fn every_launch_file_of_the_repository_is_within_the_bounds() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch/quadcopter");
+        let mut files: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+        files.sort();
+        assert!(files.len() >= 7, "{files:?}");
+        for file in files {
+            resolve(file.to_str().unwrap(), &[]).unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
+
+    #[test]
     fn override_parsing() {
         assert_eq!(Override::parse("a.b=1.5").unwrap().value, toml::Value::Float(1.5));
         assert_eq!(Override::parse("a=no-bias").unwrap().value, toml::Value::String("no-bias".into()));

@@ -266,7 +266,7 @@ impl Scenario for Pendulum {
     }
 
     fn delay_margin(&self, config: &LaunchConfig) -> Option<TheoreticalMargin> {
-        let m = margin::delay_margin(self, config);
+        let m = margin::delay_margin(self, config)?;
         Some(TheoreticalMargin {
             ticks: m.ticks,
             continuous_ticks: m.continuous_ticks,
