@@ -202,10 +202,9 @@ impl FaultSpec {
                     &field("delay_s"),
                     format!("must be 0 or more seconds, less than the run's duration_s = {} s, got {d}", c.duration_s),
                 )),
-                (None, Some(t)) if u64::from(t) > c.loops() => Err(c.error(
-                    &field("delay_ticks"),
-                    format!("must be at most the run's {} loops, got {t}", c.loops()),
-                )),
+                (None, Some(t)) if u64::from(t) > c.loops() => Err(
+                    c.error(&field("delay_ticks"), format!("must be at most the run's {} loops, got {t}", c.loops()))
+                ),
                 _ => Ok(()),
             },
             FaultKind::Drop => match self.probability {

@@ -818,7 +818,11 @@ mod tests {
         rejected(&["duration_s=604800", "rate_hz=100000"], "duration_s", "at most 1000000000");
         assert_eq!(run(&["duration_s=604800"]).unwrap().loops(), 604_800_000);
         rejected(&["duration_s=0.005"], "sensors.wheel_speed.period_s", "at most the run's duration_s");
-        rejected(&["sensors.encoder.delay_ticks=10001"], "sensors.encoder.delay_ticks", "at most the run's 10000 loops");
+        rejected(
+            &["sensors.encoder.delay_ticks=10001"],
+            "sensors.encoder.delay_ticks",
+            "at most the run's 10000 loops",
+        );
         run(&["sensors.encoder.delay_ticks=10000"]).unwrap();
         rejected(&["wait.lead_us=1000001"], "wait.lead_us", "0 to 1000000");
         rejected(&["wait.spin_cap_us=-1"], "wait.spin_cap_us", "0 to 1000000");

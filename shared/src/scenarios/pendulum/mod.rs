@@ -172,7 +172,9 @@ impl Pendulum {
         };
         // Extreme poles give gains that overflow.
         if !bias_gains.iter().all(|g| g.is_finite()) {
-            return Err(c.error(&poles_key("bias-observer"), format!("give gains too large to compute: {bias_gains:?}")));
+            return Err(
+                c.error(&poles_key("bias-observer"), format!("give gains too large to compute: {bias_gains:?}"))
+            );
         }
         if !no_bias_gains.iter().all(|g| g.is_finite()) {
             return Err(c.error(&poles_key("no-bias"), format!("give gains too large to compute: {no_bias_gains:?}")));

@@ -190,9 +190,11 @@ impl Quadcopter {
         }
         // Larger initial motion overflows the rigid body's products (ω × Jω) within a step.
         let initial = &plant.initial;
-        for (name, values) in
-            [("position_m", initial.position_m), ("velocity_m_s", initial.velocity_m_s), ("rate_rad_s", initial.rate_rad_s)]
-        {
+        for (name, values) in [
+            ("position_m", initial.position_m),
+            ("velocity_m_s", initial.velocity_m_s),
+            ("rate_rad_s", initial.rate_rad_s),
+        ] {
             for (i, value) in values.iter().enumerate() {
                 at_most(c, &format!("plant.initial.{name}.{i}"), *value)?;
             }
@@ -203,7 +205,8 @@ impl Quadcopter {
         not_negative(c, "plant.mass_step_at_s", plant.mass_step_at_s)?;
         // Positive parameters can still overflow (a mass of 1e-300 kg): ξ = (1/m, b/m, ...) of
         // the vehicle before and after the mass step must be finite.
-        for (key, mass) in [("model.mass_kg", model.mass_kg), ("plant.mass_step_kg", model.mass_kg + plant.mass_step_kg)]
+        for (key, mass) in
+            [("model.mass_kg", model.mass_kg), ("plant.mass_step_kg", model.mass_kg + plant.mass_step_kg)]
         {
             let xi = model.xi(mass);
             if !xi.iter().all(|x| x.is_finite()) {
