@@ -181,3 +181,58 @@ fn bad_wait_strategy_names_the_allowed_values() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("key `wait.strategy`") && stderr.contains("`block`, `spin`, `adaptive`"), "{stderr}");
 }
+
+/// Inputs that once made a process panic, made the run's report vanish or hung: each is now
+/// rejected at validation, before any process starts.
+#[test]
+fn out_of_range_and_non_finite_inputs_are_one_clear_error() {
+    rejects(
+        &["pendulum", "--fault", "stop controller at 1s for 1e19s"],
+        &["--fault stop controller at 1s for 1e19s", "key `faults.0.duration_s`", "at most 3600"],
+    );
+    rejects(
+        &["pendulum", "--fault", "delay controller by 1e20s at 1s"],
+        &["key `faults.0.delay_s`", "less than the run's duration_s"],
+    );
+    rejects(
+        &["pendulum", "--set", "supervision.backoff_s=2e19"],
+        &["--set supervision.backoff_s=2e19", "key `supervision.backoff_s`", "0 to 60 seconds"],
+    );
+    rejects(
+        &["quadcopter", "--set", "supervision.lockstep_stall_s=1e20"],
+        &["key `supervision.lockstep_stall_s`", "at most 3600"],
+    );
+    for (scenario, key) in [
+        ("pendulum", "plant.initial.theta"),
+        ("pendulum", "plant.initial.wheel_speed"),
+        ("quadcopter", "plant.initial.position_m.2"),
+        ("quadcopter", "plant.initial.rate_rad_s.0"),
+    ] {
+        for value in ["nan", "inf", "-inf"] {
+            let set = format!("{key}={value}");
+            rejects(&[scenario, "--set", &set], &[&format!("--set {set}"), &format!("key `{key}`"), "finite"]);
+        }
+    }
+    rejects(&["pendulum", "--set", "model.m_p=nan"], &["key `model.m_p`", "finite"]);
+    rejects(&["quadcopter", "--set", "model.inertia_kg_m2=[6e-3, nan, 1e-3]"], &["key `model.inertia_kg_m2.1`"]);
+
+    let dir = fresh_dir("non-finite");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("nan.toml");
+    std::fs::write(&file, "scenario = \"pendulum\"\n[plant.initial]\ntheta = nan\n").unwrap();
+    let file = file.to_str().unwrap();
+    rejects(&[file], &[file, "key `plant.initial.theta`", "finite"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_sweep_over_too_many_values_is_refused_before_any_run() {
+    let output = looplab()
+        .args(["sweep", "pendulum", "--param", "faults.0.delay_ticks", "--from", "0", "--to", "1e9"])
+        .args(["--fault", "delay controller by 0 ticks at 2s"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("at most 1000 are allowed"), "{stderr}");
+}

@@ -11,7 +11,19 @@ use rand::distr::{Distribution, StandardUniform};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::launch::{LaunchConfig, LaunchError, Mode};
+use crate::launch::{LaunchConfig, LaunchError, MAX_DURATION_S, Mode};
+
+/// The longest a `stop` may last, wall-clock s (an hour). It is wall-clock time, which in
+/// lockstep has nothing to do with the run's simulated duration_s (a short lockstep run may
+/// want a stop longer than itself to trip `lockstep_stall_s`), and anything longer only hangs
+/// the run.
+pub const MAX_STOP_S: f64 = 3600.0;
+/// The longest wall-clock timeout of `[supervision]`, s (an hour).
+pub const MAX_TIMEOUT_S: f64 = 3600.0;
+/// The longest wait before a restart, s (the launcher caps the doubled backoff at 1 s anyway).
+pub const MAX_BACKOFF_S: f64 = 60.0;
+/// The most restarts per process and run.
+pub const MAX_RESTARTS: u32 = 1000;
 
 /// Every process the launcher starts, in the order data flows.
 pub const PROCESSES: [&str; 5] = ["plant", "sensors", "estimator", "controller", "monitor"];
@@ -100,6 +112,8 @@ pub struct FaultSpec {
 impl FaultSpec {
     /// The tick at which it starts, and the first tick after it (None: until the end).
     pub fn ticks(&self, rate_hz: f64) -> (u64, Option<u64>) {
+        // at_s < duration_s ≤ a week, duration_s ≤ a week and rate_hz ≤ 100 kHz (checked at
+        // load): both terms are below 1e11, so neither the casts nor the sum can overflow.
         let from = (self.at_s * rate_hz).round() as u64;
         (from, self.duration_s.map(|d| from + (d * rate_hz).round() as u64))
     }
@@ -151,10 +165,17 @@ impl FaultSpec {
                 format!("must be a time within the run, 0 ≤ at_s < {} s, got {}", c.duration_s, self.at_s),
             ));
         }
-        if let Some(d) = self.duration_s
-            && !(d.is_finite() && d > 0.0)
-        {
-            return Err(c.error(&field("duration_s"), format!("must be a positive number of seconds, got {d}")));
+        if let Some(d) = self.duration_s {
+            // A stop lasts wall-clock seconds; the others simulation time, where anything past
+            // the run's end means "to the end".
+            let (most, what) = if self.kind == FaultKind::Stop {
+                (MAX_STOP_S, "wall-clock seconds, at most 3600 (an hour)")
+            } else {
+                (MAX_DURATION_S, "seconds, at most 604800 (a week; leave it out for \"to the end of the run\")")
+            };
+            if !(d.is_finite() && d > 0.0 && d <= most) {
+                return Err(c.error(&field("duration_s"), format!("must be a positive number of {what}, got {d}")));
+            }
         }
         let only = |name: &str, present: bool, kind: FaultKind| -> Result<(), LaunchError> {
             if present && self.kind != kind {
@@ -177,9 +198,13 @@ impl FaultSpec {
                 (Some(_), Some(_)) | (None, None) => {
                     Err(c.error(&field("delay_s"), "give exactly one of delay_s (seconds) and delay_ticks (loops)"))
                 }
-                (Some(d), None) if !(d.is_finite() && d >= 0.0) => {
-                    Err(c.error(&field("delay_s"), format!("must be 0 or more seconds, got {d}")))
-                }
+                (Some(d), None) if !(d.is_finite() && d >= 0.0 && d < c.duration_s) => Err(c.error(
+                    &field("delay_s"),
+                    format!("must be 0 or more seconds, less than the run's duration_s = {} s, got {d}", c.duration_s),
+                )),
+                (None, Some(t)) if u64::from(t) > c.loops() => Err(
+                    c.error(&field("delay_ticks"), format!("must be at most the run's {} loops, got {t}", c.loops()))
+                ),
                 _ => Ok(()),
             },
             FaultKind::Drop => match self.probability {
@@ -374,26 +399,41 @@ impl Supervision {
     }
 
     pub fn check(&self, c: &LaunchConfig) -> Result<(), LaunchError> {
-        let positive = |key: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
+        let timeout = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 && v <= MAX_TIMEOUT_S {
                 Ok(())
             } else {
-                Err(c.error(&format!("supervision.{key}"), format!("must be a positive number of seconds, got {v}")))
+                Err(c.error(
+                    &format!("supervision.{key}"),
+                    format!("must be a positive number of seconds, at most {MAX_TIMEOUT_S} (an hour), got {v}"),
+                ))
             }
         };
-        positive("stall_timeout_s", self.stall_timeout_s)?;
-        positive("command_timeout_s", self.command_timeout_s)?;
-        positive("lockstep_stall_s", self.lockstep_stall_s)?;
-        positive("backoff_reset_s", self.backoff_reset_s)?;
+        timeout("stall_timeout_s", self.stall_timeout_s)?;
+        timeout("command_timeout_s", self.command_timeout_s)?;
+        timeout("lockstep_stall_s", self.lockstep_stall_s)?;
+        timeout("backoff_reset_s", self.backoff_reset_s)?;
         for process in PROCESSES {
-            let backoff = self.policy(process).backoff_s;
-            if !(backoff.is_finite() && backoff >= 0.0) {
-                let key = if self.policy_of(process).backoff_s.is_some() {
-                    format!("supervision.{process}.backoff_s")
-                } else {
-                    "supervision.backoff_s".into()
+            // The key to blame: the process's own, or the default it took.
+            let key = |field: &str| {
+                let own = match field {
+                    "backoff_s" => self.policy_of(process).backoff_s.is_some(),
+                    _ => self.policy_of(process).max_restarts.is_some(),
                 };
-                return Err(c.error(&key, format!("must be 0 or more seconds, got {backoff}")));
+                if own { format!("supervision.{process}.{field}") } else { format!("supervision.{field}") }
+            };
+            let policy = self.policy(process);
+            if !(policy.backoff_s.is_finite() && policy.backoff_s >= 0.0 && policy.backoff_s <= MAX_BACKOFF_S) {
+                return Err(c.error(
+                    &key("backoff_s"),
+                    format!("must be 0 to {MAX_BACKOFF_S} seconds, got {}", policy.backoff_s),
+                ));
+            }
+            if policy.max_restarts > MAX_RESTARTS {
+                return Err(c.error(
+                    &key("max_restarts"),
+                    format!("must be 0 to {MAX_RESTARTS} restarts per process and run, got {}", policy.max_restarts),
+                ));
             }
         }
         Ok(())
@@ -467,6 +507,7 @@ impl StageFaults {
     fn ticks_of(&self, spec: &FaultSpec) -> Option<u32> {
         match (spec.delay_ticks, spec.delay_s) {
             (Some(t), _) => Some(t),
+            // delay_s < duration_s (checked at load): at most the run's loops, ≤ MAX_LOOPS < u32::MAX.
             (_, Some(s)) => Some((s / self.dt).round() as u32),
             _ => None,
         }
@@ -476,6 +517,8 @@ impl StageFaults {
         let spec = self.active(FaultKind::Delay, k)?;
         Some(match self.mode {
             Mode::Lockstep => AddedDelay::Ticks(self.ticks_of(spec).unwrap_or(0)),
+            // delay_s < duration_s and delay_ticks ≤ loops (checked at load): finite, not
+            // negative and at most about a week, so this cannot panic.
             Mode::Realtime => AddedDelay::Wall(std::time::Duration::from_secs_f64(
                 spec.delay_s.unwrap_or_else(|| f64::from(spec.delay_ticks.unwrap_or(0)) * self.dt),
             )),
@@ -517,5 +560,36 @@ mod tests {
         }
         let f = parse_fault("stop controller at 2s for 200ms").unwrap();
         assert_eq!(parse_fault(&f.describe()).unwrap(), f, "{}", f.describe());
+    }
+
+    /// The error that the pendulum's defaults (10 s at 1 kHz) with this `--fault` give, if any.
+    fn checked(fault: &str) -> Result<(), LaunchError> {
+        let overrides = [crate::launch::Override::fault(fault).unwrap()];
+        crate::launch::resolve("pendulum", &overrides).map(|_| ())
+    }
+
+    fn rejected(fault: &str, key: &str, fragment: &str) {
+        let e = checked(fault).unwrap_err();
+        assert_eq!(e.origin, format!("--fault {fault}"));
+        assert_eq!(e.key.as_deref(), Some(key), "{fault}: {e}");
+        assert!(e.message.contains(fragment), "{fault}: {e}");
+    }
+
+    #[test]
+    fn fault_times_and_amounts_are_bounded() {
+        rejected("stop controller at 1s for 1e19s", "faults.0.duration_s", "at most 3600");
+        rejected("stop controller at 1s for 3601s", "faults.0.duration_s", "at most 3600");
+        checked("stop controller at 1s for 3600s").unwrap();
+        rejected("drop sensors 20% at 1s for 604801s", "faults.0.duration_s", "at most 604800");
+        checked("drop sensors 20% at 1s for 60s").unwrap();
+        rejected("delay controller by 1e20s at 1s", "faults.0.delay_s", "less than the run's duration_s = 10 s");
+        rejected("delay controller by 10s at 1s", "faults.0.delay_s", "less than the run's duration_s");
+        checked("delay controller by 9.999s at 1s").unwrap();
+        rejected("delay controller by 10001 ticks at 1s", "faults.0.delay_ticks", "at most the run's 10000 loops");
+        checked("delay controller by 10000 ticks at 1s").unwrap();
+        rejected("kill plant at 1e19s", "faults.0.at_s", "within the run");
+        rejected("kill plant at -1s", "faults.0.at_s", "within the run");
+        rejected("drop sensors nan% at 1s", "faults.0.probability", "finite");
+        rejected("drop sensors 101% at 1s", "faults.0.probability", "between 0 and 1");
     }
 }

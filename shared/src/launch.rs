@@ -17,6 +17,15 @@ use crate::msg::{MAX_SENSOR_DIM, MAX_SENSORS};
 use crate::scenarios::{self, Scenario, ScenarioEntry, Signal};
 use crate::wait::WaitSettings;
 
+/// The longest run allowed, s (one week): it keeps every time and tick count of a run far
+/// from the limits of `Duration` and `u64` arithmetic.
+pub const MAX_DURATION_S: f64 = 604_800.0;
+/// The fastest loop allowed, Hz.
+pub const MAX_RATE_HZ: f64 = 100_000.0;
+/// The most loops a run may have (a week at 1 kHz is 6.048e8); also keeps tick counts that are
+/// derived from a run's loops within `u32` (delays in ticks).
+pub const MAX_LOOPS: u64 = 1_000_000_000;
+
 /// The top-level keys every launch file shares; the rest belong to the scenario.
 const COMMON_KEYS: [&str; 9] =
     ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision", "wait"];
@@ -191,6 +200,7 @@ impl LaunchConfig {
 
     /// Number of loops the run has: duration × rate, rounded to the nearest tick.
     pub fn loops(&self) -> u64 {
+        // duration_s ≤ a week and rate_hz ≤ 100 kHz (checked at load): below 1e11, no saturation.
         (self.duration_s * self.rate_hz).round() as u64
     }
 
@@ -201,6 +211,7 @@ impl LaunchConfig {
 
     /// A sensor's period in loop ticks (checked to be a whole number at load).
     pub fn period_ticks(&self, sensor: &SensorSpec) -> u64 {
+        // period_s ≤ duration_s (checked at load): at most the run's loops.
         (sensor.period_s * self.rate_hz).round() as u64
     }
 
@@ -383,6 +394,9 @@ fn from_document(
             set_dotted(&mut document, o).map_err(|message| LaunchError::new(o.origin(), Some(&o.key), message))?;
         origins.set_keys.insert(key, o.origin());
     }
+    // TOML allows nan and inf; no key of a launch file means either, and the checks below
+    // (and the physics) can then assume finite numbers.
+    document.iter().try_for_each(|(key, value)| check_finite(&origins, key, value))?;
 
     let scenario_name = match document.get("scenario") {
         Some(toml::Value::String(s)) => s.clone(),
@@ -442,14 +456,28 @@ fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
     if !(c.rate_hz.is_finite() && c.rate_hz > 0.0) {
         return Err(c.error("rate_hz", format!("must be a positive number of loops per second, got {}", c.rate_hz)));
     }
-    if c.rate_hz > 100_000.0 {
-        return Err(c.error("rate_hz", format!("must be at most 100000 Hz, got {}", c.rate_hz)));
+    if c.rate_hz > MAX_RATE_HZ {
+        return Err(c.error("rate_hz", format!("must be at most {MAX_RATE_HZ} Hz, got {}", c.rate_hz)));
     }
-    if !(c.duration_s.is_finite() && c.duration_s > 0.0) {
-        return Err(c.error("duration_s", format!("must be a positive number of seconds, got {}", c.duration_s)));
+    if !(c.duration_s.is_finite() && c.duration_s > 0.0 && c.duration_s <= MAX_DURATION_S) {
+        return Err(c.error(
+            "duration_s",
+            format!("must be a positive number of seconds, at most {MAX_DURATION_S} (a week), got {}", c.duration_s),
+        ));
     }
     if c.loops() == 0 {
         return Err(c.error("duration_s", format!("{} s at {} Hz is less than one loop", c.duration_s, c.rate_hz)));
+    }
+    if c.loops() > MAX_LOOPS {
+        return Err(c.error(
+            "duration_s",
+            format!(
+                "{} s at {} Hz is {} loops; at most {MAX_LOOPS} are allowed (shorten the run or lower rate_hz)",
+                c.duration_s,
+                c.rate_hz,
+                c.loops()
+            ),
+        ));
     }
     if c.sensors.len() > MAX_SENSORS {
         return Err(c.error("sensors", format!("at most {MAX_SENSORS} sensors are supported, got {}", c.sensors.len())));
@@ -469,6 +497,18 @@ fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
                     2.0 * dt,
                     3.0 * dt
                 ),
+            ));
+        }
+        if s.period_s > c.duration_s {
+            return Err(c.error(
+                &key("period_s"),
+                format!("must be at most the run's duration_s = {} s, got {}", c.duration_s, s.period_s),
+            ));
+        }
+        if u64::from(s.delay_ticks) > c.loops() {
+            return Err(c.error(
+                &key("delay_ticks"),
+                format!("must be at most the run's {} loops, got {}", c.loops(), s.delay_ticks),
             ));
         }
         if !(s.quantum.is_finite() && s.quantum >= 0.0) {
@@ -514,6 +554,21 @@ fn check_sensors(c: &LaunchConfig) -> Result<(), LaunchError> {
         }
     }
     Ok(())
+}
+
+/// Rejects NaN and ±inf anywhere in `value`, found at dotted `key` (list items by index).
+fn check_finite(origins: &Origins, key: &str, value: &toml::Value) -> Result<(), LaunchError> {
+    let child = |part: &dyn fmt::Display| format!("{key}.{part}");
+    match value {
+        toml::Value::Float(v) if !v.is_finite() => {
+            Err(origins.error(key, format!("must be a finite number, got {v}; nan and inf are not allowed")))
+        }
+        toml::Value::Table(table) => table.iter().try_for_each(|(k, v)| check_finite(origins, &child(k), v)),
+        toml::Value::Array(items) => {
+            items.iter().enumerate().try_for_each(|(i, v)| check_finite(origins, &child(&i), v))
+        }
+        _ => Ok(()),
+    }
 }
 
 /// A TOML syntax error on one line: where, and what.
@@ -582,6 +637,20 @@ fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<String, String
                 _ => return Err(format!("`{path}` is a value, not a table, so it has no key `{part}`")),
             };
         }
+        // One item of a list (`model.inertia_kg_m2.1`).
+        if let toml::Value::Array(items) = value
+            && !o.append
+        {
+            let len = items.len();
+            let item = last.parse::<usize>().ok().and_then(|i| items.get_mut(i)).ok_or_else(|| {
+                format!("`{}` is a list of {len}; index it with 0 to {}", parents.join("."), len.saturating_sub(1))
+            })?;
+            *item = match (&*item, &o.value) {
+                (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
+                (_, v) => v.clone(),
+            };
+            return Ok(o.key.clone());
+        }
         let toml::Value::Table(table) = value else {
             return Err(format!("`{}` is not a table, so it has no key `{last}`", parents.join(".")));
         };
@@ -634,6 +703,11 @@ mod tests {
         assert_eq!(c.duration_s, 30.0);
         assert_eq!(c.mode, Mode::Lockstep);
         assert_eq!(c.document["estimator"]["kind"].as_str(), Some("no-bias"));
+
+        let c = run(&["controller.gains.1=-50"]).unwrap();
+        assert_eq!(c.document["controller"]["gains"][1].as_float(), Some(-50.0));
+        let e = run(&["controller.gains.3=1"]).unwrap_err();
+        assert!(e.message.contains("is a list of 3; index it with 0 to 2"), "{e}");
     }
 
     #[test]
@@ -705,6 +779,150 @@ mod tests {
         let e = resolve(broken.to_str().unwrap(), &[]).map(|_| ()).unwrap_err();
         assert!(e.message.starts_with("not valid TOML"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn non_finite_numbers_are_rejected_naming_the_key_and_origin() {
+        for (set, key) in [
+            ("plant.initial.theta=nan", "plant.initial.theta"),
+            ("plant.initial.wheel_speed=-inf", "plant.initial.wheel_speed"),
+            ("model.m_p=inf", "model.m_p"),
+            ("controller.gains=[-378.0, nan, -1.0]", "controller.gains.1"),
+            ("sensors.encoder.bias=[nan]", "sensors.encoder.bias.0"),
+        ] {
+            let e = run(&[set]).unwrap_err();
+            assert_eq!(e.origin, format!("--set {set}"));
+            assert_eq!(e.key.as_deref(), Some(key), "{e}");
+            assert!(e.message.contains("must be a finite number"), "{e}");
+        }
+
+        let fault = Override::fault("delay controller by infs at 1s").unwrap();
+        let e = resolve("pendulum", &[fault]).map(|_| ()).unwrap_err();
+        assert_eq!(e.origin, "--fault delay controller by infs at 1s");
+        assert_eq!(e.key.as_deref(), Some("faults.0.delay_s"), "{e}");
+
+        let dir = std::env::temp_dir().join(format!("looplab-launch-nan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("nan.toml");
+        std::fs::write(&file, "scenario = \"quadcopter\"\n[plant.initial]\nposition_m = [0.0, nan, 0.0]\n").unwrap();
+        let e = resolve(file.to_str().unwrap(), &[]).map(|_| ()).unwrap_err();
+        assert_eq!(e.origin, file.to_str().unwrap());
+        assert_eq!(e.key.as_deref(), Some("plant.initial.position_m.1"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Asserts that `sets` is rejected with an error on `key` whose message has `fragment`.
+    fn rejected(sets: &[&str], key: &str, fragment: &str) {
+        let e = run(sets).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some(key), "{sets:?}: {e}");
+        assert!(e.message.contains(fragment), "{sets:?}: {e}");
+    }
+
+    #[test]
+    fn durations_rates_and_counts_are_bounded() {
+        rejected(&["duration_s=604801"], "duration_s", "at most 604800");
+        rejected(&["duration_s=604800", "rate_hz=100000"], "duration_s", "at most 1000000000");
+        assert_eq!(run(&["duration_s=604800"]).unwrap().loops(), 604_800_000);
+        rejected(&["duration_s=0.005"], "sensors.wheel_speed.period_s", "at most the run's duration_s");
+        rejected(
+            &["sensors.encoder.delay_ticks=10001"],
+            "sensors.encoder.delay_ticks",
+            "at most the run's 10000 loops",
+        );
+        run(&["sensors.encoder.delay_ticks=10000"]).unwrap();
+        rejected(&["wait.lead_us=1000001"], "wait.lead_us", "0 to 1000000");
+        rejected(&["wait.spin_cap_us=-1"], "wait.spin_cap_us", "0 to 1000000");
+        rejected(&["plant.substeps=1001"], "plant.substeps", "1 to 1000");
+        rejected(&["plant.substeps=0"], "plant.substeps", "1 to 1000");
+    }
+
+    #[test]
+    fn supervision_times_and_counts_are_bounded() {
+        rejected(&["supervision.backoff_s=2e19"], "supervision.backoff_s", "0 to 60 seconds");
+        rejected(&["supervision.controller.backoff_s=61"], "supervision.controller.backoff_s", "0 to 60");
+        run(&["supervision.backoff_s=60", "supervision.max_restarts=1000"]).unwrap();
+        rejected(&["supervision.max_restarts=1001"], "supervision.max_restarts", "0 to 1000");
+        rejected(&["supervision.plant.max_restarts=5000"], "supervision.plant.max_restarts", "0 to 1000");
+        for key in ["lockstep_stall_s", "stall_timeout_s", "command_timeout_s"] {
+            rejected(&[&format!("supervision.{key}=1e20")], &format!("supervision.{key}"), "at most 3600");
+            rejected(&[&format!("supervision.{key}=0")], &format!("supervision.{key}"), "positive");
+        }
+    }
+
+    #[test]
+    fn scenario_parameters_that_overflow_the_physics_are_rejected() {
+        rejected(&["model.torque_constant=1e307"], "model", "finite");
+        rejected(&["estimator.bias-observer.poles=[-1e300, -1e300, -1e300]"], "estimator.bias-observer.poles", "gains");
+        let quadcopter = |sets: &[&str]| {
+            let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s).unwrap()).collect();
+            resolve("quadcopter", &overrides).map(|_| ()).unwrap_err()
+        };
+        assert_eq!(quadcopter(&["model.mass_kg=1e-320"]).key.as_deref(), Some("model.mass_kg"));
+        assert_eq!(
+            quadcopter(&["estimator.initial_xi_factor=[0.0, 1.0, 1.0, 1.0]"]).key.as_deref(),
+            Some("estimator.initial_xi_factor.0")
+        );
+        assert_eq!(quadcopter(&["plant.mass_step_at_s=-1"]).key.as_deref(), Some("plant.mass_step_at_s"));
+    }
+
+    /// Every number of each scenario's defaults, set to extreme values, loads or gives an error:
+    /// never a panic, and what loads builds a plant whose first step is finite.
+    #[test]
+    fn extreme_values_of_every_key_load_or_fail_cleanly() {
+        fn numeric_keys(prefix: &str, value: &toml::Value, out: &mut Vec<(String, bool)>) {
+            match value {
+                toml::Value::Float(_) => out.push((prefix.to_owned(), true)),
+                toml::Value::Integer(_) => out.push((prefix.to_owned(), false)),
+                toml::Value::Table(t) => {
+                    for (k, v) in t {
+                        let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                        numeric_keys(&key, v, out);
+                    }
+                }
+                toml::Value::Array(items) => {
+                    for (i, v) in items.iter().enumerate() {
+                        numeric_keys(&format!("{prefix}.{i}"), v, out);
+                    }
+                }
+                _ => {}
+            }
+        }
+        let floats = [0.0, -1.0, 1e300, -1e300, 1e-300];
+        let integers = [0, -1, 1, i64::MAX, i64::MIN];
+        for entry in scenarios::ALL {
+            let mut keys = Vec::new();
+            numeric_keys("", &toml::Value::Table(entry.defaults()), &mut keys);
+            assert!(keys.len() > 20, "{}: {keys:?}", entry.name);
+            for (key, is_float) in keys {
+                let values: Vec<toml::Value> = if is_float {
+                    floats.iter().map(|v| toml::Value::Float(*v)).collect()
+                } else {
+                    integers.iter().map(|v| toml::Value::Integer(*v)).collect()
+                };
+                for value in values {
+                    let text = format!("{key}={value}");
+                    let o = Override { key: key.clone(), value, text: text.clone(), append: false };
+                    let Ok((config, scenario)) = resolve(entry.name, &[o]) else { continue };
+                    let mut plant = scenario.plant();
+                    let _ = (scenario.estimator(), scenario.controller(), scenario.metrics());
+                    let u: Vec<f64> = scenario.input_limits().iter().map(|(lo, hi)| (lo + hi) / 2.0).collect();
+                    plant.step(0.0, &u, config.dt());
+                    let finite = plant.state().iter().all(|x| x.is_finite());
+                    assert!(finite, "{}: {text} loads, and the first step gives {:?}", entry.name, plant.state());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn every_launch_file_of_the_repository_is_within_the_bounds() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch/quadcopter");
+        let mut files: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+        files.sort();
+        assert!(files.len() >= 7, "{files:?}");
+        for file in files {
+            resolve(file.to_str().unwrap(), &[]).unwrap_or_else(|e| panic!("{e}"));
+        }
     }
 
     #[test]

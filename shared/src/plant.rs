@@ -226,6 +226,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
         held: [0.0; MAX_INPUT],
         applied: [0.0; MAX_INPUT],
         held_arrived: 0,
+        // At most an hour (checked at load): well within u64 nanoseconds.
         command_timeout_ns: (supervision.command_timeout_s * 1e9) as u64,
         on_stale: supervision.on_stale,
         queued: VecDeque::new(),
@@ -264,6 +265,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                 .filter(|f| f.kind.from_outside())
                 .map(|f| f.ticks(context.config.rate_hz).0)
                 .collect();
+            // Positive, finite and at most an hour (checked at load), so this cannot panic.
             let stall_limit = Duration::from_secs_f64(supervision.lockstep_stall_s);
             emit(&ChildEvent::Started { start_ns: now_ns(), period_ns: 0, k: p.k })?;
             p.save();

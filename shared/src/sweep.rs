@@ -65,6 +65,9 @@ fn value_text(v: f64) -> String {
     if v.fract() == 0.0 && v.abs() < 1e15 { format!("{}", v as i64) } else { format!("{v}") }
 }
 
+/// The most values one sweep runs.
+const MAX_SWEEP_VALUES: usize = 1000;
+
 /// The swept values, from `from` to `to` inclusive.
 fn values(from: f64, to: f64, step: f64) -> Vec<f64> {
     let n = ((to - from) / step + 1e-9).floor() as i64;
@@ -86,6 +89,14 @@ pub fn run(args: SweepArgs) -> ExitCode {
     }
     if args.to < args.from {
         return bad(format!("--to ({}) is below --from ({})", args.to, args.from));
+    }
+    // Each value is a whole run: a typo such as --to 1e9 must not queue a billion of them.
+    let count = ((args.to - args.from) / args.step + 1e-9).floor() + 1.0;
+    if count > MAX_SWEEP_VALUES as f64 {
+        return bad(format!(
+            "--from {} --to {} --step {} gives {count} values; at most {MAX_SWEEP_VALUES} are allowed",
+            args.from, args.to, args.step
+        ));
     }
     let values = values(args.from, args.to, args.step);
     // Check every value's launch file before running any.

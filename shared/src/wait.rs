@@ -37,6 +37,10 @@ impl Strategy {
     }
 }
 
+/// The longest `lead_us` and `spin_cap_us`, µs: a second, far beyond any loop period worth
+/// polling through.
+pub const MAX_WAIT_US: f64 = 1e6;
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WaitSettings {
@@ -86,8 +90,8 @@ impl WaitSettings {
 
     pub fn check(&self, config: &crate::launch::LaunchConfig) -> Result<(), crate::launch::LaunchError> {
         for (key, value) in [("wait.lead_us", self.lead_us), ("wait.spin_cap_us", self.spin_cap_us)] {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(config.error(key, format!("must be 0 or a positive number of µs, got {value}")));
+            if !(value.is_finite() && (0.0..=MAX_WAIT_US).contains(&value)) {
+                return Err(config.error(key, format!("must be 0 to {MAX_WAIT_US} µs (a second), got {value}")));
             }
         }
         Ok(())
@@ -219,6 +223,7 @@ impl Waiter {
         }
         Self {
             strategy,
+            // At most MAX_WAIT_US (checked at load): well within u64 nanoseconds.
             lead_ns: (settings.lead_us * 1e3) as u64,
             cap_ns: (settings.spin_cap_us * 1e3) as u64,
             counts: WaitCounts::default(),

@@ -38,6 +38,19 @@ impl ScenarioEntry {
 
 pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY];
 
+/// The most integration steps per loop period: more would only make a loop slower than its
+/// period (and a huge count hangs the plant).
+pub const MAX_SUBSTEPS: u32 = 1000;
+
+/// An error unless `substeps` (at dotted `key`) is 1 to [`MAX_SUBSTEPS`].
+pub fn check_substeps(c: &LaunchConfig, key: &str, substeps: u32) -> Result<(), LaunchError> {
+    if (1..=MAX_SUBSTEPS).contains(&substeps) {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be 1 to {MAX_SUBSTEPS} integration steps per loop, got {substeps}")))
+    }
+}
+
 /// Something a sensor can measure: named components read from the true state.
 pub struct Signal {
     pub name: &'static str,

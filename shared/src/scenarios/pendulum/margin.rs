@@ -24,6 +24,10 @@ use crate::launch::{LaunchConfig, SensorSpec};
 
 /// The exact search gives up here: a second of delay at 1 kHz.
 const MAX_DELAY_TICKS: u32 = 1000;
+/// Larger sampled loops (a long sampling pattern, long sensor delays) are not analysed: the
+/// search would take hours.
+const MAX_PERIOD_TICKS: u64 = 10_000;
+const MAX_SENSOR_MEMORY: usize = 1000;
 
 /// How much extra command delay the loop tolerates, from theory.
 ///
@@ -65,24 +69,28 @@ pub struct DelayMargin {
 
 /// Both margins of the loop `p` (built from `config`).
 ///
-/// # Panics
-/// If the sampled loop is still stable with [`MAX_DELAY_TICKS`] of delay, or the continuous
-/// loop gain never crosses 1.
-pub fn delay_margin(p: &Pendulum, config: &LaunchConfig) -> DelayMargin {
+/// None where theory has no answer for this launch file: the sampled loop is still stable with
+/// [`MAX_DELAY_TICKS`] of delay, its Schur form does not converge, the continuous loop gain
+/// never crosses 1, or the loop is too large to analyse (see [`MAX_PERIOD_TICKS`]).
+pub fn delay_margin(p: &Pendulum, config: &LaunchConfig) -> Option<DelayMargin> {
+    let base = SampledLoop::new(p, config, 0);
+    if base.period() > MAX_PERIOD_TICKS || base.encoder.memory() + base.wheel.memory() > MAX_SENSOR_MEMORY {
+        return None;
+    }
     let mut radius_before = f64::NAN;
-    let (ticks, radius_at_margin) = (0..=MAX_DELAY_TICKS)
-        .find_map(|d| {
-            let r = spectral_radius_per_tick(p, config, d);
-            if r >= 1.0 {
-                return Some((d, r));
-            }
-            radius_before = r;
-            None
-        })
-        .unwrap_or_else(|| panic!("the loop is still stable with {MAX_DELAY_TICKS} ticks of command delay"));
-    let c = continuous_margin(p, Lags::default()).expect("the continuous loop gain should cross 1");
-    let lagged = continuous_margin(p, Lags::of_sampling(config)).expect("the continuous loop gain should cross 1");
-    DelayMargin {
+    let mut unstable = None;
+    for d in 0..=MAX_DELAY_TICKS {
+        let r = spectral_radius_per_tick(p, config, d)?;
+        if r >= 1.0 {
+            unstable = Some((d, r));
+            break;
+        }
+        radius_before = r;
+    }
+    let (ticks, radius_at_margin) = unstable?;
+    let c = continuous_margin(p, Lags::default())?;
+    let lagged = continuous_margin(p, Lags::of_sampling(config))?;
+    Some(DelayMargin {
         ticks,
         radius_at_margin,
         radius_before,
@@ -91,20 +99,20 @@ pub fn delay_margin(p: &Pendulum, config: &LaunchConfig) -> DelayMargin {
         continuous_s: c.delay_s,
         continuous_ticks: c.delay_s / p.dt,
         lagged_ticks: lagged.delay_s / p.dt,
-    }
+    })
 }
 
 /// Per-tick spectral radius of the linearised sampled loop with `d` ticks of extra command
 /// delay: ρ(monodromy)^(1/P) over the period P (ticks) after which the sensors' sampling
-/// pattern repeats. Below 1: stable.
-pub fn spectral_radius_per_tick(p: &Pendulum, config: &LaunchConfig, d: u32) -> f64 {
+/// pattern repeats. Below 1: stable. None if the Schur form does not converge.
+pub fn spectral_radius_per_tick(p: &Pendulum, config: &LaunchConfig, d: u32) -> Option<f64> {
     let lp = SampledLoop::new(p, config, d as usize);
-    spectral_radius(lp.monodromy()).powf(1.0 / lp.period() as f64)
+    Some(spectral_radius(lp.monodromy())?.powf(1.0 / lp.period() as f64))
 }
 
-fn spectral_radius(m: DMatrix<f64>) -> f64 {
-    let schur = nalgebra::linalg::Schur::try_new(m, f64::EPSILON, 1_000_000).expect("the Schur form should converge");
-    schur.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max)
+fn spectral_radius(m: DMatrix<f64>) -> Option<f64> {
+    let schur = nalgebra::linalg::Schur::try_new(m, f64::EPSILON, 1_000_000)?;
+    Some(schur.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max))
 }
 
 /// The continuous observer, linearised: dx̂/dt = M (x̂₁, x̂₂, x̂₃, y, I), with y the encoder
@@ -404,6 +412,14 @@ mod tests {
 
     const KINDS: [&str; 2] = ["estimator.kind=bias-observer", "estimator.kind=no-bias"];
 
+    #[test]
+    fn loops_too_large_to_analyse_have_no_margin_instead_of_a_panic_or_a_hang() {
+        let (config, p) = pendulum(&["duration_s=20", "sensors.wheel_speed.period_s=10.007"]);
+        assert!(delay_margin(&p, &config).is_none());
+        let (config, p) = pendulum(&["sensors.encoder.delay_ticks=5000"]);
+        assert!(delay_margin(&p, &config).is_none());
+    }
+
     /// One tick of a simulation of the loop's own components.
     struct Recorded {
         x: Vector3<f64>,
@@ -580,7 +596,7 @@ mod tests {
                     .filter(|l| l.norm() > 1e-6)
                     .collect();
                 assert!(continuous.iter().all(|l| l.re < 0.0));
-                assert!(spectral_radius_per_tick(&p, &config, 0) < 1.0);
+                assert!(spectral_radius_per_tick(&p, &config, 0).unwrap() < 1.0);
                 let error = continuous
                     .iter()
                     .map(|l| sampled.iter().map(|s| (s - l).norm() / l.norm()).fold(f64::INFINITY, f64::min))
@@ -617,10 +633,10 @@ mod tests {
     /// the lagged continuous estimate just below the exact margin.
     fn checked_margin(sets: &[&str]) -> DelayMargin {
         let (config, p) = pendulum(sets);
-        let m = delay_margin(&p, &config);
+        let m = delay_margin(&p, &config).unwrap();
         let crossovers = crossovers(&p, Lags::default());
         println!("{sets:?}: {m:?}, crossovers {crossovers:?}");
-        assert!(spectral_radius_per_tick(&p, &config, 0) < 1.0, "{m:?}");
+        assert!(spectral_radius_per_tick(&p, &config, 0).unwrap() < 1.0, "{m:?}");
         assert!(m.ticks > 0 && m.radius_before < 1.0 && 1.0 <= m.radius_at_margin, "{m:?}");
         assert_eq!(m.lagged_ticks.ceil(), f64::from(m.ticks), "{m:?}");
         m

@@ -141,10 +141,19 @@ impl Pendulum {
                 return Err(c.error(&format!("model.{key}"), format!("must be a positive number, got {value}")));
             }
         }
-        let plant: PlantSection = c.section("plant")?;
-        if plant.substeps == 0 {
-            return Err(c.error("plant.substeps", "must be at least 1"));
+        // Positive parameters can still overflow (1e300 kg): the linear model must be finite.
+        let (a, b) = (model.a(), model.b());
+        if !(a.is_finite() && a != 0.0 && b.is_finite() && b != 0.0) {
+            return Err(c.error(
+                "model",
+                format!(
+                    "these parameters give a = m·l·g/J₀ = {a} and b = −k/J₀ = {b}; both must be finite and \
+                     non-zero (keep the parameters within physical ranges)"
+                ),
+            ));
         }
+        let plant: PlantSection = c.section("plant")?;
+        super::check_substeps(c, "plant.substeps", plant.substeps)?;
         let estimator: EstimatorSection = c.section("estimator")?;
         let poles_key = |kind: &str| format!("estimator.{kind}.poles");
         if estimator.bias_observer.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
@@ -161,6 +170,15 @@ impl Pendulum {
             Some(g) => nalgebra::Vector2::from(g),
             None => estimator::no_bias_gains(estimator.no_bias.poles),
         };
+        // Extreme poles give gains that overflow.
+        if !bias_gains.iter().all(|g| g.is_finite()) {
+            return Err(
+                c.error(&poles_key("bias-observer"), format!("give gains too large to compute: {bias_gains:?}"))
+            );
+        }
+        if !no_bias_gains.iter().all(|g| g.is_finite()) {
+            return Err(c.error(&poles_key("no-bias"), format!("give gains too large to compute: {no_bias_gains:?}")));
+        }
         let controller: ControllerSection = c.section("controller")?;
         let limits: LimitsSection = c.section("limits")?;
         for (key, value) in [("fall_angle_rad", limits.fall_angle_rad), ("recovery_band_rad", limits.recovery_band_rad)]
@@ -250,7 +268,7 @@ impl Scenario for Pendulum {
     }
 
     fn delay_margin(&self, config: &LaunchConfig) -> Option<TheoreticalMargin> {
-        let m = margin::delay_margin(self, config);
+        let m = margin::delay_margin(self, config)?;
         Some(TheoreticalMargin {
             ticks: m.ticks,
             continuous_ticks: m.continuous_ticks,

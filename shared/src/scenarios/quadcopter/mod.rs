@@ -155,6 +155,19 @@ fn not_negative(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchErr
     }
 }
 
+/// The largest magnitude of an initial position, velocity or rate and of the process noise
+/// (SI units): far beyond any flight, and small enough that their products stay finite.
+const MAX_MOTION: f64 = 1e4;
+
+/// An error unless `value` is within ±[`MAX_MOTION`].
+fn at_most(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
+    if value.abs() <= MAX_MOTION {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be within ±{MAX_MOTION} (SI units), got {value}")))
+    }
+}
+
 impl Quadcopter {
     pub fn from_config(c: &LaunchConfig) -> Result<Self, LaunchError> {
         let model: Model = c.section("model")?;
@@ -170,14 +183,41 @@ impl Quadcopter {
         positive(c, "model.rate_max_rad_s", model.rate_max_rad_s)?;
 
         let plant: PlantSection = c.section("plant")?;
-        if plant.substeps == 0 {
-            return Err(c.error("plant.substeps", "must be at least 1"));
-        }
+        super::check_substeps(c, "plant.substeps", plant.substeps)?;
         for (i, std) in plant.process_noise_std.iter().enumerate() {
             not_negative(c, &format!("plant.process_noise_std.{i}"), *std)?;
+            at_most(c, &format!("plant.process_noise_std.{i}"), *std)?;
+        }
+        // Larger initial motion overflows the rigid body's products (ω × Jω) within a step.
+        let initial = &plant.initial;
+        for (name, values) in [
+            ("position_m", initial.position_m),
+            ("velocity_m_s", initial.velocity_m_s),
+            ("rate_rad_s", initial.rate_rad_s),
+        ] {
+            for (i, value) in values.iter().enumerate() {
+                at_most(c, &format!("plant.initial.{name}.{i}"), *value)?;
+            }
         }
         if plant.mass_step_kg <= -model.mass_kg {
             return Err(c.error("plant.mass_step_kg", "must leave a positive mass"));
+        }
+        not_negative(c, "plant.mass_step_at_s", plant.mass_step_at_s)?;
+        // Positive parameters can still overflow (a mass of 1e-300 kg): ξ = (1/m, b/m, ...) of
+        // the vehicle before and after the mass step must be finite.
+        for (key, mass) in
+            [("model.mass_kg", model.mass_kg), ("plant.mass_step_kg", model.mass_kg + plant.mass_step_kg)]
+        {
+            let xi = model.xi(mass);
+            if !xi.iter().all(|x| x.is_finite()) {
+                return Err(c.error(
+                    key,
+                    format!(
+                        "with these mass, inertia and disturbance values ξ = (1/m, b/m, ...) is not finite: {xi:?}; \
+                         keep them within physical ranges"
+                    ),
+                ));
+            }
         }
 
         let estimator: EstimatorSection = c.section("estimator")?;
@@ -194,6 +234,8 @@ impl Quadcopter {
             positive(c, &format!("estimator.{name}.1"), q)?;
         }
         positive(c, "estimator.initial_mass_inertia_factor", estimator.initial_mass_inertia_factor)?;
+        // ξ̂₁(0) = factor · 1/m: the mass filter divides by it.
+        positive(c, "estimator.initial_xi_factor.0", estimator.initial_xi_factor[0])?;
 
         let controller: ControllerSection = c.section("controller")?;
         for (i, k) in controller.gains.iter().enumerate() {
