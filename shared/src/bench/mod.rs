@@ -14,6 +14,7 @@
 pub mod codec;
 pub mod pingpong;
 mod plot;
+pub mod restarts;
 pub mod uds_loop;
 
 use std::collections::BTreeMap;
@@ -43,6 +44,10 @@ pub struct BenchArgs {
     /// Folder for bench.json, the charts and the runs (default: runs/<time>-bench)
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Only measure restarts: N real-time kills of the loop's processes, idle and then with two
+    /// CPU hogs and an fsync loop; p50/p99/max of each step; writes restarts.json
+    #[arg(long, value_name = "N")]
+    pub restarts: Option<usize>,
 }
 
 const MODES: [Strategy; 3] = [Strategy::Block, Strategy::Spin, Strategy::Adaptive];
@@ -372,6 +377,10 @@ fn check(stop: &StopFlag) -> Result<()> {
 
 fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let stop = StopFlag::install()?;
+    if let Some(kills) = args.restarts {
+        let out = crate::launcher::create_run_dir(args.out.as_deref(), "bench-restarts")?;
+        return restarts::run(kills, &out, &crate::launcher::locate_binaries()?);
+    }
     let began = Instant::now();
     let quick = args.quick;
     let seconds = args.seconds.unwrap_or(if quick { 4.0 } else { 60.0 });
