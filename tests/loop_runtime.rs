@@ -348,16 +348,14 @@ fn a_run_killed_all_at_once_is_removed_by_looplab_clean_with_its_frozen_orphan()
         assert!(Instant::now() < until, "killed children still alive: {children:?}");
         std::thread::sleep(Duration::from_millis(20));
     }
-    assert!(alive(i64::from(monitor)), "the frozen monitor is an orphan now");
-    assert!(!looplab_shared::ipc::files_of_run(&run_id).is_empty(), "a run killed at once leaves its files");
-
+    // Nobody is left to tidy up. `looplab clean` removes the run, unless the start of another
+    // test's run (which cleans abandoned runs too) got to it first.
     let output = looplab().arg("clean").output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "looplab clean: {stderr}");
-    assert!(stderr.contains(&run_id), "looplab clean names the run it removed: {stderr}");
     let until = Instant::now() + Duration::from_secs(20);
     while alive(i64::from(monitor)) {
-        assert!(Instant::now() < until, "looplab clean left the orphaned monitor running");
+        assert!(Instant::now() < until, "looplab clean left the orphaned monitor running: {stderr}");
         std::thread::sleep(Duration::from_millis(20));
     }
     assert_no_files_left(&run_id);
