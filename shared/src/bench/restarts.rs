@@ -103,7 +103,10 @@ fn measure(
     binaries: &BTreeMap<&'static str, PathBuf>,
 ) -> Result<Vec<RestartBench>> {
     let duration = kills as f64 * KILL_INTERVAL_S + 1.0;
-    let mut overrides = vec![Override::parse(&format!("duration_s={duration:?}"))?];
+    let mut overrides = vec![
+        Override::parse(&format!("duration_s={duration:?}"))?,
+        Override::parse(&format!("supervision.max_restarts={kills}"))?,
+    ];
     for i in 0..kills {
         let at = 0.5 + i as f64 * KILL_INTERVAL_S;
         overrides.push(Override::fault(&format!("kill {} at {at}s", TARGETS[i % TARGETS.len()]))?);
