@@ -5,50 +5,8 @@
 
 mod common;
 
-use std::io::Write;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-
 use common::*;
-
-/// A CPU hog and an fsync loop, stopped when dropped.
-struct Load {
-    hog: std::process::Child,
-    writing: Arc<AtomicBool>,
-    writer: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Load {
-    fn start() -> Self {
-        let hog = std::process::Command::new("sh").args(["-c", "while :; do :; done"]).spawn().expect("start a CPU hog");
-        let writing = Arc::new(AtomicBool::new(true));
-        let flag = writing.clone();
-        let path = fresh_dir("disk-writer");
-        let writer = std::thread::spawn(move || {
-            let block = vec![0u8; 1 << 20];
-            while flag.load(Ordering::Relaxed) {
-                let mut file = std::fs::File::create(&path).expect("create the writer's file");
-                for _ in 0..8 {
-                    file.write_all(&block).expect("write");
-                }
-                file.sync_all().expect("fsync");
-            }
-            let _ = std::fs::remove_file(&path);
-        });
-        Self { hog, writing, writer: Some(writer) }
-    }
-}
-
-impl Drop for Load {
-    fn drop(&mut self) {
-        let _ = self.hog.kill();
-        let _ = self.hog.wait();
-        self.writing.store(false, Ordering::Relaxed);
-        if let Some(writer) = self.writer.take() {
-            let _ = writer.join();
-        }
-    }
-}
+use looplab_shared::bench::restarts::Load;
 
 #[test]
 fn under_cpu_and_fsync_load_every_killed_process_comes_back_and_nothing_is_lost_or_left() {
@@ -71,10 +29,13 @@ fn under_cpu_and_fsync_load_every_killed_process_comes_back_and_nothing_is_lost_
     for (process, at) in stops {
         args.extend(["--fault".into(), format!("stop {process} at {at}s for 200ms")]);
     }
-    let load = Load::start();
+    let scratch = fresh_dir("soak-load");
+    std::fs::create_dir_all(&scratch).unwrap();
+    let load = Load::start(&scratch, 1).expect("start the load");
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let r = run("soak", &args);
     drop(load);
+    std::fs::remove_dir_all(&scratch).unwrap();
     let s = &r.summary;
 
     assert_eq!(s["completed"], true, "{}", s["stopped_because"]);

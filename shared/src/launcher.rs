@@ -804,10 +804,6 @@ impl<'a> Supervisor<'a> {
                 return Outcome::Interrupted;
             }
             match self.events.recv_timeout(Duration::from_millis(50)) {
-                Ok(Event::Child { index, event: Some(ChildEvent::Ready), .. }) => {
-                    self.processes[index].ready = true;
-                    self.processes[index].ready_since = Some(Instant::now());
-                }
                 Ok(event) => {
                     if let Some(index) = self.handle(event) {
                         return Outcome::Failed(format!(
@@ -894,7 +890,7 @@ impl<'a> Supervisor<'a> {
                 Ok(()) => {
                     let ns = now_ns();
                     let n = self.processes[index].incarnation;
-                    if let Some(r) = self.restarts.iter_mut().rev().find(|r| r.process == name) {
+                    if let Some(r) = self.latest_restart(name) {
                         r.spawned_ns = Some(ns);
                     }
                     self.note(ns, format!("{name} restarted (incarnation {n})"));
@@ -1014,7 +1010,7 @@ impl<'a> Supervisor<'a> {
                 self.processes[index].ready_since = Some(Instant::now());
                 if incarnation > 0 {
                     let ns = now_ns();
-                    if let Some(r) = self.restarts.iter_mut().rev().find(|r| r.process == name) {
+                    if let Some(r) = self.latest_restart(name) {
                         r.ready_ns.get_or_insert(ns);
                     }
                     for i in self.fault_indices(name, FaultKind::Kill) {
@@ -1157,6 +1153,11 @@ impl<'a> Supervisor<'a> {
         Some(Outcome::Failed(format!("{why}; see logs/{name}.log")))
     }
 
+    /// The newest restart of `process`, the one under way.
+    fn latest_restart(&mut self, process: &str) -> Option<&mut RestartRecord> {
+        self.restarts.iter_mut().rev().find(|r| r.process == process)
+    }
+
     /// The clean-up after a death of process `index` is done: its restart may go ahead.
     fn cleaned(&mut self, index: usize, removed: u64) {
         let ns = now_ns();
@@ -1166,7 +1167,7 @@ impl<'a> Supervisor<'a> {
             && !restart.cleaned
         {
             restart.cleaned = true;
-            if let Some(r) = self.restarts.iter_mut().rev().find(|r| r.process == name) {
+            if let Some(r) = self.latest_restart(name) {
                 r.cleaned_ns = Some(ns);
             }
             self.note(ns, format!("{name}: its iceoryx2 resources removed ({removed} dead node(s))"));

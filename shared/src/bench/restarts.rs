@@ -52,19 +52,20 @@ pub struct RestartBench {
     pub run_dir: String,
 }
 
-/// Two CPU hogs and an fsync loop, stopped when dropped.
-struct Load {
+/// CPU hogs and a disk writer that fsyncs without pause, stopped when dropped: a busy machine
+/// like CI's while the test suite runs.
+pub struct Load {
     hogs: Vec<std::process::Child>,
     writing: Arc<AtomicBool>,
     writer: Option<std::thread::JoinHandle<()>>,
 }
 
 impl Load {
-    fn start(scratch: &Path) -> Result<Self> {
-        let mut hogs = vec![];
-        for _ in 0..2 {
-            hogs.push(std::process::Command::new("sh").args(["-c", "while :; do :; done"]).spawn()?);
-        }
+    /// Starts `hogs` CPU hogs and the disk writer, whose file goes in `scratch`.
+    pub fn start(scratch: &Path, hogs: usize) -> Result<Self> {
+        let hogs = (0..hogs)
+            .map(|_| std::process::Command::new("sh").args(["-c", "while :; do :; done"]).spawn())
+            .collect::<std::io::Result<Vec<_>>>()?;
         let writing = Arc::new(AtomicBool::new(true));
         let flag = writing.clone();
         let path = scratch.join("disk-writer.bin");
@@ -180,7 +181,7 @@ pub fn run(kills: usize, out: &Path, binaries: &BTreeMap<&'static str, PathBuf>)
     }
     let idle = measure("idle", kills, out, binaries)?;
     let loaded = {
-        let _load = Load::start(out)?;
+        let _load = Load::start(out, 2)?;
         measure("loaded", kills, out, binaries)?
     };
     let mut text = String::from(
