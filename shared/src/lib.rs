@@ -1,22 +1,20 @@
-//! LoopLab's shared crate: the messages, the models, the loop stages, the monitor and the
-//! launcher. The binaries in `services/` are one call each into here.
+//! LoopLab's shared crate, in layers that depend only downwards:
+//! contract → config → model → scenarios → runtime → monitor → launcher → tools.
+//! The binaries in `services/` are one call each into here. ARCHITECTURE.md has the picture.
 
-pub mod bench;
-pub mod clock;
-pub mod faults;
-pub mod integrate;
-pub mod ipc;
-pub mod launch;
+pub mod config;
+pub mod contract;
 pub mod launcher;
+pub mod model;
 pub mod monitor;
-pub mod msg;
-pub mod plant;
-pub mod protocol;
-pub mod report;
+pub mod runtime;
 pub mod scenarios;
-pub mod sensors;
-pub mod signals;
-pub mod snapshot;
-pub mod stages;
-pub mod sweep;
-pub mod wait;
+pub mod tools;
+
+// The flat paths of before the layers, kept only while issue 11 moves code (removed at its end).
+pub use config::{faults, launch, wait};
+pub use contract::{clock, msg, protocol};
+pub use launcher::report;
+pub use model::{integrate, sensors};
+pub use runtime::{ipc, plant, signals, snapshot, stages};
+pub use tools::{bench, sweep};

@@ -47,31 +47,7 @@ const OPEN_RETRY: Duration = Duration::from_secs(3);
 /// How long a reader waits at start-up for its writer to exist.
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(20);
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Topic {
-    /// plant → sensors, monitor
-    State,
-    /// sensors → estimator, monitor
-    Measurements,
-    /// estimator → controller, monitor
-    Estimate,
-    /// controller → plant, monitor
-    Command,
-    /// plant → monitor: finished loop records
-    Loop,
-}
-
-impl Topic {
-    pub fn name(self) -> &'static str {
-        match self {
-            Topic::State => "state",
-            Topic::Measurements => "measurements",
-            Topic::Estimate => "estimate",
-            Topic::Command => "command",
-            Topic::Loop => "loop",
-        }
-    }
-}
+pub use crate::contract::role::Topic;
 
 /// The iceoryx2 file prefix of a run: every file the run creates starts with it.
 pub fn file_prefix(run_id: &str) -> String {

@@ -20,7 +20,7 @@ use crate::launch::{self, LaunchConfig, Mode, Override};
 use crate::monitor::MonitorReport;
 use crate::protocol::{ChildEvent, MonitorStatus, PlantReport, StageReport};
 use crate::report::{
-    self, FaultReport, Jitter, Latency, MonitorCounts, ProcessInfo, SharedMemoryCheck, Summary, TimelineEntry,
+    FaultReport, Jitter, Latency, MonitorCounts, ProcessInfo, SharedMemoryCheck, Summary, TimelineEntry,
 };
 use crate::scenarios::{self, Scenario};
 use crate::signals::StopFlag;
@@ -1403,3 +1403,5 @@ fn restart_name(r: Restart) -> &'static str {
         Restart::Always => "always",
     }
 }
+
+pub mod report;
