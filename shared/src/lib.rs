@@ -12,9 +12,9 @@ pub mod scenarios;
 pub mod tools;
 
 // The flat paths of before the layers, kept only while issue 11 moves code (removed at its end).
-pub use config::{faults, launch, wait};
+pub use config::{faults, launch};
 pub use contract::{clock, msg, protocol};
 pub use launcher::report;
 pub use model::{integrate, sensors};
-pub use runtime::{ipc, plant, signals, snapshot, stages};
+pub use runtime::{ipc, plant, signals, snapshot, stages, wait};
 pub use tools::{bench, sweep};

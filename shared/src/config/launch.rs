@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::faults::{FaultSpec, Supervision};
 use crate::msg::{MAX_SENSOR_DIM, MAX_SENSORS};
 use crate::scenarios::{self, Scenario, ScenarioEntry, Signal};
-use crate::wait::WaitSettings;
+use crate::config::wait::WaitSettings;
 
 /// The longest run allowed, s (one week): it keeps every time and tick count of a run far
 /// from the limits of `Duration` and `u64` arithmetic.

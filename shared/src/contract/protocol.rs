@@ -98,7 +98,7 @@ pub struct PlantReport {
     pub dropped: u64,
     /// Adaptive waits: caught the command or tick by polling, or blocked after the cap.
     #[serde(default)]
-    pub wait: crate::wait::WaitCounts,
+    pub wait: WaitCounts,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
@@ -118,7 +118,7 @@ pub struct StageReport {
     pub upstream_restarts: u64,
     /// Adaptive waits: caught the input by polling, or blocked after the cap.
     #[serde(default)]
-    pub wait: crate::wait::WaitCounts,
+    pub wait: WaitCounts,
 }
 
 /// Writes one event line on stdout for the launcher.
@@ -156,3 +156,13 @@ pub fn wait_for_line(stop: &StopFlag, expected: &str) -> Result<bool> {
     }
     Ok(false)
 }
+
+/// What an adaptive wait did, for the process's report.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WaitCounts {
+    /// Waits that found the input within the poll window.
+    pub caught: u64,
+    /// Waits that gave up polling and blocked.
+    pub blocked: u64,
+}
+

@@ -1199,11 +1199,11 @@ impl<'a> Supervisor<'a> {
     }
 
     /// Adaptive-wait counts per process, summed over its incarnations.
-    fn adaptive_waits(&self, plant: &PlantReport) -> BTreeMap<String, crate::wait::WaitCounts> {
+    fn adaptive_waits(&self, plant: &PlantReport) -> BTreeMap<String, crate::contract::protocol::WaitCounts> {
         let mut all = BTreeMap::new();
-        let mut add = |name: &str, w: crate::wait::WaitCounts| {
+        let mut add = |name: &str, w: crate::contract::protocol::WaitCounts| {
             if w.caught + w.blocked > 0 {
-                let entry: &mut crate::wait::WaitCounts = all.entry(name.to_string()).or_default();
+                let entry: &mut crate::contract::protocol::WaitCounts = all.entry(name.to_string()).or_default();
                 entry.caught += w.caught;
                 entry.blocked += w.blocked;
             }

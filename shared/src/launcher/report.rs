@@ -48,7 +48,7 @@ pub struct Summary {
     /// Per process with an adaptive wait (real time): inputs caught by polling, and waits that
     /// gave up polling and blocked.
     #[serde(default)]
-    pub adaptive_waits: BTreeMap<String, crate::wait::WaitCounts>,
+    pub adaptive_waits: BTreeMap<String, crate::contract::protocol::WaitCounts>,
     pub latency_ns: Latency,
     pub jitter_ns: Jitter,
     /// Per sensor: how old the sample behind command k was when command k took effect.

@@ -5,3 +5,4 @@ pub mod plant;
 pub mod signals;
 pub mod snapshot;
 pub mod stages;
+pub mod wait;

@@ -320,7 +320,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                 let first = TickTiming { scheduled_ns: start_ns + p.k * period_ns, wake_ns: woke, period_ns: 0 };
                 p.publish_state(first)?;
             }
-            let mut waiter = Waiter::new(&context.config.wait, "plant", true);
+            let mut waiter = Waiter::new(&context.config.wait, crate::contract::role::Role::Plant, true);
             while p.k < loops && !context.stop.requested() {
                 // Next: command k, if its state went out and it is not in yet, else the tick.
                 let next_tick = start_ns + (p.k + 1) * period_ns;

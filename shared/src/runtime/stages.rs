@@ -177,7 +177,7 @@ fn relay<In: Message, Out: Message>(
     let mut report = StageReport::default();
     let mut last_k: Option<u64> = None;
     let realtime = context.config.mode == Mode::Realtime;
-    let mut waiter = Waiter::new(&context.config.wait, stage.name(), realtime);
+    let mut waiter = Waiter::new(&context.config.wait, stage.name().parse().expect("a stage is a role"), realtime);
     let mut arrivals = ArrivalModel::new((context.config.dt() * 1e9).round() as u64);
     while !context.stop.requested() {
         let due = last_k.and_then(|k| arrivals.due(k + 1));

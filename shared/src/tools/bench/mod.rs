@@ -31,7 +31,7 @@ use crate::launch::{self, Override};
 use crate::signals::{Interrupted, StopFlag};
 use crate::msg::{PlantState, SensorReading};
 use crate::report::Summary;
-use crate::wait::Strategy;
+use crate::config::wait::Strategy;
 
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {

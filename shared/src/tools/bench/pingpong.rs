@@ -25,7 +25,8 @@ use serde::{Deserialize, Serialize};
 use super::codec;
 use crate::clock::now_ns;
 use crate::ipc::{retry, run_config};
-use crate::wait::{ArrivalModel, Strategy, WaitSettings, Waiter, sleep_until};
+use crate::config::wait::{Strategy, WaitSettings};
+use crate::runtime::wait::{ArrivalModel, Waiter, sleep_until};
 
 /// Bytes at the start of every message: sequence, ping sent, echo received, echo sent.
 const STAMPS: usize = 32;
@@ -173,7 +174,7 @@ pub fn echo_main(args: &EchoArgs) -> Result<()> {
         Transport::Iox => {
             let end = IoxEnd::open(&args.run_id, "pong", "ping", args.max_bytes)?;
             let settings = WaitSettings { strategy: args.mode, ..Default::default() };
-            let mut waiter = Waiter::new(&settings, "echo", true);
+            let mut waiter = Waiter::with_strategy(&settings, settings.strategy);
             let mut arrivals = ArrivalModel::new(args.period_ns.max(1));
             let mut last: Option<u64> = None;
             println!("ready");
@@ -262,7 +263,7 @@ pub fn ping(
             let mut ready = String::new();
             std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.take().expect("piped")), &mut ready)?;
             let settings = WaitSettings { strategy: mode, ..Default::default() };
-            let mut waiter = Waiter::new(&settings, "ping", true);
+            let mut waiter = Waiter::with_strategy(&settings, settings.strategy);
             let mut arrivals = ArrivalModel::new(period_ns.max(1));
             // iceoryx2 connects lazily: make sure both directions are up before the first ping.
             use iceoryx2::port::update_connections::UpdateConnections;
