@@ -1,5 +1,6 @@
-//! The controller process of the loop (see `looplab_shared::stages`).
+//! The controller process of the loop (see `looplab_shared::runtime::relay`).
 
 fn main() -> std::process::ExitCode {
-    looplab_shared::stages::process_main("controller", looplab_shared::stages::controller)
+    use looplab_shared::{contract::role::Role, runtime};
+    runtime::child::process_main(Role::Controller, runtime::relay::controller)
 }

@@ -1,5 +1,6 @@
-//! The estimator process of the loop (see `looplab_shared::stages`).
+//! The estimator process of the loop (see `looplab_shared::runtime::relay`).
 
 fn main() -> std::process::ExitCode {
-    looplab_shared::stages::process_main("estimator", looplab_shared::stages::estimator)
+    use looplab_shared::{contract::role::Role, runtime};
+    runtime::child::process_main(Role::Estimator, runtime::relay::estimator)
 }

@@ -1,5 +1,6 @@
-//! The plant process of the loop (see `looplab_shared::stages`).
+//! The plant process of the loop (see `looplab_shared::runtime::plant`).
 
 fn main() -> std::process::ExitCode {
-    looplab_shared::stages::process_main("plant", looplab_shared::plant::run)
+    use looplab_shared::{contract::role::Role, runtime};
+    runtime::child::process_main(Role::Plant, runtime::plant::run)
 }

@@ -1,5 +1,6 @@
-//! The sensors process of the loop (see `looplab_shared::stages`).
+//! The sensors process of the loop (see `looplab_shared::runtime::relay`).
 
 fn main() -> std::process::ExitCode {
-    looplab_shared::stages::process_main("sensors", looplab_shared::stages::sensors)
+    use looplab_shared::{contract::role::Role, runtime};
+    runtime::child::process_main(Role::Sensors, runtime::relay::sensors)
 }

@@ -16,5 +16,6 @@ pub use config::{faults, launch};
 pub use contract::{clock, msg, protocol};
 pub use launcher::report;
 pub use model::{integrate, sensors};
-pub use runtime::{ipc, plant, signals, snapshot, stages, wait};
+pub use runtime::child as stages;
+pub use runtime::{ipc, plant, signals, snapshot, wait};
 pub use tools::{bench, sweep};

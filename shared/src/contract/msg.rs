@@ -10,6 +10,8 @@
 
 use iceoryx2::prelude::*;
 
+use crate::contract::role::Role;
+
 /// Largest true-state vector a scenario may have.
 pub const MAX_STATE: usize = 32;
 /// Largest command vector.
@@ -49,6 +51,18 @@ impl LoopTrace {
         "controller_publish",
         "plant_receive",
     ];
+
+    /// Sets the receive and publish stamps of a stage (the plant's are set where they happen).
+    pub fn stamp(&mut self, role: Role, received: u64, published: u64) {
+        let (r, p) = match role {
+            Role::Sensors => (&mut self.sensors_receive, &mut self.sensors_publish),
+            Role::Estimator => (&mut self.estimator_receive, &mut self.estimator_publish),
+            Role::Controller => (&mut self.controller_receive, &mut self.controller_publish),
+            Role::Plant | Role::Monitor => unreachable!("only the stages stamp a receive and a publish"),
+        };
+        *r = received;
+        *p = published;
+    }
 
     pub fn stamps(&self) -> [u64; 8] {
         [
@@ -192,6 +206,22 @@ pub struct LoopRecord {
     /// monitor knows from its first record how many it never had the chance to receive.
     pub sequence: u64,
 }
+
+/// Every message of the loop carries the loop header.
+pub trait Message: Copy + Default + std::fmt::Debug + ZeroCopySend + 'static {
+    fn header(&self) -> &Header;
+    fn header_mut(&mut self) -> &mut Header;
+}
+
+macro_rules! impl_message {
+    ($($t:ty),*) => {$(
+        impl Message for $t {
+            fn header(&self) -> &Header { &self.header }
+            fn header_mut(&mut self) -> &mut Header { &mut self.header }
+        }
+    )*};
+}
+impl_message!(PlantState, Measurements, Estimate, Command, LoopRecord);
 
 /// All-zero values: every message is plain numbers, so zero is a valid starting point.
 macro_rules! zeroed_default {

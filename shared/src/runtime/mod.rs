@@ -1,8 +1,12 @@
-//! Layer 4, the runtime: iceoryx2 ports, waiting, the stage runner, the plant loop, snapshots.
+//! Layer 4, the runtime: it owns time and policy. iceoryx2 ports, waiting, the stage runner and
+//! its tasks, the plant loop, snapshots, and the in-process twin of the five processes.
 
+pub mod child;
+pub mod faults;
 pub mod ipc;
 pub mod plant;
+pub mod relay;
 pub mod signals;
 pub mod snapshot;
-pub mod stages;
+pub mod task;
 pub mod wait;

@@ -20,22 +20,25 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
 
-use crate::clock::{TickTimer, now_ns};
-use crate::faults::OnStale;
-use crate::ipc::{Topic, TopicPublisher, TopicSubscriber};
-use crate::launch::Mode;
-use crate::msg::*;
-use crate::protocol::{ChildEvent, PlantReport, emit, wait_for_line};
-use crate::snapshot::Snapshot;
-use crate::stages::{Context, wait, waitset};
-use crate::wait::{ArrivalModel, Waiter};
+use crate::config::faults::OnStale;
+use crate::config::launch::{LaunchConfig, Mode};
+use crate::contract::clock::{TickTimer, now_ns};
+use crate::contract::msg::*;
+use crate::contract::protocol::{ChildEvent, PlantReport, emit, wait_for_line};
+use crate::contract::role::{Role, Topic};
+use crate::runtime::child::{Context, wait, waitset};
+use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
+use crate::runtime::snapshot::Snapshot;
+use crate::runtime::wait::{ArrivalModel, Waiter};
+use crate::scenarios::Scenario;
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.
 const LATE_COMMAND_GRACE: Duration = Duration::from_millis(50);
 
-/// The plant's state between ticks: the truth, the commands, and the counters.
-struct PlantLoop {
+/// The plant's state between ticks: the truth, the commands, and the counters. Pure: the
+/// caller passes the times and sends the messages (the process below, or the in-process twin).
+pub struct PlantCore {
     plant: Box<dyn crate::scenarios::Plant>,
     limits: Vec<(f64, f64)>,
     dt: f64,
@@ -55,28 +58,50 @@ struct PlantLoop {
     /// Valid commands that arrived but have not taken effect yet: (arrival, command).
     queued: VecDeque<(u64, [f64; MAX_INPUT])>,
     /// The newest loop whose command arrived in time (valid or not).
-    in_time_k: Option<u64>,
+    pub in_time_k: Option<u64>,
     /// The newest tick whose state was published.
-    published_k: Option<u64>,
-    state_out: TopicPublisher<PlantState>,
-    loop_out: TopicPublisher<LoopRecord>,
-    counters: PlantCounters,
-    report: PlantReport,
-    snapshot: Snapshot<SnapshotData>,
+    pub published_k: Option<u64>,
+    pub counters: PlantCounters,
+    pub report: PlantReport,
     /// The current tick: the plant's state is at t = k·dt.
-    k: u64,
+    pub k: u64,
     /// When commands arrive after their tick's state goes out (real time).
     arrivals: ArrivalModel,
 }
 
-impl PlantLoop {
+impl PlantCore {
+    pub fn new(config: &LaunchConfig, scenario: &dyn Scenario, incarnation: u32) -> Self {
+        let supervision = &config.supervision;
+        Self {
+            plant: scenario.plant(),
+            limits: scenario.input_limits(),
+            dt: config.dt(),
+            incarnation,
+            schedule: None,
+            held: [0.0; MAX_INPUT],
+            applied: [0.0; MAX_INPUT],
+            held_arrived: 0,
+            // At most an hour (checked at load): well within u64 nanoseconds.
+            command_timeout_ns: (supervision.command_timeout_s * 1e9) as u64,
+            on_stale: supervision.on_stale,
+            queued: VecDeque::new(),
+            in_time_k: None,
+            published_k: None,
+            counters: PlantCounters::default(),
+            report: PlantReport::default(),
+            k: 0,
+            arrivals: ArrivalModel::new((config.dt() * 1e9).round() as u64),
+        }
+    }
+
     /// When tick `tick` is due (real-time mode).
     fn due(&self, tick: u64) -> Option<u64> {
         self.schedule.map(|(start, period)| start + tick * period)
     }
 
-    /// Publishes the state at tick k, with the command that was held over the last period.
-    fn publish_state(&mut self, timing: TickTiming) -> Result<()> {
+    /// The state at tick k, with the command that was held over the last period, published at
+    /// `published_ns`.
+    pub fn state_message(&mut self, timing: TickTiming, published_ns: u64) -> PlantState {
         let mut msg = PlantState {
             header: Header { k: self.k, t: self.k as f64 * self.dt, ..Default::default() },
             u_applied: self.applied,
@@ -87,22 +112,19 @@ impl PlantLoop {
         msg.header.incarnations[0] = self.incarnation;
         let x = self.plant.state();
         msg.x[..x.len()].copy_from_slice(x);
-        msg.header.trace.plant_publish = now_ns();
-        self.state_out.send(&msg)?;
+        msg.header.trace.plant_publish = published_ns;
         self.published_k = Some(self.k);
         if self.report.published == 0 {
-            self.report.first_publish_ns = msg.header.trace.plant_publish;
+            self.report.first_publish_ns = published_ns;
         }
-        self.report.last_publish_ns = msg.header.trace.plant_publish;
+        self.report.last_publish_ns = published_ns;
         self.report.published += 1;
-        self.save();
-        Ok(())
+        msg
     }
 
-    /// Takes one command: stamps its arrival, queues it if valid, publishes the loop record.
-    /// The command of loop k is in time if it arrives before tick k+1 is due.
-    fn accept(&mut self, command: &Command) -> Result<()> {
-        let arrived = now_ns();
+    /// Takes one command that arrived at `arrived`: queues it if valid, and returns the loop
+    /// record. The command of loop k is in time if it arrives before tick k+1 is due.
+    pub fn accept(&mut self, command: &Command, arrived: u64) -> LoopRecord {
         let k = command.header.k;
         let m = self.limits.len();
         let lost = command.header.lost != 0;
@@ -129,14 +151,14 @@ impl PlantLoop {
             sequence: self.report.commands,
         };
         record.header.trace.plant_receive = arrived;
-        self.loop_out.send(&record)
+        record
     }
 
     /// Integrates one period, tick k → k+1, with the newest valid command that had arrived
     /// when tick k+1 was due (zero-order hold), or `on_stale` once that command is older than
     /// the timeout. If tick k's state went out and command k was not in by then, loop k missed
     /// its deadline.
-    fn advance(&mut self) {
+    pub fn advance(&mut self) {
         let due = self.due(self.k + 1);
         while let Some(&(arrived, u)) = self.queued.front() {
             if due.is_some_and(|due| arrived > due) {
@@ -164,18 +186,16 @@ impl PlantLoop {
             self.applied = self.held;
         }
         self.k += 1;
-        self.save();
     }
 
-    fn drain(&mut self, commands: &TopicSubscriber<Command>) -> Result<()> {
-        let mut cleared = false;
-        while let Some(command) = commands.next(&mut cleared)? {
-            self.accept(&command)?;
-        }
-        Ok(())
+    /// Completes the report at the end of a run of `loops` loops.
+    pub fn finish(&mut self, loops: u64) {
+        self.report.stopped_early = self.k < loops;
+        self.report.counters = self.counters;
+        self.report.loops = self.report.published + self.counters.skipped_ticks;
     }
 
-    fn save(&mut self) {
+    fn snapshot(&self) -> SnapshotData {
         let mut s = SnapshotData {
             k: self.k,
             held: self.held,
@@ -192,7 +212,7 @@ impl PlantLoop {
         };
         let x = self.plant.state();
         s.x[..x.len()].copy_from_slice(x);
-        self.snapshot.write(&s);
+        s
     }
 
     fn restore(&mut self, s: &SnapshotData) {
@@ -213,34 +233,70 @@ impl PlantLoop {
     }
 }
 
+/// The plant process: the core, its two publishers, and the snapshot it writes after every
+/// change, so that a restarted plant goes on from where this one died.
+struct PlantProcess {
+    core: PlantCore,
+    state_out: TopicPublisher<PlantState>,
+    loop_out: TopicPublisher<LoopRecord>,
+    snapshot: Snapshot<SnapshotData>,
+}
+
+impl std::ops::Deref for PlantProcess {
+    type Target = PlantCore;
+    fn deref(&self) -> &PlantCore {
+        &self.core
+    }
+}
+
+impl std::ops::DerefMut for PlantProcess {
+    fn deref_mut(&mut self) -> &mut PlantCore {
+        &mut self.core
+    }
+}
+
+impl PlantProcess {
+    fn publish_state(&mut self, timing: TickTiming) -> Result<()> {
+        let msg = self.core.state_message(timing, now_ns());
+        self.state_out.send(&msg)?;
+        self.save();
+        Ok(())
+    }
+
+    fn accept(&mut self, command: &Command) -> Result<()> {
+        let record = self.core.accept(command, now_ns());
+        self.loop_out.send(&record)
+    }
+
+    fn advance(&mut self) {
+        self.core.advance();
+        self.save();
+    }
+
+    fn drain(&mut self, commands: &TopicSubscriber<Command>) -> Result<()> {
+        let mut cleared = false;
+        while let Some(command) = commands.next(&mut cleared)? {
+            self.accept(&command)?;
+        }
+        Ok(())
+    }
+
+    fn save(&mut self) {
+        let s = self.core.snapshot();
+        self.snapshot.write(&s);
+    }
+}
+
 pub fn run(context: &Context) -> Result<ChildEvent> {
     let commands: TopicSubscriber<Command> = context.ipc.stage_subscriber(Topic::Command)?;
     let supervision = &context.config.supervision;
-    let snapshot = Snapshot::open(&context.run_id, "plant")?;
-    let mut p = PlantLoop {
-        plant: context.scenario.plant(),
-        limits: context.scenario.input_limits(),
-        dt: context.config.dt(),
-        incarnation: context.incarnation,
-        schedule: None,
-        held: [0.0; MAX_INPUT],
-        applied: [0.0; MAX_INPUT],
-        held_arrived: 0,
-        // At most an hour (checked at load): well within u64 nanoseconds.
-        command_timeout_ns: (supervision.command_timeout_s * 1e9) as u64,
-        on_stale: supervision.on_stale,
-        queued: VecDeque::new(),
-        in_time_k: None,
-        published_k: None,
+    let mut p = PlantProcess {
+        core: PlantCore::new(&context.config, context.scenario.as_ref(), context.incarnation),
         state_out: context.ipc.publisher(Topic::State, true)?,
         loop_out: context.ipc.publisher(Topic::Loop, false)?,
-        counters: PlantCounters::default(),
-        report: PlantReport::default(),
-        snapshot,
-        k: 0,
-        arrivals: ArrivalModel::new((context.config.dt() * 1e9).round() as u64),
+        snapshot: Snapshot::open(&context.run_id, Role::Plant.name())?,
     };
-    let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.restore(&s)).is_some();
+    let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.core.restore(&s)).is_some();
     p.report.restored_at = restored.then_some(p.k);
     let ws = waitset()?;
     let _wake = ws
@@ -250,7 +306,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     emit(&ChildEvent::Ready)?;
     if !wait_for_line(&context.stop, "start")? {
         p.report.stopped_early = true;
-        return Ok(ChildEvent::PlantReport(p.report));
+        return Ok(ChildEvent::PlantReport(p.core.report));
     }
 
     let loops = context.config.loops();
@@ -320,7 +376,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                 let first = TickTiming { scheduled_ns: start_ns + p.k * period_ns, wake_ns: woke, period_ns: 0 };
                 p.publish_state(first)?;
             }
-            let mut waiter = Waiter::new(&context.config.wait, crate::contract::role::Role::Plant, true);
+            let mut waiter = Waiter::new(&context.config.wait, Role::Plant, true);
             while p.k < loops && !context.stop.requested() {
                 // Next: command k, if its state went out and it is not in yet, else the tick.
                 let next_tick = start_ns + (p.k + 1) * period_ns;
@@ -366,13 +422,11 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
             }
         }
     }
-    p.report.stopped_early = p.k < loops;
-    p.report.counters = p.counters;
-    p.report.loops = p.report.published + p.counters.skipped_ticks;
+    p.core.finish(loops);
     let (state_waited, state_dropped) = p.state_out.backpressure();
     let (loop_waited, loop_dropped) = p.loop_out.backpressure();
     (p.report.waited, p.report.dropped) = (state_waited + loop_waited, state_dropped + loop_dropped);
-    Ok(ChildEvent::PlantReport(p.report))
+    Ok(ChildEvent::PlantReport(p.core.report))
 }
 
 /// What a restarted plant needs to go on where the last one stopped.

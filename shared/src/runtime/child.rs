@@ -1,0 +1,92 @@
+//! What every loop process shares: its arguments, its context, its `main`, and how it waits on
+//! its iceoryx2 WaitSet. Each binary in `services/` is one call into here.
+
+use std::path::Path;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{Result, anyhow};
+use iceoryx2::prelude::*;
+
+use crate::config::launch::{LaunchConfig, load_resolved};
+use crate::contract::protocol::{ChildEvent, ProcessArgs, emit};
+use crate::contract::role::Role;
+use crate::runtime::ipc::Ipc;
+use crate::runtime::signals::StopFlag;
+use crate::scenarios::Scenario;
+
+/// Longest a wait blocks before it looks at the stop flag again (a signal also ends it early).
+pub const WAIT_SLICE: Duration = Duration::from_millis(100);
+
+/// What every loop process starts with.
+pub struct Context {
+    pub config: LaunchConfig,
+    pub scenario: Box<dyn Scenario>,
+    pub ipc: Ipc,
+    pub stop: StopFlag,
+    pub run_dir: std::path::PathBuf,
+    pub run_id: String,
+    /// 0 for the first start of this process, then one more per restart.
+    pub incarnation: u32,
+}
+
+/// Parses the arguments, loads the run's launch file and connects to iceoryx2, runs `body`,
+/// and turns a failure into a message on stderr and exit code 1.
+pub fn process_main(role: Role, body: fn(&Context) -> Result<ChildEvent>) -> ExitCode {
+    let name = role.name();
+    use clap::Parser;
+    let args = ProcessArgs::parse();
+    // SAFETY: getppid has no preconditions.
+    let launcher = unsafe { libc::getppid() };
+    let result = (|| -> Result<()> {
+        let stop = StopFlag::install()?;
+        let (config, scenario) = load_resolved(Path::new(&args.launch))?;
+        let ipc = Ipc::new(name, &args.run_id, config.mode)?;
+        let context = Context {
+            config,
+            scenario,
+            ipc,
+            stop,
+            run_dir: args.run_dir.clone(),
+            run_id: args.run_id.clone(),
+            incarnation: args.incarnation,
+        };
+        let report = body(&context)?;
+        emit(&report)
+    })();
+    // Our node is gone now. If the launcher died (we were stopped by PR_SET_PDEATHSIG), nobody
+    // else will tidy up: the last process of the run to go removes what is left of it. The others
+    // are exiting at the same moment, so each waits a little for them to go (a frozen one never
+    // goes: `looplab clean`, and every `looplab run`, removes the run once its launcher is gone).
+    // SAFETY: as above.
+    if unsafe { libc::getppid() } != launcher {
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
+        while crate::ipc::clean_up_run(&args.run_id).is_ok_and(|c| !c.leftover.is_empty())
+            && std::time::Instant::now() < until
+        {
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{name}: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+pub fn waitset() -> Result<WaitSet<ipc::Service>> {
+    WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow!("cannot create a WaitSet: {e:?}"))
+}
+
+/// Blocks until the WaitSet has an event, the slice ends, or a signal arrives.
+pub fn wait(ws: &WaitSet<ipc::Service>) -> Result<()> {
+    ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, WAIT_SLICE)
+        .map(|_| ())
+        .map_err(|e| anyhow!("WaitSet wait failed: {e:?}"))
+}
+

@@ -1,0 +1,82 @@
+//! The process runner of a stage: wake on input, let the [`StageRunner`] handle it, stamp the
+//! loop trace and publish. The sensors, estimator and controller processes are this loop around
+//! their task.
+
+use anyhow::{Result, anyhow};
+
+use crate::config::launch::Mode;
+use crate::contract::clock::now_ns;
+use crate::contract::msg::Message;
+use crate::contract::protocol::{ChildEvent, emit};
+use crate::contract::role::Role;
+use crate::runtime::child::{Context, WAIT_SLICE, wait, waitset};
+use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
+use crate::runtime::snapshot::Snapshot;
+use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
+use crate::runtime::wait::{ArrivalModel, Waiter};
+use crate::scenarios::Calibration;
+
+/// Runs `task` as the process of `role` until a stop is requested.
+fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {
+    let (input, output) = (role.input().expect("a stage has an input"), role.output().expect("and an output"));
+    let subscriber: TopicSubscriber<T::In> = context.ipc.stage_subscriber(input)?;
+    let publisher: TopicPublisher<T::Out> = context.ipc.publisher(output, true)?;
+    let ws = waitset()?;
+    let _wake = ws
+        .attach_notification(subscriber.listener().expect("stage subscribers have a listener"))
+        .map_err(|e| anyhow!("cannot attach the {input} listener: {e:?}"))?;
+    // The frozen state of the task survives a restart in the run's snapshot folder.
+    let mut kept: Option<Snapshot<Calibration>> =
+        if T::FREEZES { Some(Snapshot::open(&context.run_id, role.name())?) } else { None };
+    let mut runner = StageRunner::new(task, role, &context.config, context.incarnation);
+    if context.incarnation > 0
+        && let Some(frozen) = kept.as_mut().and_then(|k| k.read())
+    {
+        runner.task.thaw(&frozen);
+    }
+    subscriber.connect(&context.stop)?;
+    emit(&ChildEvent::Ready)?;
+
+    let mut last_k: Option<u64> = None;
+    let realtime = context.config.mode == Mode::Realtime;
+    let mut waiter = Waiter::new(&context.config.wait, role, realtime);
+    let mut arrivals = ArrivalModel::new((context.config.dt() * 1e9).round() as u64);
+    while !context.stop.requested() {
+        let due = last_k.and_then(|k| arrivals.due(k + 1));
+        let slice_end = now_ns() + WAIT_SLICE.as_nanos() as u64;
+        waiter.wait(due, slice_end, || subscriber.has_samples(), || wait(&ws))?;
+        let mut cleared = false;
+        while let Some(sample) = subscriber.next(&mut cleared)? {
+            let received = now_ns();
+            let header = *sample.header();
+            arrivals.observe(header.k, header.trace.plant_publish, received);
+            let handled = runner.handle(&sample);
+            if let (Some(kept), Some(frozen)) = (kept.as_mut(), runner.task.freeze()) {
+                kept.write(&frozen);
+            }
+            if let Some(hold) = handled.hold {
+                std::thread::sleep(hold);
+            }
+            let Some(mut out) = handled.output else { continue };
+            out.header_mut().trace.stamp(role, received, now_ns());
+            publisher.send(&out)?;
+            last_k = Some(header.k);
+        }
+    }
+    let mut report = runner.report;
+    (report.waited, report.dropped) = publisher.backpressure();
+    report.wait = waiter.counts;
+    Ok(ChildEvent::StageReport(report))
+}
+
+pub fn sensors(context: &Context) -> Result<ChildEvent> {
+    relay(context, Role::Sensors, SensorsTask::new(&context.config))
+}
+
+pub fn estimator(context: &Context) -> Result<ChildEvent> {
+    relay(context, Role::Estimator, EstimatorTask::new(&context.config, context.scenario.as_ref()))
+}
+
+pub fn controller(context: &Context) -> Result<ChildEvent> {
+    relay(context, Role::Controller, ControllerTask::new(context.scenario.as_ref()))
+}

@@ -1,0 +1,231 @@
+//! Stages as tasks. A task is the plain computation of one stage, input message to output
+//! message: it knows nothing of iceoryx2, the clock or the mode. The [`StageRunner`] around it
+//! does what every stage does the same way: incarnations, the in-loop faults (delay, drop,
+//! corrupt) by loop index, and the counts of the stage's report. The process runner
+//! (`runtime::relay`) adds waiting, stamping and publishing; the in-process runner
+//! (`runtime::in_process`) calls the same runners in loop order.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use crate::config::faults::CorruptValue;
+use crate::config::launch::{LaunchConfig, Mode};
+use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState};
+use crate::contract::protocol::StageReport;
+use crate::contract::role::Role;
+use crate::model::sensors::SensorEmulator;
+use crate::runtime::faults::{AddedDelay, StageFaults};
+use crate::scenarios::{Calibration, Controller, Estimator, Scenario};
+
+/// One stage's computation.
+pub trait Task {
+    type In: Message;
+    type Out: Message;
+    /// Whether the task has state to freeze (the process runner then keeps a snapshot).
+    const FREEZES: bool = false;
+    /// Computes this loop's output from its input (the header is the runner's business).
+    fn process(&mut self, input: &Self::In, output: &mut Self::Out);
+    /// Slow state worth keeping across a restart, such as a calibrated bias.
+    fn freeze(&self) -> Option<Calibration> {
+        None
+    }
+    /// A restarted task gets its predecessor's frozen state before its first input.
+    fn thaw(&mut self, _frozen: &Calibration) {}
+    /// Replaces the output by a corrupt value (`corrupt` faults, which target the command).
+    fn corrupt(&self, _output: &mut Self::Out, _value: CorruptValue) {}
+}
+
+/// The sensors: every sensor's held reading at the plant's tick.
+pub struct SensorsTask {
+    emulator: SensorEmulator,
+    sensors: usize,
+}
+
+impl SensorsTask {
+    pub fn new(config: &LaunchConfig) -> Self {
+        Self { emulator: SensorEmulator::new(config), sensors: config.sensors.len() }
+    }
+}
+
+impl Task for SensorsTask {
+    type In = PlantState;
+    type Out = Measurements;
+    fn process(&mut self, state: &PlantState, out: &mut Measurements) {
+        self.emulator.tick(state.header.k, state.header.t, &state.x, &mut out.readings[..self.sensors]);
+        out.u_applied = state.u_applied;
+    }
+}
+
+/// The scenario's estimator.
+pub struct EstimatorTask {
+    estimator: Box<dyn Estimator>,
+    sensors: usize,
+    inputs: usize,
+    estimates: usize,
+}
+
+impl EstimatorTask {
+    pub fn new(config: &LaunchConfig, scenario: &dyn Scenario) -> Self {
+        Self {
+            estimator: scenario.estimator(),
+            sensors: config.sensors.len(),
+            inputs: scenario.input_names().len(),
+            estimates: scenario.estimate_names().len(),
+        }
+    }
+}
+
+impl Task for EstimatorTask {
+    type In = Measurements;
+    type Out = Estimate;
+    const FREEZES: bool = true;
+    fn process(&mut self, meas: &Measurements, out: &mut Estimate) {
+        let readings = &meas.readings[..self.sensors];
+        self.estimator.update(meas.header.t, readings, &meas.u_applied[..self.inputs], &mut out.x[..self.estimates]);
+    }
+    fn freeze(&self) -> Option<Calibration> {
+        self.estimator.calibration()
+    }
+    fn thaw(&mut self, frozen: &Calibration) {
+        self.estimator.resume(frozen);
+    }
+}
+
+/// The scenario's controller.
+pub struct ControllerTask {
+    controller: Box<dyn Controller>,
+    estimates: usize,
+    limits: Vec<(f64, f64)>,
+}
+
+impl ControllerTask {
+    pub fn new(scenario: &dyn Scenario) -> Self {
+        Self {
+            controller: scenario.controller(),
+            estimates: scenario.estimate_names().len(),
+            limits: scenario.input_limits(),
+        }
+    }
+}
+
+impl Task for ControllerTask {
+    type In = Estimate;
+    type Out = Command;
+    fn process(&mut self, est: &Estimate, out: &mut Command) {
+        let m = self.limits.len();
+        self.controller.update(est.header.t, &est.x[..self.estimates], &mut out.u[..m]);
+    }
+    fn corrupt(&self, out: &mut Command, value: CorruptValue) {
+        for (u, (_, hi)) in out.u.iter_mut().zip(&self.limits) {
+            *u = match value {
+                CorruptValue::Nan => f64::NAN,
+                CorruptValue::Inf => f64::INFINITY,
+                CorruptValue::OutOfRange => 10.0 * hi.abs().max(1.0),
+            };
+        }
+    }
+}
+
+/// What became of one input.
+pub struct Handled<Out> {
+    /// Real time: a delay fault asks to hold the output this long before it goes out.
+    pub hold: Option<Duration>,
+    /// The output to publish, header set (stamps aside); None if a drop fault took it.
+    pub output: Option<Out>,
+}
+
+/// Runs one task the way every stage runs: see the module's documentation.
+///
+/// A restart upstream shows in the data: every header carries the incarnation of each process
+/// that handled the loop, so the runner sees a new one arrive, logs it and counts it. A restarted
+/// stage itself starts from nothing but its task's frozen state.
+pub struct StageRunner<T: Task> {
+    pub task: T,
+    role: Role,
+    slot: usize,
+    incarnation: u32,
+    faults: StageFaults,
+    /// Lockstep delay line: the outputs computed in the last loops, newest last.
+    computed: VecDeque<T::Out>,
+    keep: usize,
+    /// Real time: a dropped output is not sent; lockstep: it is sent marked lost, so the loop
+    /// goes on and the plant holds its command.
+    drop_sends_lost: bool,
+    upstream: Option<[u32; 4]>,
+    last_k: Option<u64>,
+    pub report: StageReport,
+}
+
+impl<T: Task> StageRunner<T> {
+    pub fn new(task: T, role: Role, config: &LaunchConfig, incarnation: u32) -> Self {
+        let faults = StageFaults::for_role(config, role);
+        let keep = faults.max_delay_ticks() as usize + 1;
+        Self {
+            task,
+            role,
+            slot: role.slot().expect("a stage has an incarnation slot"),
+            incarnation,
+            faults,
+            computed: VecDeque::new(),
+            keep,
+            drop_sends_lost: config.mode == Mode::Lockstep,
+            upstream: None,
+            last_k: None,
+            report: StageReport::default(),
+        }
+    }
+
+    /// Handles the input of one loop.
+    pub fn handle(&mut self, input: &T::In) -> Handled<T::Out> {
+        let header = *input.header();
+        let k = header.k;
+        let mut seen = header.incarnations;
+        seen[self.slot..].fill(0);
+        if self.upstream.is_some_and(|u| u != seen) {
+            self.report.upstream_restarts += 1;
+            eprintln!("{}: loop {k}: an upstream process restarted (incarnations {seen:?})", self.role);
+        }
+        self.upstream = Some(seen);
+
+        // A loop dropped upstream (lockstep) is passed on, not computed: like a lost message in
+        // real time, this stage does not run for it.
+        let mut out = if header.lost == 0 {
+            let mut out = T::Out::default();
+            self.task.process(input, &mut out);
+            if let Some(value) = self.faults.corrupt(k) {
+                self.task.corrupt(&mut out, value);
+            }
+            out
+        } else {
+            self.computed.back().copied().unwrap_or_default()
+        };
+        self.computed.push_back(out);
+        if self.computed.len() > self.keep {
+            self.computed.pop_front();
+        }
+        let mut hold = None;
+        match self.faults.delay(k) {
+            Some(AddedDelay::Wall(d)) => hold = Some(d),
+            Some(AddedDelay::Ticks(d)) => {
+                // What was computed d loops ago, or the oldest kept at the start of a run.
+                out = self.computed[self.computed.len().saturating_sub(1 + d as usize)];
+            }
+            None => {}
+        }
+        *out.header_mut() = header;
+        out.header_mut().incarnations[self.slot] = self.incarnation;
+        if self.faults.drops(k) {
+            self.report.dropped_by_fault += 1;
+            if !self.drop_sends_lost {
+                return Handled { hold, output: None };
+            }
+            out.header_mut().lost = 1;
+        }
+        self.report.processed += 1;
+        if let Some(last) = self.last_k {
+            self.report.skipped += k.saturating_sub(last + 1);
+        }
+        self.last_k = Some(k);
+        Handled { hold, output: Some(out) }
+    }
+}
