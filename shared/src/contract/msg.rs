@@ -223,6 +223,16 @@ macro_rules! impl_message {
 }
 impl_message!(PlantState, Measurements, Estimate, Command, LoopRecord);
 
+/// Any message of a loop, for whoever records them all (the monitor).
+#[derive(Debug, Clone, Copy)]
+pub enum LoopMessage {
+    State(PlantState),
+    Measurements(Measurements),
+    Estimate(Estimate),
+    Command(Command),
+    Loop(LoopRecord),
+}
+
 /// All-zero values: every message is plain numbers, so zero is a valid starting point.
 macro_rules! zeroed_default {
     ($($t:ty),*) => {$(

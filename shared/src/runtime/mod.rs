@@ -3,6 +3,7 @@
 
 pub mod child;
 pub mod faults;
+pub mod in_process;
 pub mod ipc;
 pub mod plant;
 pub mod relay;
