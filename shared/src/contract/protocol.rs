@@ -165,4 +165,3 @@ pub struct WaitCounts {
     /// Waits that gave up polling and blocked.
     pub blocked: u64,
 }
-

@@ -150,7 +150,8 @@ impl Joiner {
         let newest = self.newest_any()?;
         let k = self.next_k;
         let part = self.pending.get(&k);
-        let settled = Topic::ALL.iter().all(|&t| part.is_some_and(|p| p.has(t)) || self.newest[t].is_some_and(|n| n > k));
+        let settled =
+            Topic::ALL.iter().all(|&t| part.is_some_and(|p| p.has(t)) || self.newest[t].is_some_and(|n| n > k));
         if k > newest || !(settled || newest >= k + self.window) {
             return None;
         }

@@ -13,11 +13,11 @@ use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::role::Topic;
 use crate::monitor::fault_effect::FaultTracker;
-use crate::runtime::ipc::MONITOR_BUFFER;
 use crate::monitor::join::{Joiner, LoopParts, Sample};
 use crate::monitor::layout::Layout;
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
 use crate::monitor::stats::LoopStats;
+use crate::runtime::ipc::MONITOR_BUFFER;
 use crate::scenarios::{ErrorMeasure, Metrics, Row, Scenario};
 
 /// A loop still missing parts once this many newer loops have arrived is written as it is: by
@@ -139,8 +139,13 @@ impl Recording {
         report.hops = HOPS.iter().zip(&stats.hops).map(|((name, _, _), d)| (name.to_string(), d.stats())).collect();
         report.plant_tick_jitter = stats.plant_tick_jitter.stats();
         report.plant_wake_latency = stats.plant_wake_latency.stats();
-        report.data_age =
-            self.layout.sensors.iter().map(|(name, _)| name.clone()).zip(stats.data_age.iter().map(|d| d.stats())).collect();
+        report.data_age = self
+            .layout
+            .sensors
+            .iter()
+            .map(|(name, _)| name.clone())
+            .zip(stats.data_age.iter().map(|d| d.stats()))
+            .collect();
         report.metrics = self.metrics.finish();
         report.notes = self.metrics.notes();
         report.faults = self.faults.into_iter().map(|f| f.finish(self.dt)).collect();
@@ -185,5 +190,104 @@ impl Recording {
             _ => self.report.partial_rows += 1,
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::launch::{Override, resolve};
+    use crate::monitor::join::tests::{command, estimate, measurements, record, state, whole};
+
+    /// A lockstep pendulum run of 6 loops, recorded into a fresh folder.
+    fn setup(name: &str) -> (LaunchConfig, Box<dyn Scenario>, std::path::PathBuf) {
+        let overrides = ["mode=lockstep", "duration_s=0.006"].map(|o| Override::parse(o).unwrap());
+        let (config, scenario) = resolve("pendulum", &overrides).unwrap();
+        let dir = std::env::temp_dir().join(format!("looplab-recording-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        (config, scenario, dir)
+    }
+
+    fn loops_csv_rows(dir: &Path) -> Vec<String> {
+        std::fs::read_to_string(dir.join("loops.csv")).unwrap().lines().skip(1).map(String::from).collect()
+    }
+
+    #[test]
+    fn loops_without_a_record_are_missing_and_late_parts_only_counted() {
+        let (config, scenario, dir) = setup("missing");
+        let mut recording = Recording::new(&config, scenario.as_ref(), &dir, 0, None).unwrap();
+        let mut samples: Vec<Sample> = vec![];
+        samples.extend(whole(0));
+        samples.extend(whole(1));
+        // Loop 2's record is lost; its other parts come out of order, after loop 3's state.
+        samples.extend([state(2), state(3), command(2), estimate(2), measurements(2)]);
+        samples.extend([measurements(3), estimate(3), command(3), record(3)]);
+        samples.extend(whole(4));
+        // Loop 5: only the state came.
+        samples.push(state(5));
+        for sample in samples {
+            recording.take(sample).unwrap();
+        }
+        // Written already (loop 3's record settled it): counted as received, not joined.
+        recording.take(record(2)).unwrap();
+        let report = recording.finish().unwrap();
+
+        assert_eq!(report.records, 4);
+        assert_eq!(report.loops_seen, 6);
+        assert_eq!(report.missing.ranges, [[2, 2], [5, 5]]);
+        assert_eq!(report.missing.missing_loops, 2);
+        assert_eq!(report.partial_rows, 1, "loop 5");
+        assert_eq!(report.received["loop"], 5);
+        assert_eq!(report.received["state"], 6);
+        assert_eq!(report.lost_records(6), 1);
+        assert_eq!(report.end_to_end.count, 4);
+        let rows = loops_csv_rows(&dir);
+        let trajectory = std::fs::read_to_string(dir.join("trajectory.csv")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(rows.len(), 6);
+        // Lockstep: no record, no tick timing, the cells stay empty.
+        assert_eq!(rows[2], format!("2,0.002{}", ",".repeat(14)));
+        assert_eq!(rows[3], "3,0.003,0,0,0,0,0,0,0,0,0,0,0,,,");
+        assert_eq!(trajectory.lines().count(), 7);
+    }
+
+    #[test]
+    fn a_restarted_recording_counts_the_loops_before_it_as_missing() {
+        let (config, scenario, dir) = setup("restart");
+        let mut first = Recording::new(&config, scenario.as_ref(), &dir, 0, None).unwrap();
+        for k in 0..2 {
+            whole(k).into_iter().try_for_each(|s| first.take(s)).unwrap();
+        }
+        drop(first);
+        let statuses = std::sync::Arc::new(std::sync::Mutex::new(vec![]));
+        let seen = statuses.clone();
+        let status: StatusCallback = Box::new(move |s| {
+            seen.lock().unwrap().push(s.clone());
+            Ok(())
+        });
+        let mut second = Recording::new(&config, scenario.as_ref(), &dir, 1, Some(status)).unwrap();
+        // It comes up at loop 3; loop 3's record is the plant's fourth.
+        for k in 3..6 {
+            whole(k).into_iter().try_for_each(|s| second.take(s)).unwrap();
+        }
+        second.checkpoint().unwrap();
+        let report = second.finish().unwrap();
+        let rows = loops_csv_rows(&dir);
+        std::fs::remove_dir_all(&dir).unwrap();
+
+        assert_eq!(report.missing.ranges, [[0, 2]]);
+        assert_eq!(report.missing.missing_before_restart, 3);
+        assert_eq!(report.records_before_start, 3);
+        assert_eq!((report.records, report.loops_seen), (3, 6));
+        assert_eq!(report.lost_records(6), 0);
+        assert_eq!(
+            statuses.lock().unwrap()[..],
+            [MonitorStatus { loops_recorded: 3, end_to_end_p99_ns: Some(0), deadline_misses: 0 }]
+        );
+        // The first recording was dropped without finishing: what it wrote stays, and the second
+        // appends (loop 2 went to neither).
+        let ks: Vec<&str> = rows.iter().map(|r| r.split(',').next().unwrap()).collect();
+        assert_eq!(ks, ["0", "1", "3", "4", "5"]);
     }
 }

@@ -42,8 +42,8 @@ impl LatencyLog {
 
     fn flush_interval(&mut self, start: u64, end: u64) -> Result<()> {
         let length = Duration::from_nanos(end.saturating_sub(start).max(1));
-        let histograms =
-            std::iter::once(("end_to_end", &mut self.end_to_end)).chain(HOPS.iter().map(|h| h.0).zip(self.hops.iter_mut()));
+        let histograms = std::iter::once(("end_to_end", &mut self.end_to_end))
+            .chain(HOPS.iter().map(|h| h.0).zip(self.hops.iter_mut()));
         self.log.write(wall_time(start), length, histograms)
     }
 }

@@ -75,3 +75,71 @@ impl RunSink for TrajectoryCsv {
         self.flush()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contract::msg::{Command, Estimate, Measurements, PlantState};
+    use crate::monitor::join::LoopParts;
+    use crate::monitor::layout::Layout;
+
+    fn layout() -> Layout {
+        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        Layout {
+            state: names(&["theta", "omega"]),
+            sensors: vec![("encoder".into(), names(&["angle"])), ("imu".into(), names(&["x", "y"]))],
+            estimate: names(&["theta"]),
+            input: names(&["u"]),
+        }
+    }
+
+    fn whole_loop() -> LoopParts {
+        let mut state = PlantState::default();
+        state.x[..2].copy_from_slice(&[0.5, -1.25]);
+        let mut measurements = Measurements::default();
+        measurements.readings[0].value[0] = 0.1;
+        measurements.readings[1].value[..2].copy_from_slice(&[2.0, 3.0]);
+        let mut estimate = Estimate::default();
+        estimate.x[0] = 0.25;
+        let mut command = Command::default();
+        command.u[0] = -0.75;
+        LoopParts {
+            state: Some(state),
+            measurements: Some(measurements),
+            estimate: Some(estimate),
+            command: Some(command),
+            record: None,
+        }
+    }
+
+    #[test]
+    fn rows_hold_each_vector_and_leave_missing_parts_empty() {
+        let dir = std::env::temp_dir().join(format!("looplab-trajectory-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = crate::config::launch::resolve("pendulum", &[]).unwrap().0;
+        let layout = layout();
+        let setup = |restarted| SinkSetup { run_dir: &dir, restarted, config: &config, layout: &layout };
+
+        let mut sink = TrajectoryCsv::open(&setup(false)).unwrap();
+        let whole = whole_loop();
+        sink.loop_joined(&JoinedLoop { k: 0, t: 0.0, parts: &whole }).unwrap();
+        let partial = LoopParts { measurements: None, estimate: None, ..whole_loop() };
+        sink.loop_joined(&JoinedLoop { k: 1, t: 0.001, parts: &partial }).unwrap();
+        sink.finish(&MonitorReport::default()).unwrap();
+        drop(sink);
+        // A restarted monitor appends, without a second header.
+        let mut sink = TrajectoryCsv::open(&setup(true)).unwrap();
+        sink.loop_joined(&JoinedLoop { k: 5, t: 0.005, parts: &LoopParts::default() }).unwrap();
+        sink.finish(&MonitorReport::default()).unwrap();
+
+        let text = std::fs::read_to_string(dir.join("trajectory.csv")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(
+            text,
+            "k,t,theta,omega,meas.encoder,meas.imu.x,meas.imu.y,est.theta,cmd.u\n\
+             0,0,0.5,-1.25,0.1,2,3,0.25,-0.75\n\
+             1,0.001,0.5,-1.25,,,,,-0.75\n\
+             5,0.005,,,,,,,\n"
+        );
+    }
+}
