@@ -1,5 +1,7 @@
 //! The monitor process: records latency, jitter and the trajectory (see `looplab_shared::monitor`).
 
+use looplab_shared::contract::role::Role;
+
 fn main() -> std::process::ExitCode {
-    looplab_shared::stages::process_main("monitor", looplab_shared::monitor::run)
+    looplab_shared::runtime::stages::process_main(Role::Monitor.name(), looplab_shared::monitor::run)
 }
