@@ -4,4 +4,5 @@
 pub mod clock;
 pub mod msg;
 pub mod protocol;
+pub mod report;
 pub mod role;

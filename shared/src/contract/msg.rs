@@ -224,6 +224,7 @@ macro_rules! impl_message {
 impl_message!(PlantState, Measurements, Estimate, Command, LoopRecord);
 
 /// Any message of a loop, for whoever records them all (the monitor).
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy)]
 pub enum LoopMessage {
     State(PlantState),

@@ -13,7 +13,7 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use serde::{Deserialize, Serialize};
 
-use crate::signals::StopFlag;
+use crate::runtime::signals::StopFlag;
 
 /// Arguments every loop process takes; the launcher fills them in.
 #[derive(Debug, Parser)]
@@ -64,7 +64,7 @@ pub enum ChildEvent {
     Status(MonitorStatus),
     PlantReport(PlantReport),
     StageReport(StageReport),
-    MonitorReport(Box<crate::monitor::MonitorReport>),
+    MonitorReport(Box<crate::contract::report::MonitorReport>),
 }
 
 /// The live numbers behind the launcher's status line.
@@ -83,7 +83,7 @@ pub struct PlantReport {
     pub published: u64,
     /// Commands received (in time or late).
     pub commands: u64,
-    pub counters: crate::msg::PlantCounters,
+    pub counters: crate::contract::msg::PlantCounters,
     /// A restarted plant: the tick its snapshot held.
     pub restored_at: Option<u64>,
     /// Lockstep: the loop whose command never came (`supervision.lockstep_stall_s`).
@@ -165,4 +165,3 @@ pub struct WaitCounts {
     /// Waits that gave up polling and blocked.
     pub blocked: u64,
 }
-

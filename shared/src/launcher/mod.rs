@@ -17,7 +17,7 @@ use crate::clock::now_ns;
 use crate::faults::{FaultKind, Policy, Restart};
 use crate::ipc;
 use crate::launch::{self, LaunchConfig, Mode, Override};
-use crate::monitor::MonitorReport;
+use crate::contract::report::MonitorReport;
 use crate::protocol::{ChildEvent, MonitorStatus, PlantReport, StageReport};
 use crate::report::{
     FaultReport, Jitter, Latency, MonitorCounts, ProcessInfo, SharedMemoryCheck, Summary, TimelineEntry,

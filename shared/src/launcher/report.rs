@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 
 use serde::{Deserialize, Serialize};
 
-use crate::monitor::{HOPS, Stats};
+use crate::contract::report::{HOPS, Stats};
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Summary {
@@ -100,7 +100,7 @@ pub struct FaultReport {
     pub continued_after_ms: Option<f64>,
     pub resumed_after_ms: Option<f64>,
     /// None when the monitor has no record of the fault's loops.
-    pub effect: Option<crate::monitor::FaultEffect>,
+    pub effect: Option<crate::contract::report::FaultEffect>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -153,7 +153,7 @@ pub struct MonitorCounts {
     /// (skipped ticks, loops without command), lost, or before a restarted monitor's first
     /// loop (`missing_before_restart`).
     #[serde(flatten)]
-    pub missing: crate::monitor::MissingLoops,
+    pub missing: crate::contract::report::MissingLoops,
     /// Samples the monitor received per topic.
     pub received: BTreeMap<String, u64>,
     /// Trajectory rows with some part missing.
@@ -279,7 +279,7 @@ pub fn render(s: &Summary) -> String {
 }
 
 /// The loops without a record, for the report's monitor line.
-fn missing_text(m: &crate::monitor::MissingLoops) -> String {
+fn missing_text(m: &crate::contract::report::MissingLoops) -> String {
     if m.missing_loops == 0 {
         return String::new();
     }
@@ -406,7 +406,7 @@ fn render_restarts(out: &mut String, s: &Summary) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::monitor::FaultEffect;
+    use crate::contract::report::FaultEffect;
 
     fn summary_with_fault() -> Summary {
         Summary {

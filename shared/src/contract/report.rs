@@ -1,0 +1,193 @@
+//! What the monitor hands the launcher when it ends: the recorded loop's numbers, serialised
+//! into the `monitor` event and from there into `summary.json`.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::contract::role::Topic;
+
+/// Most missing ranges listed in the report.
+pub const MAX_MISSING_RANGES: usize = 100;
+
+/// The hops of one loop, as (name, index of the start stamp, index of the end stamp) in
+/// `LoopTrace::stamps()`.
+pub const HOPS: [(&str, usize, usize); 7] = [
+    ("plant_to_sensors", 0, 1),
+    ("sensors_compute", 1, 2),
+    ("sensors_to_estimator", 2, 3),
+    ("estimator_compute", 3, 4),
+    ("estimator_to_controller", 4, 5),
+    ("controller_compute", 5, 6),
+    ("controller_to_plant", 6, 7),
+];
+
+/// A latency distribution as the summary reports it, in nanoseconds. Percentiles come from the
+/// HDR histogram (within 0.1%); count, min, max and mean are exact. All `None` when empty.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct Stats {
+    pub count: u64,
+    pub min: Option<u64>,
+    pub p50: Option<u64>,
+    pub p90: Option<u64>,
+    pub p99: Option<u64>,
+    pub p999: Option<u64>,
+    pub max: Option<u64>,
+    pub mean: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MonitorReport {
+    /// Loops written with their loop record (whole loops, plant to plant). A record that comes
+    /// after its loop was written is only counted as received.
+    pub records: u64,
+    /// Loops the monitor saw any message of: 0 up to the newest k, plus one.
+    pub loops_seen: u64,
+    /// Samples received per topic.
+    pub received: BTreeMap<String, u64>,
+    /// Loops without a record, within the loops the monitor saw anything of.
+    pub missing: MissingLoops,
+    /// Loop records the plant published before this monitor's first one: 0 for the first
+    /// monitor, which is up before the loop starts; a restarted one never could receive them.
+    pub records_before_start: u64,
+    pub end_to_end: Stats,
+    pub hops: BTreeMap<String, Stats>,
+    /// |actual tick period − dt| (real-time mode).
+    pub plant_tick_jitter: Stats,
+    /// Wake-up time − scheduled tick time (real-time mode).
+    pub plant_wake_latency: Stats,
+    /// Per sensor: age of the sample command k used, when command k took effect.
+    pub data_age: BTreeMap<String, Stats>,
+    /// Trajectory rows written with some part missing.
+    pub partial_rows: u64,
+    pub metrics: BTreeMap<String, f64>,
+    /// The scenario's findings in words.
+    pub notes: Vec<String>,
+    /// What each fault of the launch file did to the loop, in its order.
+    pub faults: Vec<FaultEffect>,
+}
+
+impl MonitorReport {
+    /// Of the `published` loop records, those that never reached this monitor though it was
+    /// there to receive them (its buffer overflowed).
+    pub fn lost_records(&self, published: u64) -> u64 {
+        let received = self.received.get(Topic::Loop.name()).copied().unwrap_or(0);
+        published.saturating_sub(self.records_before_start + received)
+    }
+}
+
+/// Loops without a loop record: every one counted, the first [`MAX_MISSING_RANGES`] ranges
+/// listed. Serialized flat into the summary's `monitor` object.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MissingLoops {
+    /// Inclusive [first, last] ranges, in order.
+    #[serde(rename = "missing")]
+    pub ranges: Vec<[u64; 2]>,
+    /// All loops without a record, listed or not.
+    pub missing_loops: u64,
+    /// Ranges left out of the list.
+    pub missing_ranges_omitted: u64,
+    /// Of `missing_loops`, those before the first loop of a restarted monitor: their records
+    /// went to an earlier monitor (whose report died with it) or came while none ran.
+    pub missing_before_restart: u64,
+    /// The newest missing loop, listed or not: an omitted range grows while loops go on missing.
+    #[serde(skip)]
+    last: Option<u64>,
+}
+
+impl MissingLoops {
+    /// Adds the loops `first..=last`, which come after every loop added so far.
+    pub fn add(&mut self, first: u64, last: u64) {
+        self.missing_loops += last - first + 1;
+        let adjacent = self.last.is_some_and(|newest| newest + 1 == first);
+        self.last = Some(last);
+        let listed = self.ranges.len();
+        match self.ranges.last_mut() {
+            Some(range) if adjacent && range[1] + 1 == first => range[1] = last,
+            // The range goes on past the list's end: it is counted already.
+            _ if adjacent => {}
+            _ if listed < MAX_MISSING_RANGES => self.ranges.push([first, last]),
+            _ => self.missing_ranges_omitted += 1,
+        }
+    }
+
+    /// With the loops from `loops_seen` up to the run's last loop added: the monitor saw nothing
+    /// of those.
+    pub fn up_to(mut self, loops_seen: u64, loops: u64) -> Self {
+        if loops_seen < loops {
+            self.add(loops_seen, loops - 1);
+        }
+        self
+    }
+}
+
+/// What one fault did to the loop and to the physical system, in simulation time.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct FaultEffect {
+    /// Ticks with no fresh command (none came, or it was late, rejected or lost) from the
+    /// injection until the first fresh one after the fault ended (after a kill: the first that
+    /// went through the restarted process).
+    pub outage_ticks: u64,
+    /// When fresh commands were back (None: not within the run).
+    pub commands_back_at_s: Option<f64>,
+    /// A killed process: the first loop its restarted incarnation handled.
+    pub rejoined_at_s: Option<f64>,
+    /// The scenario's error measure, worst value from the injection until fresh commands were
+    /// back, and after that until the next fault or the end of the run.
+    pub worst_error_during: Option<f64>,
+    pub worst_error_after: Option<f64>,
+    /// From the end of the fault (a kill: the injection) until the error is back within the
+    /// scenario's band for good; None if it did not come back before the next fault or the end.
+    pub recovery_s: Option<f64>,
+    /// The error stayed below the scenario's limit from the injection to the next fault or the end.
+    pub within_limits: bool,
+    /// The largest error in the first second from the injection and in the last second before
+    /// the next fault or the end: their ratio shows an oscillation growing (an unstable loop)
+    /// or dying out.
+    pub error_peak_first_s: Option<f64>,
+    pub error_peak_last_s: Option<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn missing_loops_are_all_counted_when_the_list_is_full() {
+        let mut missing = MissingLoops::default();
+        missing.add(0, 9);
+        for k in (20..20 + 2 * MAX_MISSING_RANGES as u64).step_by(2) {
+            missing.add(k, k);
+        }
+        // A long run of missing loops past the list's end is one omitted range.
+        for k in 1000..1010 {
+            missing.add(k, k);
+        }
+        let missing = missing.up_to(1010, 1100);
+        assert_eq!(missing.ranges.len(), MAX_MISSING_RANGES);
+        assert_eq!(missing.ranges[..2], [[0, 9], [20, 20]]);
+        assert_eq!(missing.missing_ranges_omitted, 2, "loop 218, then 1000–1099");
+        assert_eq!(missing.missing_loops, 10 + MAX_MISSING_RANGES as u64 + 100);
+    }
+
+    #[test]
+    fn adjacent_missing_loops_make_one_range() {
+        let mut missing = MissingLoops::default();
+        missing.add(3, 3);
+        missing.add(4, 6);
+        missing.add(9, 9);
+        assert_eq!(missing.ranges, [[3, 6], [9, 9]]);
+        assert_eq!(missing.missing_loops, 5);
+        // The summary's `monitor` object spells it flat, with the ranges as `missing`.
+        let json = serde_json::to_value(&missing).unwrap();
+        assert_eq!(
+            json,
+            serde_json::json!({
+                "missing": [[3, 6], [9, 9]],
+                "missing_loops": 5,
+                "missing_ranges_omitted": 0,
+                "missing_before_restart": 0
+            })
+        );
+    }
+}

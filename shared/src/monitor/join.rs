@@ -1,0 +1,317 @@
+//! Joining the five messages of each loop by k: the parts arrive per topic, in loop order on
+//! each topic but not across topics, and go out as whole loops in order.
+
+use std::collections::BTreeMap;
+use std::ops::{Index, IndexMut};
+
+use crate::contract::msg::{Command, Estimate, LoopRecord, Measurements, PlantState};
+use crate::contract::report::HOPS;
+use crate::contract::role::Topic;
+
+/// One message the recorder takes (the contract's `LoopMessage`). Samples are moved, not boxed:
+/// one copy per sample, no allocation on the receive path.
+pub use crate::contract::msg::LoopMessage as Sample;
+
+impl Sample {
+    /// The loop it belongs to, and its topic.
+    pub fn key(&self) -> (u64, Topic) {
+        match self {
+            Sample::State(s) => (s.header.k, Topic::State),
+            Sample::Measurements(s) => (s.header.k, Topic::Measurements),
+            Sample::Estimate(s) => (s.header.k, Topic::Estimate),
+            Sample::Command(s) => (s.header.k, Topic::Command),
+            Sample::Loop(s) => (s.header.k, Topic::Loop),
+        }
+    }
+}
+
+/// The parts of one loop that have arrived.
+#[derive(Debug, Default, Clone)]
+pub struct LoopParts {
+    pub state: Option<PlantState>,
+    pub measurements: Option<Measurements>,
+    pub estimate: Option<Estimate>,
+    pub command: Option<Command>,
+    pub record: Option<LoopRecord>,
+}
+
+impl LoopParts {
+    fn put(&mut self, sample: Sample) {
+        match sample {
+            Sample::State(s) => self.state = Some(s),
+            Sample::Measurements(s) => self.measurements = Some(s),
+            Sample::Estimate(s) => self.estimate = Some(s),
+            Sample::Command(s) => self.command = Some(s),
+            Sample::Loop(s) => self.record = Some(s),
+        }
+    }
+
+    /// Whether the part from `topic` is here.
+    pub fn has(&self, topic: Topic) -> bool {
+        match topic {
+            Topic::State => self.state.is_some(),
+            Topic::Measurements => self.measurements.is_some(),
+            Topic::Estimate => self.estimate.is_some(),
+            Topic::Command => self.command.is_some(),
+            Topic::Loop => self.record.is_some(),
+        }
+    }
+
+    /// Plant publish of the state to the command reaching the plant, from the loop record.
+    pub fn end_to_end_ns(&self) -> Option<u64> {
+        self.record.map(|r| {
+            let stamps = r.header.trace.stamps();
+            stamps[7].saturating_sub(stamps[0])
+        })
+    }
+
+    /// Each hop of [`HOPS`], from the loop record.
+    pub fn hops_ns(&self) -> Option<[u64; HOPS.len()]> {
+        self.record.map(|r| {
+            let stamps = r.header.trace.stamps();
+            HOPS.map(|(_, from, to)| stamps[to].saturating_sub(stamps[from]))
+        })
+    }
+}
+
+/// One value per topic.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PerTopic<T>([T; Topic::ALL.len()]);
+
+impl<T> Index<Topic> for PerTopic<T> {
+    type Output = T;
+    fn index(&self, topic: Topic) -> &T {
+        // Topic's declaration order is the order of Topic::ALL (checked in the tests).
+        &self.0[topic as usize]
+    }
+}
+
+impl<T> IndexMut<Topic> for PerTopic<T> {
+    fn index_mut(&mut self, topic: Topic) -> &mut T {
+        &mut self.0[topic as usize]
+    }
+}
+
+/// Holds the parts of each loop until the loop is settled, then hands the loops out in order.
+///
+/// A loop is settled once every part is either here or will never come: each topic delivers
+/// in loop order, so a newer loop on a topic means this loop's part from it was skipped or lost.
+/// A loop still open after `window` newer ones goes as it is.
+#[derive(Debug)]
+pub struct Joiner {
+    window: u64,
+    pending: BTreeMap<u64, LoopParts>,
+    /// The next loop to hand out.
+    next_k: u64,
+    /// Per topic, the newest loop received.
+    newest: PerTopic<Option<u64>>,
+}
+
+impl Joiner {
+    pub fn new(window: u64) -> Self {
+        Self { window, pending: BTreeMap::new(), next_k: 0, newest: PerTopic::default() }
+    }
+
+    /// Starts at loop `k` instead of 0 (a restarted monitor: the loops before were the last one's).
+    pub fn start_at(&mut self, k: u64) {
+        self.next_k = k;
+    }
+
+    /// The next loop to hand out: every loop before it has gone.
+    pub fn next_k(&self) -> u64 {
+        self.next_k
+    }
+
+    /// Takes a sample; false if its loop has gone out already (the part came too late).
+    pub fn put(&mut self, sample: Sample) -> bool {
+        let (k, topic) = sample.key();
+        self.newest[topic] = self.newest[topic].max(Some(k));
+        if k < self.next_k {
+            return false;
+        }
+        self.pending.entry(k).or_default().put(sample);
+        true
+    }
+
+    fn newest_any(&self) -> Option<u64> {
+        Topic::ALL.iter().filter_map(|&t| self.newest[t]).max()
+    }
+
+    /// The next loop, if it is settled.
+    pub fn next_settled(&mut self) -> Option<(u64, LoopParts)> {
+        let newest = self.newest_any()?;
+        let k = self.next_k;
+        let part = self.pending.get(&k);
+        let settled =
+            Topic::ALL.iter().all(|&t| part.is_some_and(|p| p.has(t)) || self.newest[t].is_some_and(|n| n > k));
+        if k > newest || !(settled || newest >= k + self.window) {
+            return None;
+        }
+        Some(self.pop())
+    }
+
+    /// The next loop, settled or not, up to the newest loop received: once everything has
+    /// arrived, the loops still waiting for parts go as they are.
+    pub fn next_remaining(&mut self) -> Option<(u64, LoopParts)> {
+        self.newest_any().is_some_and(|newest| self.next_k <= newest).then(|| self.pop())
+    }
+
+    fn pop(&mut self) -> (u64, LoopParts) {
+        let k = self.next_k;
+        self.next_k = k + 1;
+        (k, self.pending.remove(&k).unwrap_or_default())
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    pub(crate) fn state(k: u64) -> Sample {
+        let mut s = PlantState::default();
+        s.header.k = k;
+        Sample::State(s)
+    }
+    pub(crate) fn measurements(k: u64) -> Sample {
+        let mut s = Measurements::default();
+        s.header.k = k;
+        Sample::Measurements(s)
+    }
+    pub(crate) fn estimate(k: u64) -> Sample {
+        let mut s = Estimate::default();
+        s.header.k = k;
+        Sample::Estimate(s)
+    }
+    pub(crate) fn command(k: u64) -> Sample {
+        let mut s = Command::default();
+        s.header.k = k;
+        Sample::Command(s)
+    }
+    pub(crate) fn record(k: u64) -> Sample {
+        let mut s = LoopRecord::default();
+        s.header.k = k;
+        s.sequence = k + 1;
+        Sample::Loop(s)
+    }
+    /// The five messages of loop k, in the order data flows.
+    pub(crate) fn whole(k: u64) -> [Sample; 5] {
+        [state(k), measurements(k), estimate(k), command(k), record(k)]
+    }
+
+    /// Which parts each loop handed out has.
+    fn shape(parts: &LoopParts) -> String {
+        Topic::ALL.iter().map(|&t| if parts.has(t) { t.name().chars().next().unwrap() } else { '-' }).collect()
+    }
+
+    /// Puts each sample and returns the loops that became settled, with their parts.
+    fn feed(joiner: &mut Joiner, samples: impl IntoIterator<Item = Sample>) -> Vec<(u64, String)> {
+        let mut out = vec![];
+        for sample in samples {
+            joiner.put(sample);
+            while let Some((k, parts)) = joiner.next_settled() {
+                out.push((k, shape(&parts)));
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn topics_index_in_the_order_of_all() {
+        for (i, topic) in Topic::ALL.into_iter().enumerate() {
+            assert_eq!(topic as usize, i);
+        }
+    }
+
+    #[test]
+    fn a_loop_goes_out_once_all_five_parts_are_here() {
+        let mut joiner = Joiner::new(8);
+        let [s, m, e, c, r] = whole(0);
+        assert_eq!(feed(&mut joiner, [s, m, e, c]), []);
+        assert_eq!(feed(&mut joiner, [r]), [(0, "smecl".to_string())]);
+        assert_eq!(joiner.next_k(), 1);
+    }
+
+    #[test]
+    fn parts_arriving_out_of_order_across_topics_still_join() {
+        let mut joiner = Joiner::new(8);
+        // Records lag behind: loops 0 and 1 wait for theirs, then go in order.
+        let out = feed(&mut joiner, [state(0), state(1), measurements(0), measurements(1), estimate(1), estimate(0)]);
+        assert_eq!(out, []);
+        let out = feed(&mut joiner, [command(1), command(0), record(1)]);
+        // Loop 0's record will never come now that loop 1's is here; loop 1 is whole.
+        assert_eq!(out, [(0, "smec-".to_string()), (1, "smecl".to_string())]);
+    }
+
+    #[test]
+    fn a_newer_loop_on_every_topic_settles_a_loop_with_parts_missing() {
+        let mut joiner = Joiner::new(100);
+        let out = feed(&mut joiner, [state(0), measurements(0), record(0)]);
+        assert_eq!(out, []);
+        // Estimate and command of loop 0 were dropped: loop 1's on those topics settle it.
+        let out = feed(&mut joiner, [state(1), measurements(1), estimate(1)]);
+        assert_eq!(out, []);
+        let out = feed(&mut joiner, [command(1)]);
+        assert_eq!(out, [(0, "sm--l".to_string())]);
+    }
+
+    #[test]
+    fn a_loop_still_open_after_the_window_goes_as_it_is() {
+        let mut joiner = Joiner::new(3);
+        // The record topic is silent: nothing tells that loop 0's record will not come.
+        let mut out = vec![];
+        for k in 0..4 {
+            out.extend(feed(&mut joiner, [state(k), measurements(k), estimate(k), command(k)]));
+        }
+        assert_eq!(out, [(0, "smec-".to_string())], "loop 3 is the window's end for loop 0");
+        assert_eq!(joiner.next_k(), 1);
+    }
+
+    #[test]
+    fn a_part_after_its_loop_went_out_is_refused() {
+        let mut joiner = Joiner::new(8);
+        feed(&mut joiner, whole(0));
+        feed(&mut joiner, [state(1), measurements(1), estimate(1), command(1), record(1)]);
+        assert!(!joiner.put(record(0)), "loop 0 has gone");
+        assert!(joiner.put(state(2)));
+    }
+
+    #[test]
+    fn the_remaining_loops_go_at_the_end_up_to_the_newest() {
+        let mut joiner = Joiner::new(8);
+        let out = feed(&mut joiner, [state(0), state(1), state(2), measurements(0)]);
+        assert_eq!(out, []);
+        let mut rest = vec![];
+        while let Some((k, parts)) = joiner.next_remaining() {
+            rest.push((k, shape(&parts)));
+        }
+        assert_eq!(rest, [(0, "sm---".to_string()), (1, "s----".to_string()), (2, "s----".to_string())]);
+    }
+
+    #[test]
+    fn a_restarted_monitor_starts_at_its_first_loop() {
+        let mut joiner = Joiner::new(8);
+        joiner.start_at(40);
+        assert!(!joiner.put(state(39)), "the last monitor's loop");
+        let out = feed(&mut joiner, whole(40));
+        assert_eq!(out, [(40, "smecl".to_string())]);
+    }
+
+    #[test]
+    fn latencies_come_from_the_record_stamps() {
+        let mut record = LoopRecord::default();
+        record.header.trace = crate::contract::msg::LoopTrace {
+            plant_publish: 100,
+            sensors_receive: 110,
+            sensors_publish: 130,
+            estimator_receive: 135,
+            estimator_publish: 175,
+            controller_receive: 180,
+            controller_publish: 200,
+            plant_receive: 260,
+        };
+        let parts = LoopParts { record: Some(record), ..Default::default() };
+        assert_eq!(parts.end_to_end_ns(), Some(160));
+        assert_eq!(parts.hops_ns(), Some([10, 20, 5, 40, 5, 20, 60]));
+        assert_eq!(LoopParts::default().hops_ns(), None);
+    }
+}

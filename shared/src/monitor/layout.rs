@@ -1,0 +1,36 @@
+//! The run's vectors as the recorder reads them: names and sizes of the state, each sensor's
+//! reading, the estimate and the command, taken once from the launch file and the scenario.
+
+use crate::config::launch::LaunchConfig;
+use crate::scenarios::Scenario;
+
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Layout {
+    pub state: Vec<String>,
+    /// Per sensor, in the launch file's order (the order of readings in `Measurements`): its
+    /// name and its components' names.
+    pub sensors: Vec<(String, Vec<String>)>,
+    pub estimate: Vec<String>,
+    pub input: Vec<String>,
+}
+
+impl Layout {
+    pub fn new(config: &LaunchConfig, scenario: &dyn Scenario) -> Self {
+        let names = |names: &[&str]| names.iter().map(|n| n.to_string()).collect::<Vec<_>>();
+        Self {
+            state: names(scenario.state_names()),
+            sensors: config
+                .sensors
+                .iter()
+                .map(|(name, spec)| (name.clone(), names(config.signal_of(spec).components)))
+                .collect(),
+            estimate: names(scenario.estimate_names()),
+            input: names(scenario.input_names()),
+        }
+    }
+
+    /// The number of components of each sensor's reading.
+    pub fn sensor_dims(&self) -> Vec<usize> {
+        self.sensors.iter().map(|(_, components)| components.len()).collect()
+    }
+}

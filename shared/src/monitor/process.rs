@@ -1,0 +1,130 @@
+//! The monitor process: a passive reader of every topic that never slows the loop.
+//!
+//! Its readers have no listeners, so publishing never wakes it; it polls every few milliseconds
+//! with deep buffers (real-time mode: safe overflow, so a slow monitor loses samples, counted,
+//! and never blocks a stage). The receive loop only copies samples out of shared memory, feeds
+//! the stall watch and passes the samples over a channel to a writer thread, which runs the
+//! [`Recording`] and sends the live status to the launcher.
+
+use std::fmt::Debug;
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, anyhow};
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::config::launch::Mode;
+use crate::contract::clock::now_ns;
+use crate::contract::protocol::{ChildEvent, emit};
+use crate::contract::report::MonitorReport;
+use crate::monitor::join::Sample;
+use crate::monitor::recording::{Recording, StatusCallback};
+use crate::monitor::stall::StallWatch;
+use crate::runtime::ipc::{MONITOR_BUFFER, Topic, TopicSubscriber};
+use crate::runtime::child::Context;
+
+/// Sleep between drains when the queues were nearly empty.
+const POLL_PERIOD: Duration = Duration::from_millis(5);
+/// How often the live status goes to the launcher; it is also the monitor's heartbeat, and the
+/// files are flushed as often, so that a killed monitor loses little.
+const STATUS_PERIOD: Duration = Duration::from_millis(100);
+
+/// One topic's reader and how its samples go to the writer.
+struct Reader<T: Debug + ZeroCopySend + 'static> {
+    subscriber: TopicSubscriber<T>,
+    wrap: fn(T) -> Sample,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Reader<T> {
+    fn new(context: &Context, topic: Topic, wrap: fn(T) -> Sample) -> Result<Self> {
+        Ok(Self { subscriber: context.ipc.passive_subscriber(topic)?, wrap })
+    }
+
+    /// Passes on every sample queued; returns how many.
+    fn drain(&self, watch: &mut StallWatch, tx: &Sender<Sample>) -> Result<usize> {
+        let mut n = 0;
+        while let Some(message) = self.subscriber.receive()? {
+            n += 1;
+            let sample = (self.wrap)(message);
+            let (k, topic) = sample.key();
+            watch.saw(topic, k);
+            tx.send(sample).map_err(|_| anyhow!("the monitor's writer stopped"))?;
+        }
+        Ok(n)
+    }
+}
+
+pub fn run(context: &Context) -> Result<ChildEvent> {
+    let config = &context.config;
+    let states = Reader::new(context, Topic::State, Sample::State)?;
+    let measurements = Reader::new(context, Topic::Measurements, Sample::Measurements)?;
+    let estimates = Reader::new(context, Topic::Estimate, Sample::Estimate)?;
+    let commands = Reader::new(context, Topic::Command, Sample::Command)?;
+    let records = Reader::new(context, Topic::Loop, Sample::Loop)?;
+    // Every reader exists before any waits for its writer.
+    states.subscriber.connect(&context.stop)?;
+    measurements.subscriber.connect(&context.stop)?;
+    estimates.subscriber.connect(&context.stop)?;
+    commands.subscriber.connect(&context.stop)?;
+    records.subscriber.connect(&context.stop)?;
+    let status: StatusCallback = Box::new(|status| emit(&ChildEvent::Status(status.clone())));
+    let recording =
+        Recording::new(config, context.scenario.as_ref(), &context.run_dir, context.incarnation, Some(status))?;
+    // The mode's one say in the monitor process. In real time the monitor must never slow the
+    // loop: it runs at the lowest priority (its threads inherit it), and its buffers hold a
+    // second of samples to catch up with. The plant ticks on a clock there, so silence is a stall.
+    let plant_period_ns = match config.mode {
+        Mode::Realtime => {
+            crate::runtime::wait::run_in_background();
+            Some((config.dt() * 1e9) as u64)
+        }
+        Mode::Lockstep => None,
+    };
+    emit(&ChildEvent::Ready)?;
+
+    let (tx, rx) = crossbeam_channel::unbounded();
+    let writer = std::thread::Builder::new().name("monitor-writer".into()).spawn(move || write(recording, rx))?;
+
+    let timeout_ns = (config.supervision.stall_timeout_s * 1e9) as u64;
+    let mut watch = StallWatch::new(timeout_ns, config.loops(), plant_period_ns, Box::new(now_ns));
+    let mut drain = || -> Result<usize> {
+        // In the order data flows, so a loop's parts tend to arrive together.
+        let n = states.drain(&mut watch, &tx)?
+            + measurements.drain(&mut watch, &tx)?
+            + estimates.drain(&mut watch, &tx)?
+            + commands.drain(&mut watch, &tx)?
+            + records.drain(&mut watch, &tx)?;
+        for event in watch.check() {
+            emit(&event)?;
+        }
+        Ok(n)
+    };
+    while !context.stop.requested() {
+        if drain()? < MONITOR_BUFFER / 8 {
+            std::thread::sleep(POLL_PERIOD);
+        }
+    }
+    // The launcher stops the monitor last: everything the loop sent is queued by now.
+    while drain()? > 0 {}
+    drop(tx);
+    let report = writer.join().map_err(|_| anyhow!("the monitor's writer panicked"))??;
+    Ok(ChildEvent::MonitorReport(Box::new(report)))
+}
+
+/// The writer thread: records every sample, with a checkpoint (status and flush) every
+/// [`STATUS_PERIOD`], until the receive loop hangs up.
+fn write(mut recording: Recording, rx: Receiver<Sample>) -> Result<MonitorReport> {
+    let mut last_status = Instant::now();
+    loop {
+        match rx.recv_timeout(STATUS_PERIOD) {
+            Ok(sample) => recording.take(sample)?,
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+        if last_status.elapsed() >= STATUS_PERIOD {
+            last_status = Instant::now();
+            recording.checkpoint()?;
+        }
+    }
+    recording.finish()
+}

@@ -1,0 +1,293 @@
+//! The recorder: takes the loop's messages in any order, joins them by loop, feeds the
+//! statistics, the fault trackers and the scenario's metrics, passes each loop to the sinks, and
+//! ends with the [`MonitorReport`]. No IPC, no threads, no output but the sinks': the monitor
+//! process feeds it from iceoryx2, an in-process run feeds it directly.
+
+use std::path::Path;
+
+use anyhow::Result;
+
+use crate::config::launch::{LaunchConfig, Mode};
+use crate::contract::msg::PlantCounters;
+use crate::contract::protocol::MonitorStatus;
+use crate::contract::report::{HOPS, MonitorReport};
+use crate::contract::role::Topic;
+use crate::monitor::fault_effect::FaultTracker;
+use crate::monitor::join::{Joiner, LoopParts, Sample};
+use crate::monitor::layout::Layout;
+use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
+use crate::monitor::stats::LoopStats;
+use crate::runtime::ipc::MONITOR_BUFFER;
+use crate::scenarios::{ErrorMeasure, Metrics, Row, Scenario};
+
+/// A loop still missing parts once this many newer loops have arrived is written as it is: by
+/// then the monitor's buffer of that topic has overflowed past it.
+const JOIN_WINDOW: u64 = 2 * MONITOR_BUFFER as u64;
+
+/// Called with the live numbers at each [`Recording::checkpoint`].
+pub type StatusCallback = Box<dyn FnMut(&MonitorStatus) -> Result<()> + Send>;
+
+pub struct Recording {
+    dt: f64,
+    joiner: Joiner,
+    layout: Layout,
+    stats: LoopStats,
+    metrics: Box<dyn Metrics>,
+    measure: ErrorMeasure,
+    faults: Vec<FaultTracker>,
+    sinks: Vec<Box<dyn RunSink>>,
+    report: MonitorReport,
+    /// The plant's counters in the newest state written.
+    last_counters: PlantCounters,
+    status: Option<StatusCallback>,
+    /// A restarted monitor starts at the first loop it sees; the first one starts at 0.
+    started: bool,
+    restarted: bool,
+}
+
+impl Recording {
+    /// A recording of the run into `run_dir` by monitor `incarnation` (a restarted monitor, one
+    /// above 0, appends to the files). `status` gets the live numbers at each checkpoint.
+    pub fn new(
+        config: &LaunchConfig,
+        scenario: &dyn Scenario,
+        run_dir: &Path,
+        incarnation: u32,
+        status: Option<StatusCallback>,
+    ) -> Result<Self> {
+        let layout = Layout::new(config, scenario);
+        let restarted = incarnation > 0;
+        let sinks = sinks::open(&SinkSetup { run_dir, restarted, config, layout: &layout })?;
+        // The one place the mode matters to the recording: in real time the loop runs in
+        // wall-clock time, so a command's latency ages its data and a `stop` lasts for the loop.
+        let wall_clock = config.mode == Mode::Realtime;
+        Ok(Self {
+            dt: config.dt(),
+            joiner: Joiner::new(JOIN_WINDOW),
+            stats: LoopStats::new(layout.sensors.len(), config.dt(), wall_clock),
+            layout,
+            metrics: scenario.metrics(),
+            measure: scenario.error_measure(),
+            faults: FaultTracker::for_faults(config, wall_clock),
+            sinks,
+            report: MonitorReport::default(),
+            last_counters: PlantCounters::default(),
+            status,
+            started: !restarted,
+            restarted,
+        })
+    }
+
+    /// Takes one message; writes every loop it completes.
+    pub fn take(&mut self, sample: Sample) -> Result<()> {
+        let (k, topic) = sample.key();
+        if !self.started {
+            // The loops before this one were the last monitor's; this report has no record of them.
+            self.started = true;
+            self.joiner.start_at(k);
+            if k > 0 {
+                self.report.missing.add(0, k - 1);
+                self.report.missing.missing_before_restart = k;
+            }
+        }
+        if let Sample::Loop(record) = &sample
+            && self.restarted
+            && !self.report.received.contains_key(Topic::Loop.name())
+        {
+            // The first record: those before it went out before this monitor was up. (The
+            // first monitor is up before the loop starts.)
+            self.report.records_before_start = record.sequence.saturating_sub(1);
+        }
+        *self.report.received.entry(topic.name().to_owned()).or_default() += 1;
+        // A part of a loop written already came too late: it stays counted as received.
+        if self.joiner.put(sample) {
+            while let Some((k, parts)) = self.joiner.next_settled() {
+                self.write(k, &parts)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The live numbers for the status line.
+    pub fn status(&self) -> MonitorStatus {
+        MonitorStatus {
+            loops_recorded: self.report.records,
+            end_to_end_p99_ns: self.stats.end_to_end.quantile(0.99),
+            deadline_misses: self.last_counters.deadline_misses,
+        }
+    }
+
+    /// Reports the status (if there is a callback) and flushes every sink.
+    pub fn checkpoint(&mut self) -> Result<()> {
+        let status = self.status();
+        if let Some(callback) = &mut self.status {
+            callback(&status)?;
+        }
+        self.sinks.iter_mut().try_for_each(|sink| sink.flush())
+    }
+
+    /// Everything has arrived: writes the loops still waiting for parts, finishes every sink and
+    /// returns the report.
+    pub fn finish(mut self) -> Result<MonitorReport> {
+        while let Some((k, parts)) = self.joiner.next_remaining() {
+            self.write(k, &parts)?;
+        }
+        let mut report = std::mem::take(&mut self.report);
+        let stats = &self.stats;
+        report.loops_seen = self.joiner.next_k();
+        report.end_to_end = stats.end_to_end.stats();
+        report.hops = HOPS.iter().zip(&stats.hops).map(|((name, _, _), d)| (name.to_string(), d.stats())).collect();
+        report.plant_tick_jitter = stats.plant_tick_jitter.stats();
+        report.plant_wake_latency = stats.plant_wake_latency.stats();
+        report.data_age = self
+            .layout
+            .sensors
+            .iter()
+            .map(|(name, _)| name.clone())
+            .zip(stats.data_age.iter().map(|d| d.stats()))
+            .collect();
+        report.metrics = self.metrics.finish();
+        report.notes = self.metrics.notes();
+        report.faults = self.faults.into_iter().map(|f| f.finish(self.dt)).collect();
+        for sink in &mut self.sinks {
+            sink.finish(&report)?;
+        }
+        Ok(report)
+    }
+
+    /// Writes loop `k` (whatever arrived of it).
+    fn write(&mut self, k: u64, parts: &LoopParts) -> Result<()> {
+        let t = k as f64 * self.dt;
+        if let Some(state) = &parts.state {
+            self.last_counters = state.counters;
+        }
+        self.stats.observe(t, parts);
+        if parts.record.is_some() {
+            self.report.records += 1;
+        } else {
+            self.report.missing.add(k, k);
+        }
+        for fault in &mut self.faults {
+            fault.observe(k, parts, &self.measure);
+        }
+        let joined = JoinedLoop { k, t, parts };
+        for sink in &mut self.sinks {
+            sink.loop_joined(&joined)?;
+        }
+        let layout = &self.layout;
+        match parts {
+            LoopParts { state: Some(s), measurements: Some(m), estimate: Some(e), command: Some(c), .. } => {
+                self.metrics.observe(&Row {
+                    k,
+                    t,
+                    state: &s.x[..layout.state.len()],
+                    readings: &m.readings[..layout.sensors.len()],
+                    estimate: &e.x[..layout.estimate.len()],
+                    command: &c.u[..layout.input.len()],
+                    applied: &s.u_applied[..layout.input.len()],
+                })
+            }
+            _ => self.report.partial_rows += 1,
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::launch::{Override, resolve};
+    use crate::monitor::join::tests::{command, estimate, measurements, record, state, whole};
+
+    /// A lockstep pendulum run of 6 loops, recorded into a fresh folder.
+    fn setup(name: &str) -> (LaunchConfig, Box<dyn Scenario>, std::path::PathBuf) {
+        let overrides = ["mode=lockstep", "duration_s=0.006"].map(|o| Override::parse(o).unwrap());
+        let (config, scenario) = resolve("pendulum", &overrides).unwrap();
+        let dir = std::env::temp_dir().join(format!("looplab-recording-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        (config, scenario, dir)
+    }
+
+    fn loops_csv_rows(dir: &Path) -> Vec<String> {
+        std::fs::read_to_string(dir.join("loops.csv")).unwrap().lines().skip(1).map(String::from).collect()
+    }
+
+    #[test]
+    fn loops_without_a_record_are_missing_and_late_parts_only_counted() {
+        let (config, scenario, dir) = setup("missing");
+        let mut recording = Recording::new(&config, scenario.as_ref(), &dir, 0, None).unwrap();
+        let mut samples: Vec<Sample> = vec![];
+        samples.extend(whole(0));
+        samples.extend(whole(1));
+        // Loop 2's record is lost; its other parts come out of order, after loop 3's state.
+        samples.extend([state(2), state(3), command(2), estimate(2), measurements(2)]);
+        samples.extend([measurements(3), estimate(3), command(3), record(3)]);
+        samples.extend(whole(4));
+        // Loop 5: only the state came.
+        samples.push(state(5));
+        for sample in samples {
+            recording.take(sample).unwrap();
+        }
+        // Written already (loop 3's record settled it): counted as received, not joined.
+        recording.take(record(2)).unwrap();
+        let report = recording.finish().unwrap();
+
+        assert_eq!(report.records, 4);
+        assert_eq!(report.loops_seen, 6);
+        assert_eq!(report.missing.ranges, [[2, 2], [5, 5]]);
+        assert_eq!(report.missing.missing_loops, 2);
+        assert_eq!(report.partial_rows, 1, "loop 5");
+        assert_eq!(report.received["loop"], 5);
+        assert_eq!(report.received["state"], 6);
+        assert_eq!(report.lost_records(6), 1);
+        assert_eq!(report.end_to_end.count, 4);
+        let rows = loops_csv_rows(&dir);
+        let trajectory = std::fs::read_to_string(dir.join("trajectory.csv")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(rows.len(), 6);
+        // Lockstep: no record, no tick timing, the cells stay empty.
+        assert_eq!(rows[2], format!("2,0.002{}", ",".repeat(14)));
+        assert_eq!(rows[3], "3,0.003,0,0,0,0,0,0,0,0,0,0,0,,,");
+        assert_eq!(trajectory.lines().count(), 7);
+    }
+
+    #[test]
+    fn a_restarted_recording_counts_the_loops_before_it_as_missing() {
+        let (config, scenario, dir) = setup("restart");
+        let mut first = Recording::new(&config, scenario.as_ref(), &dir, 0, None).unwrap();
+        for k in 0..2 {
+            whole(k).into_iter().try_for_each(|s| first.take(s)).unwrap();
+        }
+        drop(first);
+        let statuses = std::sync::Arc::new(std::sync::Mutex::new(vec![]));
+        let seen = statuses.clone();
+        let status: StatusCallback = Box::new(move |s| {
+            seen.lock().unwrap().push(s.clone());
+            Ok(())
+        });
+        let mut second = Recording::new(&config, scenario.as_ref(), &dir, 1, Some(status)).unwrap();
+        // It comes up at loop 3; loop 3's record is the plant's fourth.
+        for k in 3..6 {
+            whole(k).into_iter().try_for_each(|s| second.take(s)).unwrap();
+        }
+        second.checkpoint().unwrap();
+        let report = second.finish().unwrap();
+        let rows = loops_csv_rows(&dir);
+        std::fs::remove_dir_all(&dir).unwrap();
+
+        assert_eq!(report.missing.ranges, [[0, 2]]);
+        assert_eq!(report.missing.missing_before_restart, 3);
+        assert_eq!(report.records_before_start, 3);
+        assert_eq!((report.records, report.loops_seen), (3, 6));
+        assert_eq!(report.lost_records(6), 0);
+        assert_eq!(
+            statuses.lock().unwrap()[..],
+            [MonitorStatus { loops_recorded: 3, end_to_end_p99_ns: Some(0), deadline_misses: 0 }]
+        );
+        // The first recording was dropped without finishing: what it wrote stays, and the second
+        // appends (loop 2 went to neither).
+        let ks: Vec<&str> = rows.iter().map(|r| r.split(',').next().unwrap()).collect();
+        assert_eq!(ks, ["0", "1", "3", "4", "5"]);
+    }
+}

@@ -1,0 +1,62 @@
+//! `loops.csv`: one row per loop with every CLOCK_MONOTONIC stamp of its trace, the end-to-end
+//! latency, the deadline-miss and rejected flags and the plant's tick timing.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+use crate::contract::msg::LoopTrace;
+use crate::contract::report::MonitorReport;
+use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
+
+pub struct LoopsCsv {
+    file: BufWriter<File>,
+    run_dir: PathBuf,
+}
+
+impl LoopsCsv {
+    pub fn open(setup: &SinkSetup) -> Result<Self> {
+        let (mut file, new) = create(setup.run_dir, "loops.csv", setup.restarted)?;
+        let mut columns: Vec<String> = vec!["k".into(), "t".into()];
+        columns.extend(LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")));
+        columns.extend(
+            ["end_to_end_ns", "deadline_miss", "rejected", "tick_scheduled_ns", "tick_wake_ns", "tick_period_ns"]
+                .map(String::from),
+        );
+        if new {
+            writeln!(file, "{}", columns.join(","))?;
+        }
+        Ok(Self { file, run_dir: setup.run_dir.to_path_buf() })
+    }
+}
+
+impl RunSink for LoopsCsv {
+    fn loop_joined(&mut self, joined: &JoinedLoop) -> Result<()> {
+        let mut row = format!("{},{}", joined.k, joined.t);
+        match (&joined.parts.record, joined.parts.end_to_end_ns()) {
+            (Some(r), Some(e2e)) => {
+                for s in r.header.trace.stamps() {
+                    row.push_str(&format!(",{s}"));
+                }
+                row.push_str(&format!(",{e2e},{},{}", r.deadline_miss, r.rejected));
+            }
+            _ => row.push_str(&",".repeat(11)),
+        }
+        match joined.tick_timing() {
+            Some(tm) => row.push_str(&format!(",{},{},{}", tm.scheduled_ns, tm.wake_ns, tm.period_ns)),
+            None => row.push_str(",,,"),
+        }
+        writeln!(self.file, "{row}")?;
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        flush(&mut self.file, &self.run_dir)
+    }
+
+    fn finish(&mut self, _report: &MonitorReport) -> Result<()> {
+        self.flush()
+    }
+}

@@ -1,0 +1,86 @@
+//! Where the joined loops go: each output of a run is a [`RunSink`]. A new output (an MCAP
+//! recording, a live view) is one file in this folder and one line in [`open`].
+
+pub mod hlog;
+pub mod loops;
+pub mod trajectory;
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
+
+use anyhow::{Context as _, Result};
+
+use crate::config::launch::LaunchConfig;
+use crate::contract::msg::TickTiming;
+use crate::contract::report::MonitorReport;
+use crate::monitor::join::LoopParts;
+use crate::monitor::layout::Layout;
+
+/// What a sink is opened with.
+pub struct SinkSetup<'a> {
+    /// The run folder, where the files go.
+    pub run_dir: &'a Path,
+    /// A restarted monitor: append to what the last one wrote.
+    pub restarted: bool,
+    /// The run's launch file (its faults with their ticks, the rate, the seed).
+    pub config: &'a LaunchConfig,
+    pub layout: &'a Layout,
+}
+
+/// One loop as the recorder joined it. Loops come in order of k, each once; a restarted
+/// monitor's first loop is past 0, and a part that never arrived is `None`.
+pub struct JoinedLoop<'a> {
+    pub k: u64,
+    /// Simulation time of tick k.
+    pub t: f64,
+    pub parts: &'a LoopParts,
+}
+
+impl JoinedLoop<'_> {
+    /// How the plant's clock behaved at this tick; None without the state or without a clock
+    /// (lockstep, where the plant's timing is all zero).
+    pub fn tick_timing(&self) -> Option<TickTiming> {
+        self.parts.state.map(|s| s.timing).filter(|timing| *timing != TickTiming::default())
+    }
+}
+
+/// One output of a run, fed every joined loop.
+pub trait RunSink: Send {
+    fn loop_joined(&mut self, joined: &JoinedLoop) -> Result<()>;
+    /// Pushes what is buffered to the file, so that a killed monitor loses little.
+    fn flush(&mut self) -> Result<()>;
+    /// The run is over (every loop has been passed): writes what is left. `report` holds the
+    /// run's numbers, what each fault did included.
+    fn finish(&mut self, report: &MonitorReport) -> Result<()>;
+}
+
+/// Opens every output of a run, in this order.
+pub fn open(setup: &SinkSetup) -> Result<Vec<Box<dyn RunSink>>> {
+    Ok(vec![
+        Box::new(trajectory::TrajectoryCsv::open(setup)?),
+        Box::new(loops::LoopsCsv::open(setup)?),
+        Box::new(hlog::LatencyLog::open(setup)?),
+    ])
+}
+
+/// Creates an output file, or, for a restarted monitor, appends to what the last one wrote;
+/// returns whether the file is new (and needs its header).
+pub fn create(dir: &Path, name: &str, restarted: bool) -> Result<(BufWriter<File>, bool)> {
+    let path = dir.join(name);
+    let append = restarted && path.exists();
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .append(append)
+        .truncate(!append)
+        .open(&path)
+        .with_context(|| format!("create {}", path.display()))?;
+    Ok((BufWriter::new(file), !append))
+}
+
+/// Flushes an output file of the run folder `dir`.
+pub fn flush(file: &mut BufWriter<File>, dir: &Path) -> Result<()> {
+    use std::io::Write as _;
+    file.flush().with_context(|| format!("write to {}", dir.display()))
+}

@@ -1,0 +1,145 @@
+//! `trajectory.csv`: one row per tick in simulation time only: the true state, each sensor's
+//! held value, the estimate and the command. Byte for byte the same for a lockstep run of the
+//! same launch file and seed.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+use crate::contract::report::MonitorReport;
+use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
+
+pub struct TrajectoryCsv {
+    file: BufWriter<File>,
+    run_dir: PathBuf,
+    n_state: usize,
+    sensor_dims: Vec<usize>,
+    n_estimate: usize,
+    n_input: usize,
+}
+
+impl TrajectoryCsv {
+    pub fn open(setup: &SinkSetup) -> Result<Self> {
+        let layout = setup.layout;
+        let (mut file, new) = create(setup.run_dir, "trajectory.csv", setup.restarted)?;
+        let mut columns: Vec<String> = vec!["k".into(), "t".into()];
+        columns.extend(layout.state.iter().cloned());
+        for (name, components) in &layout.sensors {
+            match &components[..] {
+                [_] => columns.push(format!("meas.{name}")),
+                components => columns.extend(components.iter().map(|c| format!("meas.{name}.{c}"))),
+            }
+        }
+        columns.extend(layout.estimate.iter().map(|n| format!("est.{n}")));
+        columns.extend(layout.input.iter().map(|n| format!("cmd.{n}")));
+        if new {
+            writeln!(file, "{}", columns.join(","))?;
+        }
+        Ok(Self {
+            file,
+            run_dir: setup.run_dir.to_path_buf(),
+            n_state: layout.state.len(),
+            sensor_dims: layout.sensor_dims(),
+            n_estimate: layout.estimate.len(),
+            n_input: layout.input.len(),
+        })
+    }
+}
+
+impl RunSink for TrajectoryCsv {
+    fn loop_joined(&mut self, joined: &JoinedLoop) -> Result<()> {
+        let part = joined.parts;
+        let mut row = format!("{},{}", joined.k, joined.t);
+        // A part that did not arrive leaves its cells empty.
+        let mut push = |values: Option<&[f64]>, n: usize| match values {
+            Some(v) => v[..n].iter().for_each(|x| row.push_str(&format!(",{x}"))),
+            None => row.push_str(&",".repeat(n)),
+        };
+        push(part.state.as_ref().map(|s| &s.x[..]), self.n_state);
+        for (i, dim) in self.sensor_dims.iter().enumerate() {
+            push(part.measurements.as_ref().map(|m| &m.readings[i].value[..]), *dim);
+        }
+        push(part.estimate.as_ref().map(|e| &e.x[..]), self.n_estimate);
+        push(part.command.as_ref().map(|c| &c.u[..]), self.n_input);
+        writeln!(self.file, "{row}")?;
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        flush(&mut self.file, &self.run_dir)
+    }
+
+    fn finish(&mut self, _report: &MonitorReport) -> Result<()> {
+        self.flush()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contract::msg::{Command, Estimate, Measurements, PlantState};
+    use crate::monitor::join::LoopParts;
+    use crate::monitor::layout::Layout;
+
+    fn layout() -> Layout {
+        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        Layout {
+            state: names(&["theta", "omega"]),
+            sensors: vec![("encoder".into(), names(&["angle"])), ("imu".into(), names(&["x", "y"]))],
+            estimate: names(&["theta"]),
+            input: names(&["u"]),
+        }
+    }
+
+    fn whole_loop() -> LoopParts {
+        let mut state = PlantState::default();
+        state.x[..2].copy_from_slice(&[0.5, -1.25]);
+        let mut measurements = Measurements::default();
+        measurements.readings[0].value[0] = 0.1;
+        measurements.readings[1].value[..2].copy_from_slice(&[2.0, 3.0]);
+        let mut estimate = Estimate::default();
+        estimate.x[0] = 0.25;
+        let mut command = Command::default();
+        command.u[0] = -0.75;
+        LoopParts {
+            state: Some(state),
+            measurements: Some(measurements),
+            estimate: Some(estimate),
+            command: Some(command),
+            record: None,
+        }
+    }
+
+    #[test]
+    fn rows_hold_each_vector_and_leave_missing_parts_empty() {
+        let dir = std::env::temp_dir().join(format!("looplab-trajectory-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = crate::config::launch::resolve("pendulum", &[]).unwrap().0;
+        let layout = layout();
+        let setup = |restarted| SinkSetup { run_dir: &dir, restarted, config: &config, layout: &layout };
+
+        let mut sink = TrajectoryCsv::open(&setup(false)).unwrap();
+        let whole = whole_loop();
+        sink.loop_joined(&JoinedLoop { k: 0, t: 0.0, parts: &whole }).unwrap();
+        let partial = LoopParts { measurements: None, estimate: None, ..whole_loop() };
+        sink.loop_joined(&JoinedLoop { k: 1, t: 0.001, parts: &partial }).unwrap();
+        sink.finish(&MonitorReport::default()).unwrap();
+        drop(sink);
+        // A restarted monitor appends, without a second header.
+        let mut sink = TrajectoryCsv::open(&setup(true)).unwrap();
+        sink.loop_joined(&JoinedLoop { k: 5, t: 0.005, parts: &LoopParts::default() }).unwrap();
+        sink.finish(&MonitorReport::default()).unwrap();
+
+        let text = std::fs::read_to_string(dir.join("trajectory.csv")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(
+            text,
+            "k,t,theta,omega,meas.encoder,meas.imu.x,meas.imu.y,est.theta,cmd.u\n\
+             0,0,0.5,-1.25,0.1,2,3,0.25,-0.75\n\
+             1,0.001,0.5,-1.25,,,,,-0.75\n\
+             5,0.005,,,,,,,\n"
+        );
+    }
+}

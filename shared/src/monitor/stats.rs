@@ -1,0 +1,173 @@
+//! Latency distributions: an HDR histogram per hop, end to end, the plant's tick timing and
+//! each sensor's data age, summarised as [`Stats`].
+
+use hdrhistogram::Histogram;
+
+use crate::contract::report::{HOPS, Stats};
+use crate::monitor::join::LoopParts;
+
+/// Histogram range: 1 ns to 60 s at 3 significant digits.
+const HISTOGRAM_MAX_NS: u64 = 60_000_000_000;
+
+/// An empty histogram with the monitor's range and precision.
+pub fn histogram() -> Histogram<u64> {
+    Histogram::new_with_bounds(1, HISTOGRAM_MAX_NS, 3).expect("valid histogram bounds")
+}
+
+/// An HDR histogram with exact extremes and mean.
+pub struct Distribution {
+    histogram: Histogram<u64>,
+    min: u64,
+    max: u64,
+    sum: u128,
+}
+
+impl Default for Distribution {
+    fn default() -> Self {
+        Self { histogram: histogram(), min: u64::MAX, max: 0, sum: 0 }
+    }
+}
+
+impl Distribution {
+    pub fn record(&mut self, ns: u64) {
+        self.histogram.saturating_record(ns);
+        self.min = self.min.min(ns);
+        self.max = self.max.max(ns);
+        self.sum += u128::from(ns);
+    }
+
+    /// The value at quantile `q` as HDR reports it (a bucket's highest equivalent value).
+    pub fn quantile(&self, q: f64) -> Option<u64> {
+        (!self.histogram.is_empty()).then(|| self.histogram.value_at_quantile(q))
+    }
+
+    pub fn stats(&self) -> Stats {
+        let count = self.histogram.len();
+        if count == 0 {
+            return Stats::default();
+        }
+        // HDR reports a bucket's highest equivalent value; keep it inside the exact extremes.
+        let q = |q: f64| Some(self.histogram.value_at_quantile(q).clamp(self.min, self.max));
+        Stats {
+            count,
+            min: Some(self.min),
+            p50: q(0.50),
+            p90: q(0.90),
+            p99: q(0.99),
+            p999: q(0.999),
+            max: Some(self.max),
+            mean: Some(self.sum as f64 / count as f64),
+        }
+    }
+}
+
+/// Every distribution the report gives, fed one joined loop at a time.
+pub struct LoopStats {
+    pub end_to_end: Distribution,
+    pub hops: [Distribution; HOPS.len()],
+    /// |actual tick period − dt|, for the ticks the plant woke for on its clock.
+    pub plant_tick_jitter: Distribution,
+    /// Wake-up time − scheduled tick time.
+    pub plant_wake_latency: Distribution,
+    /// Per sensor, in the launch file's order.
+    pub data_age: Vec<Distribution>,
+    period_ns: i64,
+    /// The loop runs in wall-clock time: the time command k took to take effect adds to the age
+    /// of the data it used.
+    wall_clock: bool,
+}
+
+impl LoopStats {
+    pub fn new(sensors: usize, dt: f64, wall_clock: bool) -> Self {
+        Self {
+            end_to_end: Distribution::default(),
+            hops: Default::default(),
+            plant_tick_jitter: Distribution::default(),
+            plant_wake_latency: Distribution::default(),
+            data_age: (0..sensors).map(|_| Distribution::default()).collect(),
+            period_ns: (dt * 1e9).round() as i64,
+            wall_clock,
+        }
+    }
+
+    /// Records loop `k` at simulation time `t`.
+    pub fn observe(&mut self, t: f64, parts: &LoopParts) {
+        if let Some(state) = &parts.state {
+            let timing = state.timing;
+            // Tick 0 is published at start, not on a timer wake-up; in lockstep the plant has
+            // no clock and every timing is zero.
+            if timing.period_ns > 0 {
+                self.plant_tick_jitter.record((timing.period_ns as i64 - self.period_ns).unsigned_abs());
+                self.plant_wake_latency.record(timing.wake_ns.saturating_sub(timing.scheduled_ns));
+            }
+        }
+        let (Some(e2e), Some(hops)) = (parts.end_to_end_ns(), parts.hops_ns()) else {
+            return;
+        };
+        self.end_to_end.record(e2e);
+        for (distribution, ns) in self.hops.iter_mut().zip(hops) {
+            distribution.record(ns);
+        }
+        if let Some(meas) = &parts.measurements {
+            // Simulation-time age of the sample used, plus (in wall-clock time) the time the
+            // command took to take effect.
+            let actuation = if self.wall_clock { e2e as f64 } else { 0.0 };
+            for (distribution, reading) in self.data_age.iter_mut().zip(&meas.readings) {
+                if reading.valid != 0 {
+                    distribution.record(((t - reading.sample_time) * 1e9 + actuation).round().max(0.0) as u64);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contract::msg::{LoopRecord, Measurements, PlantState, TickTiming};
+
+    #[test]
+    fn stats_keep_exact_extremes_and_mean() {
+        let mut d = Distribution::default();
+        assert_eq!(d.stats(), Stats::default());
+        for ns in [1000, 2000, 5001] {
+            d.record(ns);
+        }
+        let s = d.stats();
+        assert_eq!((s.count, s.min, s.max, s.mean), (3, Some(1000), Some(5001), Some(2667.0)));
+        // 5001 falls in the bucket 5000..=5003, whose highest value HDR reports: clamped to the max.
+        assert_eq!(d.quantile(0.999), Some(5003));
+        assert_eq!(s.p999, Some(5001));
+        assert_eq!(s.p50, Some(2000));
+    }
+
+    fn loop_at(k: u64, sample_time: f64, timing: TickTiming) -> LoopParts {
+        let mut state = PlantState::default();
+        state.timing = timing;
+        let mut record = LoopRecord::default();
+        record.header.k = k;
+        record.header.trace.plant_publish = 1_000;
+        record.header.trace.plant_receive = 1_000 + 400_000;
+        let mut meas = Measurements::default();
+        meas.readings[0].valid = 1;
+        meas.readings[0].sample_time = sample_time;
+        LoopParts { state: Some(state), measurements: Some(meas), record: Some(record), ..Default::default() }
+    }
+
+    #[test]
+    fn data_age_adds_the_actuation_time_only_in_wall_clock_time() {
+        let timing = TickTiming { scheduled_ns: 5_000_000, wake_ns: 5_020_000, period_ns: 1_003_000 };
+        let mut realtime = LoopStats::new(1, 0.001, true);
+        let mut lockstep = LoopStats::new(1, 0.001, false);
+        // Loop 5 (t = 5 ms) used a sample taken at 3 ms.
+        realtime.observe(0.005, &loop_at(5, 0.003, timing));
+        lockstep.observe(0.005, &loop_at(5, 0.003, TickTiming::default()));
+        assert_eq!(realtime.data_age[0].stats().max, Some(2_000_000 + 400_000));
+        assert_eq!(lockstep.data_age[0].stats().max, Some(2_000_000));
+        assert_eq!(realtime.plant_tick_jitter.stats().max, Some(3_000));
+        assert_eq!(realtime.plant_wake_latency.stats().max, Some(20_000));
+        assert_eq!(lockstep.plant_tick_jitter.stats().count, 0, "no clock in lockstep");
+        assert_eq!(lockstep.end_to_end.stats().max, Some(400_000));
+        assert_eq!(lockstep.hops[6].stats().count, 1);
+    }
+}
