@@ -1405,3 +1405,4 @@ fn restart_name(r: Restart) -> &'static str {
 }
 
 pub mod report;
+pub mod in_process;
