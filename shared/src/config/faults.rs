@@ -491,7 +491,7 @@ impl StageFaults {
             })
             .collect();
         // One stream per process, so that faults in one do not shift another's draws.
-        let seed = config.seed ^ crate::sensors::fnv1a(&format!("faults/{process}"));
+        let seed = config.seed ^ crate::config::seed::fnv1a(&format!("faults/{process}"));
         Self { windows, rng: ChaCha8Rng::seed_from_u64(seed), dt: config.dt(), mode: config.mode }
     }
 
@@ -565,7 +565,7 @@ mod tests {
     /// The error that the pendulum's defaults (10 s at 1 kHz) with this `--fault` give, if any.
     fn checked(fault: &str) -> Result<(), LaunchError> {
         let overrides = [crate::launch::Override::fault(fault).unwrap()];
-        crate::launch::resolve("pendulum", &overrides).map(|_| ())
+        crate::scenarios::resolve("pendulum", &overrides).map(|_| ())
     }
 
     fn rejected(fault: &str, key: &str, fragment: &str) {

@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 
 use serde::{Deserialize, Serialize};
 
+use crate::model::scenario::ErrorMeasureInfo;
 use crate::monitor::{HOPS, Stats};
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -69,13 +70,6 @@ pub struct Summary {
     #[serde(default)]
     pub restart_steps: Vec<RestartSteps>,
     pub shared_memory: SharedMemoryCheck,
-}
-
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
-pub struct ErrorMeasureInfo {
-    pub name: String,
-    pub recovery_band: f64,
-    pub limit: f64,
 }
 
 /// One injected fault: what the launcher saw (wall-clock, from the injection) and what it did

@@ -14,7 +14,8 @@ use iceoryx2::prelude::*;
 use crate::clock::now_ns;
 use crate::faults::{AddedDelay, CorruptValue, StageFaults};
 use crate::ipc::{Ipc, Topic, TopicPublisher, TopicSubscriber};
-use crate::launch::{LaunchConfig, Mode, load_resolved};
+use crate::config::launch::{LaunchConfig, Mode};
+use crate::scenarios::load_resolved;
 use crate::msg::*;
 use crate::protocol::{ChildEvent, ProcessArgs, StageReport, emit};
 use crate::scenarios::{Calibration, Scenario};
@@ -242,10 +243,10 @@ fn relay<In: Message, Out: Message>(
 }
 
 pub fn sensors(context: &Context) -> Result<ChildEvent> {
-    let mut emulator = SensorEmulator::new(&context.config);
-    let n = context.config.sensors.len();
+    let mut emulator = SensorEmulator::new(&context.config, context.scenario.vectors().signals);
+    let (n, m) = (context.config.sensors.len(), context.scenario.vectors().input.len());
     relay(context, Topic::State, Topic::Measurements, Stage::Sensors, |state: &PlantState, out: &mut Measurements| {
-        emulator.tick(state.header.k, state.header.t, &state.x, &mut out.readings[..n]);
+        emulator.tick(state.header.k, state.header.t, &state.x[..], &state.u_applied[..m], &mut out.readings[..n]);
         out.u_applied = state.u_applied;
     })
 }
