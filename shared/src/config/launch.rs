@@ -687,6 +687,31 @@ fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<String, String
 mod tests {
     use super::*;
 
+    /// A scenario whose estimate is larger than a message carries cannot be resolved: the error
+    /// names the scenario and the vector (and no child process ever starts).
+    #[test]
+    fn a_scenario_whose_vectors_do_not_fit_the_messages_is_an_error_at_resolution() {
+        use crate::config::schema::Component;
+        const E60: &[Component] = &[Component::new("e", "1"); 60];
+        let schema = ScenarioSchema {
+            name: "made-up",
+            file: "launch/made-up.toml",
+            text: "scenario = \"made-up\"\nmode = \"lockstep\"\nrate_hz = 100.0\nduration_s = 1.0\nseed = 1\n",
+            state: &[],
+            input: &[],
+            estimate: E60,
+            signals: vec![],
+        };
+        let e = resolve_config("made-up", &[], std::slice::from_ref(&schema)).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "scenario made-up: the estimate has 60 components, more than the 48 a message carries"
+        );
+        let fits = ScenarioSchema { estimate: &E60[..48], ..schema };
+        let c = resolve_config("made-up", &[], &[fits]).unwrap();
+        assert_eq!((c.scenario.as_str(), c.loops()), ("made-up", 100));
+    }
+
     #[test]
     fn override_parsing() {
         assert_eq!(Override::parse("a.b=1.5").unwrap().value, toml::Value::Float(1.5));

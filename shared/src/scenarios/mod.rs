@@ -21,7 +21,6 @@ pub use crate::model::scenario::{
     Calibration, Controller, ErrorMeasure, Estimator, MAX_SUBSTEPS, Metrics, Plant, Row, Scenario, ScenarioEntry,
     TheoreticalMargin, check_substeps,
 };
-pub use crate::model::vectors::Signal;
 
 pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY];
 
