@@ -317,7 +317,7 @@ fn find<'a>(catalog: &'a [ScenarioSchema], name: &str) -> Option<&'a ScenarioSch
 
 /// Resolves what the user asked to run, a scenario name or a launch-file path, with overrides,
 /// into a checked configuration for one of the scenarios of `catalog` (the scenarios layer
-/// passes its registry and builds the scenario: `crate::scenarios::resolve`).
+/// passes its registry, and builds the scenario the configuration describes).
 pub fn resolve_config(
     target: &str,
     overrides: &[Override],
