@@ -474,7 +474,7 @@ mod tests {
     /// The error that the pendulum's defaults (10 s at 1 kHz) with this `--fault` give, if any.
     fn checked(fault: &str) -> Result<(), LaunchError> {
         let overrides = [crate::launch::Override::fault(fault).unwrap()];
-        crate::launch::resolve("pendulum", &overrides).map(|_| ())
+        crate::scenarios::resolve("pendulum", &overrides).map(|_| ())
     }
 
     fn rejected(fault: &str, key: &str, fragment: &str) {

@@ -12,10 +12,10 @@ use std::path::Path;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use crate::faults::{FaultSpec, Supervision};
-use crate::msg::{MAX_SENSOR_DIM, MAX_SENSORS};
-use crate::scenarios::{self, Scenario, ScenarioEntry, Signal};
+use crate::config::faults::{FaultSpec, Supervision};
+use crate::config::schema::{ScenarioSchema, SignalLayout};
 use crate::config::wait::WaitSettings;
+use crate::contract::msg::MAX_SENSORS;
 
 /// The longest run allowed, s (one week): it keeps every time and tick count of a run far
 /// from the limits of `Duration` and `u64` arithmetic.
@@ -27,7 +27,7 @@ pub const MAX_RATE_HZ: f64 = 100_000.0;
 pub const MAX_LOOPS: u64 = 1_000_000_000;
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-const COMMON_KEYS: [&str; 9] =
+pub const COMMON_KEYS: [&str; 9] =
     ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision", "wait"];
 
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -164,7 +164,8 @@ pub struct LaunchConfig {
     pub wait: WaitSettings,
     /// The whole resolved document, as written to the run folder.
     pub document: toml::Table,
-    entry: &'static ScenarioEntry,
+    /// The scenario it was checked against.
+    pub schema: ScenarioSchema,
     /// Where the values came from, for error messages.
     origins: Origins,
 }
@@ -205,8 +206,8 @@ impl LaunchConfig {
     }
 
     /// What a sensor measures (checked to exist when the launch file loads).
-    pub fn signal_of(&self, sensor: &SensorSpec) -> &'static Signal {
-        self.entry.signals.iter().find(|s| s.name == sensor.signal).expect("sensor signals are checked at load")
+    pub fn signal_of(&self, sensor: &SensorSpec) -> &SignalLayout {
+        self.schema.signal(&sensor.signal).expect("sensor signals are checked at load")
     }
 
     /// A sensor's period in loop ticks (checked to be a whole number at load).
@@ -290,11 +291,11 @@ impl Override {
         Ok(Self { key: key.to_owned(), value, text: text.to_owned(), append: false })
     }
 
-    /// Parses a `--fault` text (see [`crate::faults::FAULT_SYNTAX`]) into an entry appended to
+    /// Parses a `--fault` text (see [`crate::config::faults::FAULT_SYNTAX`]) into an entry appended to
     /// the launch file's `faults` list.
     pub fn fault(text: &str) -> Result<Self, LaunchError> {
         let origin = format!("--fault {text}");
-        let spec = crate::faults::parse_fault(text).map_err(|e| LaunchError::new(&origin, None, e))?;
+        let spec = crate::config::faults::parse_fault(text).map_err(|e| LaunchError::new(&origin, None, e))?;
         let value = toml::Value::try_from(&spec).expect("a fault always converts to TOML");
         Ok(Self { key: "faults".into(), value, text: text.to_owned(), append: true })
     }
@@ -305,22 +306,28 @@ impl Override {
     }
 }
 
-/// The built-in scenario of this name, with its default launch file compiled in.
-pub fn builtin(name: &str) -> Option<&'static scenarios::ScenarioEntry> {
-    scenarios::ALL.iter().find(|s| s.name == name)
+/// The names of the scenarios of `catalog`, for error messages.
+fn names(catalog: &[ScenarioSchema]) -> String {
+    catalog.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
 }
 
-/// The built-in scenarios' names, for error messages.
-pub fn scenario_names() -> String {
-    scenarios::ALL.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+fn find<'a>(catalog: &'a [ScenarioSchema], name: &str) -> Option<&'a ScenarioSchema> {
+    catalog.iter().find(|s| s.name == name)
 }
 
 /// Resolves what the user asked to run, a scenario name or a launch-file path, with overrides,
-/// into a checked configuration and the scenario it describes.
-pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
+/// into a checked configuration for one of the scenarios of `catalog` (the scenarios layer
+/// passes its registry, and builds the scenario the configuration describes).
+pub fn resolve_config(
+    target: &str,
+    overrides: &[Override],
+    catalog: &[ScenarioSchema],
+) -> Result<LaunchConfig, LaunchError> {
+    let scenario_names = || names(catalog);
     // A scenario's name wins over a file of that name; anything else that looks like a path is one.
-    let looks_like_path =
-        builtin(target).is_none() && !Path::new(target).is_dir() && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
+    let looks_like_path = find(catalog, target).is_none()
+        && !Path::new(target).is_dir()
+        && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
     let (origin, document) = if looks_like_path {
         let text = std::fs::read_to_string(target)
             .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;
@@ -342,14 +349,14 @@ pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Bo
                 ));
             }
         };
-        let entry = builtin(&name).ok_or_else(|| {
+        let schema = find(catalog, &name).ok_or_else(|| {
             LaunchError::new(
                 target,
                 Some("scenario"),
                 format!("unknown scenario \"{name}\"; allowed: {}", scenario_names()),
             )
         })?;
-        let mut document = entry.defaults();
+        let mut document = schema.defaults();
         merge(&mut document, user);
         (target.to_owned(), document)
     } else if Path::new(target).is_dir() {
@@ -359,7 +366,7 @@ pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Bo
             format!("is a folder; give a launch file (.toml) or a scenario name: {}", scenario_names()),
         ));
     } else {
-        let entry = builtin(target).ok_or_else(|| {
+        let schema = find(catalog, target).ok_or_else(|| {
             LaunchError::new(
                 "command line",
                 None,
@@ -369,25 +376,26 @@ pub fn resolve(target: &str, overrides: &[Override]) -> Result<(LaunchConfig, Bo
                 ),
             )
         })?;
-        (entry.file.to_owned(), entry.defaults())
+        (schema.file.to_owned(), schema.defaults())
     };
-    from_document(document, &origin, overrides)
+    from_document(document, &origin, overrides, catalog)
 }
 
 /// Reads a resolved launch file written by the launcher (what each loop process does).
-pub fn load_resolved(path: &Path) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
+pub fn load_resolved_config(path: &Path, catalog: &[ScenarioSchema]) -> Result<LaunchConfig, LaunchError> {
     let origin = path.display().to_string();
     let text = std::fs::read_to_string(path)
         .map_err(|e| LaunchError::new(&origin, None, format!("cannot read the launch file: {e}")))?;
     let document: toml::Table = toml::from_str(&text).map_err(|e| toml_error(&origin, &text, &e))?;
-    from_document(document, &origin, &[])
+    from_document(document, &origin, &[], catalog)
 }
 
 fn from_document(
     mut document: toml::Table,
     origin: &str,
     overrides: &[Override],
-) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
+    catalog: &[ScenarioSchema],
+) -> Result<LaunchConfig, LaunchError> {
     let mut origins = Origins { file: origin.to_owned(), set_keys: BTreeMap::new() };
     for o in overrides {
         let key =
@@ -400,14 +408,16 @@ fn from_document(
 
     let scenario_name = match document.get("scenario") {
         Some(toml::Value::String(s)) => s.clone(),
-        _ => return Err(origins.error("scenario", format!("missing or not a string; allowed: {}", scenario_names()))),
+        _ => return Err(origins.error("scenario", format!("missing or not a string; allowed: {}", names(catalog)))),
     };
-    let entry = builtin(&scenario_name).ok_or_else(|| {
-        origins.error("scenario", format!("unknown scenario \"{scenario_name}\"; allowed: {}", scenario_names()))
+    let schema = find(catalog, &scenario_name).ok_or_else(|| {
+        origins.error("scenario", format!("unknown scenario \"{scenario_name}\"; allowed: {}", names(catalog)))
     })?;
+    schema.check_fits()?;
 
     // Top-level keys: the shared ones, then the scenario's sections; anything else is a typo.
-    let allowed: BTreeSet<&str> = COMMON_KEYS.iter().chain(entry.sections).copied().collect();
+    let sections = schema.sections();
+    let allowed: BTreeSet<&str> = COMMON_KEYS.iter().copied().chain(sections.iter().map(String::as_str)).collect();
     for key in document.keys() {
         if !allowed.contains(key.as_str()) {
             return Err(origins.error(
@@ -438,7 +448,7 @@ fn from_document(
         supervision: common.supervision,
         wait: common.wait,
         document,
-        entry,
+        schema: schema.clone(),
         origins,
     };
     check_common(&config)?;
@@ -448,8 +458,7 @@ fn from_document(
     for (i, fault) in config.faults.iter().enumerate() {
         fault.check(&config, &format!("faults.{i}"))?;
     }
-    let scenario = (entry.build)(&config)?;
-    Ok((config, scenario))
+    Ok(config)
 }
 
 fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
@@ -501,10 +510,9 @@ fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
         }
         // A sensor slower than the run samples once, at loop 0; the bound keeps tick counts small.
         if s.period_s > MAX_DURATION_S {
-            return Err(c.error(
-                &key("period_s"),
-                format!("must be at most {MAX_DURATION_S} s (a week), got {}", s.period_s),
-            ));
+            return Err(
+                c.error(&key("period_s"), format!("must be at most {MAX_DURATION_S} s (a week), got {}", s.period_s))
+            );
         }
         if u64::from(s.delay_ticks) > c.loops() {
             return Err(c.error(
@@ -530,15 +538,14 @@ fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
 
 fn check_sensors(c: &LaunchConfig) -> Result<(), LaunchError> {
     for (name, s) in &c.sensors {
-        let Some(signal) = c.entry.signals.iter().find(|sig| sig.name == s.signal) else {
-            let names: Vec<_> = c.entry.signals.iter().map(|sig| sig.name).collect();
+        let Some(signal) = c.schema.signal(&s.signal) else {
+            let names: Vec<_> = c.schema.signals.iter().map(|sig| sig.name).collect();
             return Err(c.error(
                 &format!("sensors.{name}.signal"),
                 format!("unknown signal \"{}\"; allowed: {}", s.signal, names.join(", ")),
             ));
         };
         let dim = signal.components.len();
-        debug_assert!(dim <= MAX_SENSOR_DIM);
         for (field, value) in [("noise_std", &s.noise_std), ("bias", &s.bias)] {
             if let PerComponent::Each(v) = value
                 && v.len() != dim
@@ -680,252 +687,29 @@ fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<String, String
 mod tests {
     use super::*;
 
-    fn run(overrides: &[&str]) -> Result<LaunchConfig, LaunchError> {
-        let overrides: Vec<Override> = overrides.iter().map(|s| Override::parse(s).unwrap()).collect();
-        resolve("pendulum", &overrides).map(|(c, _)| c)
-    }
-
+    /// A scenario whose estimate is larger than a message carries cannot be resolved: the error
+    /// names the scenario and the vector (and no child process ever starts).
     #[test]
-    fn builtin_defaults_load() {
-        let c = run(&[]).unwrap();
-        assert_eq!(c.scenario, "pendulum");
-        assert_eq!(c.mode, Mode::Realtime);
-        assert_eq!(c.rate_hz, 1000.0);
-        assert_eq!(c.loops(), 10_000);
-        assert_eq!(c.sensors.keys().collect::<Vec<_>>(), ["encoder", "wheel_speed"]);
-        assert_eq!(c.period_ticks(&c.sensors["wheel_speed"]), 10);
-    }
-
-    #[test]
-    fn set_overrides_values_and_coerces_integers() {
-        let c =
-            run(&["sensors.encoder.bias=0.05", "duration_s=30", "mode=lockstep", "estimator.kind=no-bias"]).unwrap();
-        assert_eq!(c.sensors["encoder"].bias, PerComponent::All(0.05));
-        assert_eq!(c.duration_s, 30.0);
-        assert_eq!(c.mode, Mode::Lockstep);
-        assert_eq!(c.document["estimator"]["kind"].as_str(), Some("no-bias"));
-
-        let c = run(&["controller.gains.1=-50"]).unwrap();
-        assert_eq!(c.document["controller"]["gains"][1].as_float(), Some(-50.0));
-        let e = run(&["controller.gains.3=1"]).unwrap_err();
-        assert!(e.message.contains("is a list of 3; index it with 0 to 2"), "{e}");
-    }
-
-    #[test]
-    fn unknown_key_names_the_key_and_the_allowed_ones() {
-        let e = run(&["sensors.encoder.biass=0.05"]).unwrap_err();
-        assert_eq!(e.origin, "--set sensors.encoder.biass=0.05");
-        assert_eq!(e.key.as_deref(), Some("sensors.encoder.biass"));
-        assert!(e.message.contains("expected one of") && e.message.contains("`bias`"), "{e}");
-
-        let e = run(&["durationn_s=3"]).unwrap_err();
-        assert_eq!(e.key.as_deref(), Some("durationn_s"));
-        assert!(e.message.contains("duration_s"), "{e}");
-
-        let e = run(&["estimator.kindd=x"]).unwrap_err();
-        assert_eq!(e.key.as_deref(), Some("estimator.kindd"), "{e}");
-    }
-
-    #[test]
-    fn bad_values_name_the_key_and_what_is_allowed() {
-        let e = run(&["mode=fast"]).unwrap_err();
-        assert_eq!(e.key.as_deref(), Some("mode"));
-        assert!(e.message.contains("realtime") && e.message.contains("lockstep"), "{e}");
-
-        let e = run(&["estimator.kind=kalman"]).unwrap_err();
-        assert_eq!(e.key.as_deref(), Some("estimator.kind"));
-        assert!(e.message.contains("bias-observer") && e.message.contains("no-bias"), "{e}");
-
-        let e = run(&["rate_hz=-5"]).unwrap_err();
-        assert_eq!(e.key.as_deref(), Some("rate_hz"));
-
-        let e = run(&["sensors.wheel_speed.period_s=0.0015"]).unwrap_err();
-        assert_eq!(e.key.as_deref(), Some("sensors.wheel_speed.period_s"));
-        assert!(e.message.contains("multiple of the loop period"), "{e}");
-
-        let e = run(&["sensors.encoder.signal=height"]).unwrap_err();
-        assert!(e.message.contains("theta") && e.message.contains("wheel_speed"), "{e}");
-
-        let e = run(&["duration_s=fast"]).unwrap_err();
-        assert_eq!(e.key.as_deref(), Some("duration_s"));
-        assert!(e.message.contains("invalid type"), "{e}");
-    }
-
-    #[test]
-    fn unknown_scenario_lists_the_known_ones() {
-        let e = resolve("pendulm", &[]).map(|_| ()).unwrap_err();
-        assert!(e.message.contains("unknown scenario \"pendulm\"") && e.message.contains("pendulum"), "{e}");
-    }
-
-    #[test]
-    fn a_file_overrides_the_defaults_and_errors_name_the_file() {
-        let dir = std::env::temp_dir().join(format!("looplab-launch-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let good = dir.join("good.toml");
-        std::fs::write(&good, "scenario = \"pendulum\"\nmode = \"lockstep\"\n[sensors.encoder]\nbias = -0.02\n")
-            .unwrap();
-        let (c, _) = resolve(good.to_str().unwrap(), &[]).unwrap();
-        assert_eq!(c.mode, Mode::Lockstep);
-        assert_eq!(c.sensors["encoder"].bias, PerComponent::All(-0.02));
-        assert_eq!(c.sensors["encoder"].signal, "theta", "keys the file leaves out keep their defaults");
-
-        let bad = dir.join("bad.toml");
-        std::fs::write(&bad, "scenario = \"pendulum\"\n[sensors.encoder]\nnoise = 1\n").unwrap();
-        let e = resolve(bad.to_str().unwrap(), &[]).map(|_| ()).unwrap_err();
-        assert_eq!(e.origin, bad.to_str().unwrap());
-        assert_eq!(e.key.as_deref(), Some("sensors.encoder.noise"));
-
-        let broken = dir.join("broken.toml");
-        std::fs::write(&broken, "scenario = \"pendulum\"\nrate_hz = \n").unwrap();
-        let e = resolve(broken.to_str().unwrap(), &[]).map(|_| ()).unwrap_err();
-        assert!(e.message.starts_with("not valid TOML"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    fn non_finite_numbers_are_rejected_naming_the_key_and_origin() {
-        for (set, key) in [
-            ("plant.initial.theta=nan", "plant.initial.theta"),
-            ("plant.initial.wheel_speed=-inf", "plant.initial.wheel_speed"),
-            ("model.m_p=inf", "model.m_p"),
-            ("controller.gains=[-378.0, nan, -1.0]", "controller.gains.1"),
-            ("sensors.encoder.bias=[nan]", "sensors.encoder.bias.0"),
-        ] {
-            let e = run(&[set]).unwrap_err();
-            assert_eq!(e.origin, format!("--set {set}"));
-            assert_eq!(e.key.as_deref(), Some(key), "{e}");
-            assert!(e.message.contains("must be a finite number"), "{e}");
-        }
-
-        let fault = Override::fault("delay controller by infs at 1s").unwrap();
-        let e = resolve("pendulum", &[fault]).map(|_| ()).unwrap_err();
-        assert_eq!(e.origin, "--fault delay controller by infs at 1s");
-        assert_eq!(e.key.as_deref(), Some("faults.0.delay_s"), "{e}");
-
-        let dir = std::env::temp_dir().join(format!("looplab-launch-nan-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let file = dir.join("nan.toml");
-        std::fs::write(&file, "scenario = \"quadcopter\"\n[plant.initial]\nposition_m = [0.0, nan, 0.0]\n").unwrap();
-        let e = resolve(file.to_str().unwrap(), &[]).map(|_| ()).unwrap_err();
-        assert_eq!(e.origin, file.to_str().unwrap());
-        assert_eq!(e.key.as_deref(), Some("plant.initial.position_m.1"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    /// Asserts that `sets` is rejected with an error on `key` whose message has `fragment`.
-    fn rejected(sets: &[&str], key: &str, fragment: &str) {
-        let e = run(sets).unwrap_err();
-        assert_eq!(e.key.as_deref(), Some(key), "{sets:?}: {e}");
-        assert!(e.message.contains(fragment), "{sets:?}: {e}");
-    }
-
-    #[test]
-    fn durations_rates_and_counts_are_bounded() {
-        rejected(&["duration_s=604801"], "duration_s", "at most 604800");
-        rejected(&["duration_s=604800", "rate_hz=100000"], "duration_s", "at most 1000000000");
-        assert_eq!(run(&["duration_s=604800"]).unwrap().loops(), 604_800_000);
-        rejected(&["sensors.wheel_speed.period_s=604801"], "sensors.wheel_speed.period_s", "at most 604800");
-        // A sensor slower than a short run samples once, at loop 0.
-        run(&["duration_s=0.005"]).unwrap();
-        rejected(
-            &["sensors.encoder.delay_ticks=10001"],
-            "sensors.encoder.delay_ticks",
-            "at most the run's 10000 loops",
-        );
-        run(&["sensors.encoder.delay_ticks=10000"]).unwrap();
-        rejected(&["wait.lead_us=1000001"], "wait.lead_us", "0 to 1000000");
-        rejected(&["wait.spin_cap_us=-1"], "wait.spin_cap_us", "0 to 1000000");
-        rejected(&["plant.substeps=1001"], "plant.substeps", "1 to 1000");
-        rejected(&["plant.substeps=0"], "plant.substeps", "1 to 1000");
-    }
-
-    #[test]
-    fn supervision_times_and_counts_are_bounded() {
-        rejected(&["supervision.backoff_s=2e19"], "supervision.backoff_s", "0 to 60 seconds");
-        rejected(&["supervision.controller.backoff_s=61"], "supervision.controller.backoff_s", "0 to 60");
-        run(&["supervision.backoff_s=60", "supervision.max_restarts=1000"]).unwrap();
-        rejected(&["supervision.max_restarts=1001"], "supervision.max_restarts", "0 to 1000");
-        rejected(&["supervision.plant.max_restarts=5000"], "supervision.plant.max_restarts", "0 to 1000");
-        for key in ["lockstep_stall_s", "stall_timeout_s", "command_timeout_s"] {
-            rejected(&[&format!("supervision.{key}=1e20")], &format!("supervision.{key}"), "at most 3600");
-            rejected(&[&format!("supervision.{key}=0")], &format!("supervision.{key}"), "positive");
-        }
-    }
-
-    #[test]
-    fn scenario_parameters_that_overflow_the_physics_are_rejected() {
-        rejected(&["model.torque_constant=1e307"], "model", "finite");
-        rejected(&["estimator.bias-observer.poles=[-1e300, -1e300, -1e300]"], "estimator.bias-observer.poles", "gains");
-        let quadcopter = |sets: &[&str]| {
-            let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s).unwrap()).collect();
-            resolve("quadcopter", &overrides).map(|_| ()).unwrap_err()
+    fn a_scenario_whose_vectors_do_not_fit_the_messages_is_an_error_at_resolution() {
+        use crate::config::schema::Component;
+        const E60: &[Component] = &[Component::new("e", "1"); 60];
+        let schema = ScenarioSchema {
+            name: "made-up",
+            file: "launch/made-up.toml",
+            text: "scenario = \"made-up\"\nmode = \"lockstep\"\nrate_hz = 100.0\nduration_s = 1.0\nseed = 1\n",
+            state: &[],
+            input: &[],
+            estimate: E60,
+            signals: vec![],
         };
-        assert_eq!(quadcopter(&["model.mass_kg=1e-320"]).key.as_deref(), Some("model.mass_kg"));
+        let e = resolve_config("made-up", &[], std::slice::from_ref(&schema)).unwrap_err();
         assert_eq!(
-            quadcopter(&["estimator.initial_xi_factor=[0.0, 1.0, 1.0, 1.0]"]).key.as_deref(),
-            Some("estimator.initial_xi_factor.0")
+            e.to_string(),
+            "scenario made-up: the estimate has 60 components, more than the 48 a message carries"
         );
-        assert_eq!(quadcopter(&["plant.mass_step_at_s=-1"]).key.as_deref(), Some("plant.mass_step_at_s"));
-    }
-
-    /// Every number of each scenario's defaults, set to extreme values, loads or gives an error:
-    /// never a panic, and what loads builds a plant whose first step is finite.
-    #[test]
-    fn extreme_values_of_every_key_load_or_fail_cleanly() {
-        fn numeric_keys(prefix: &str, value: &toml::Value, out: &mut Vec<(String, bool)>) {
-            match value {
-                toml::Value::Float(_) => out.push((prefix.to_owned(), true)),
-                toml::Value::Integer(_) => out.push((prefix.to_owned(), false)),
-                toml::Value::Table(t) => {
-                    for (k, v) in t {
-                        let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
-                        numeric_keys(&key, v, out);
-                    }
-                }
-                toml::Value::Array(items) => {
-                    for (i, v) in items.iter().enumerate() {
-                        numeric_keys(&format!("{prefix}.{i}"), v, out);
-                    }
-                }
-                _ => {}
-            }
-        }
-        let floats = [0.0, -1.0, 1e300, -1e300, 1e-300];
-        let integers = [0, -1, 1, i64::MAX, i64::MIN];
-        for entry in scenarios::ALL {
-            let mut keys = Vec::new();
-            numeric_keys("", &toml::Value::Table(entry.defaults()), &mut keys);
-            assert!(keys.len() > 20, "{}: {keys:?}", entry.name);
-            for (key, is_float) in keys {
-                let values: Vec<toml::Value> = if is_float {
-                    floats.iter().map(|v| toml::Value::Float(*v)).collect()
-                } else {
-                    integers.iter().map(|v| toml::Value::Integer(*v)).collect()
-                };
-                for value in values {
-                    let text = format!("{key}={value}");
-                    let o = Override { key: key.clone(), value, text: text.clone(), append: false };
-                    let Ok((config, scenario)) = resolve(entry.name, &[o]) else { continue };
-                    let mut plant = scenario.plant();
-                    let _ = (scenario.estimator(), scenario.controller(), scenario.metrics());
-                    let u: Vec<f64> = scenario.input_limits().iter().map(|(lo, hi)| (lo + hi) / 2.0).collect();
-                    plant.step(0.0, &u, config.dt());
-                    let finite = plant.state().iter().all(|x| x.is_finite());
-                    assert!(finite, "{}: {text} loads, and the first step gives {:?}", entry.name, plant.state());
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn every_launch_file_of_the_repository_is_within_the_bounds() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch/quadcopter");
-        let mut files: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
-        files.sort();
-        assert!(files.len() >= 7, "{files:?}");
-        for file in files {
-            resolve(file.to_str().unwrap(), &[]).unwrap_or_else(|e| panic!("{e}"));
-        }
+        let fits = ScenarioSchema { estimate: &E60[..48], ..schema };
+        let c = resolve_config("made-up", &[], &[fits]).unwrap();
+        assert_eq!((c.scenario.as_str(), c.loops()), ("made-up", 100));
     }
 
     #[test]

@@ -1,6 +1,9 @@
-//! Layer 1, configuration: launch files, fault and supervision settings, wait settings. Depends
-//! only on the contract.
+//! Layer 1, configuration: launch files, fault and supervision settings, wait settings, and the
+//! plain-data view of a scenario a launch file is checked against. Depends only on the contract.
 
 pub mod faults;
 pub mod launch;
+pub mod schema;
+pub mod seed;
+pub mod validate;
 pub mod wait;

@@ -18,8 +18,8 @@ pub const MAX_STATE: usize = 32;
 pub const MAX_INPUT: usize = 8;
 /// Largest number of sensors in one launch file.
 pub const MAX_SENSORS: usize = 8;
-/// Largest number of components one sensor may measure.
-pub const MAX_SENSOR_DIM: usize = 12;
+/// Largest number of components one sensor may measure (paper 004's attitude sensor has 14).
+pub const MAX_SENSOR_DIM: usize = 16;
 /// Largest estimate vector.
 pub const MAX_ESTIMATE: usize = 48;
 
@@ -260,7 +260,8 @@ mod tests {
         assert_eq!(std::mem::size_of::<PlantState>(), 104 + 8 * (MAX_STATE + MAX_INPUT) + 64);
         assert_eq!(std::mem::size_of::<SensorReading>(), 8 * MAX_SENSOR_DIM + 24);
         assert_eq!(std::mem::size_of::<Command>(), 104 + 8 * MAX_INPUT);
-        assert!(std::mem::size_of::<Measurements>() < 1200);
+        assert_eq!(std::mem::size_of::<Measurements>(), 104 + MAX_SENSORS * (8 * MAX_SENSOR_DIM + 24) + 8 * MAX_INPUT);
+        assert_eq!(std::mem::size_of::<Measurements>(), 1384);
     }
 
     #[test]

@@ -22,7 +22,8 @@ use crate::protocol::{ChildEvent, MonitorStatus, PlantReport, StageReport};
 use crate::report::{
     FaultReport, Jitter, Latency, MonitorCounts, ProcessInfo, SharedMemoryCheck, Summary, TimelineEntry,
 };
-use crate::scenarios::{self, Scenario};
+use crate::model::scenario::Scenario;
+use crate::scenarios;
 use crate::signals::StopFlag;
 
 /// The loop processes in start order: readers before writers, the plant last.
@@ -183,12 +184,12 @@ pub fn main() -> ExitCode {
             list();
             ExitCode::SUCCESS
         }
-        Some(Command::Show { scenario }) => match launch::builtin(&scenario) {
+        Some(Command::Show { scenario }) => match scenarios::builtin(&scenario) {
             Some(entry) => {
                 print!("{}", entry.text);
                 ExitCode::SUCCESS
             }
-            None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", launch::scenario_names())),
+            None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", scenarios::scenario_names())),
         },
         Some(Command::Run(args)) => run(args),
         Some(Command::Clean) => clean(),
@@ -289,7 +290,7 @@ fn overrides(mode: Option<&str>, launch: &LaunchArgs) -> Result<Vec<Override>, l
 
 fn run(args: RunArgs) -> ExitCode {
     let overrides = overrides(args.mode.as_deref(), &args.launch);
-    let resolved = overrides.and_then(|o| launch::resolve(&args.target, &o));
+    let resolved = overrides.and_then(|o| scenarios::resolve(&args.target, &o));
     let (config, scenario) = match resolved {
         Ok(r) => r,
         Err(e) => return bad_input(e),

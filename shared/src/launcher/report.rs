@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 use serde::{Deserialize, Serialize};
 
 use crate::contract::report::{HOPS, Stats};
+use crate::model::scenario::ErrorMeasureInfo;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Summary {
@@ -69,13 +70,6 @@ pub struct Summary {
     #[serde(default)]
     pub restart_steps: Vec<RestartSteps>,
     pub shared_memory: SharedMemoryCheck,
-}
-
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
-pub struct ErrorMeasureInfo {
-    pub name: String,
-    pub recovery_band: f64,
-    pub limit: f64,
 }
 
 /// One injected fault: what the launcher saw (wall-clock, from the injection) and what it did

@@ -1,5 +1,8 @@
-//! Layer 2, the model: pure maths with no IPC and no mode (the sensor emulator, the integrator).
-//! Depends on the contract and the configuration.
+//! Layer 2, the model: the scenario interface and pure maths with no IPC and no mode (the
+//! sensor emulator, the integrator). Depends on the contract and the configuration.
 
 pub mod integrate;
+pub mod reference;
+pub mod scenario;
 pub mod sensors;
+pub mod vectors;

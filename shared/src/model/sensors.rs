@@ -15,11 +15,13 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::launch::LaunchConfig;
-use crate::msg::{MAX_SENSOR_DIM, SensorReading};
+use crate::config::launch::LaunchConfig;
+use crate::config::seed::fnv1a;
+use crate::contract::msg::{MAX_SENSOR_DIM, SensorReading};
+use crate::model::vectors::{ReadSignal, Signal};
 
 struct EmulatedSensor {
-    read: fn(&[f64], &mut [f64]),
+    read: ReadSignal,
     dim: usize,
     period_ticks: u64,
     delay_ticks: u64,
@@ -39,18 +41,16 @@ pub struct SensorEmulator {
     sensors: Vec<EmulatedSensor>,
 }
 
-/// FNV-1a: a fixed, documented hash, so seeds do not depend on the standard library's hasher.
-pub(crate) fn fnv1a(text: &str) -> u64 {
-    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
-}
-
 impl SensorEmulator {
-    pub fn new(config: &LaunchConfig) -> Self {
+    /// One emulated sensor per sensor of `config`, reading the scenario's `signals` (the
+    /// launch file was checked to name only these).
+    pub fn new(config: &LaunchConfig, signals: &[Signal]) -> Self {
         let sensors = config
             .sensors
             .iter()
             .map(|(name, spec)| {
-                let signal = config.signal_of(spec);
+                let signal =
+                    signals.iter().find(|s| s.name == spec.signal).expect("sensor signals are checked at load");
                 let dim = signal.components.len();
                 EmulatedSensor {
                     read: signal.read,
@@ -71,14 +71,15 @@ impl SensorEmulator {
         Self { sensors }
     }
 
-    /// Advances to tick `k` (simulation time `t`, true state `x`) and writes every sensor's
-    /// held reading into `out`.
-    pub fn tick(&mut self, k: u64, t: f64, x: &[f64], out: &mut [SensorReading]) {
+    /// Advances to tick `k` (simulation time `t`, true state `x`, the input the actuator
+    /// applied over the last interval `u_applied`) and writes every sensor's held reading into
+    /// `out`.
+    pub fn tick(&mut self, k: u64, t: f64, x: &[f64], u_applied: &[f64], out: &mut [SensorReading]) {
         for (sensor, out) in self.sensors.iter_mut().zip(out.iter_mut()) {
             if k >= sensor.next_sample {
                 sensor.next_sample = (k / sensor.period_ticks + 1) * sensor.period_ticks;
                 let mut value = [0.0; MAX_SENSOR_DIM];
-                (sensor.read)(x, &mut value[..sensor.dim]);
+                (sensor.read)(t, x, u_applied, &mut value[..sensor.dim]);
                 for ((v, bias), std) in value.iter_mut().zip(&sensor.bias).zip(&sensor.noise_std) {
                     let noise: f64 = StandardNormal.sample(&mut sensor.rng);
                     let measured = *v + bias + std * noise;
@@ -107,12 +108,36 @@ impl SensorEmulator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::launch::{Override, resolve};
+    use crate::config::launch::{Override, resolve_config};
+    use crate::config::schema::{Component, ScenarioSchema};
 
+    const RAD: &[Component] = &[Component::new("theta", "rad")];
+    const RAD_S: &[Component] = &[Component::new("wheel_speed", "rad/s")];
+    /// The pendulum's two signals, and one that reads time and the applied input.
+    const SIGNALS: &[Signal] = &[
+        Signal { name: "theta", components: RAD, read: |_, x, _, out| out[0] = x[0] },
+        Signal { name: "wheel_speed", components: RAD_S, read: |_, x, _, out| out[0] = x[2] },
+        Signal {
+            name: "known_input",
+            components: &[Component::new("t", "s"), Component::new("u", "A")],
+            read: |t, _, u, out| out[..2].copy_from_slice(&[t, u[0]]),
+        },
+    ];
+
+    /// The pendulum's default launch file, resolved against [`SIGNALS`] (no scenario is built).
     fn emulator(sets: &[&str]) -> (SensorEmulator, LaunchConfig) {
+        let schema = ScenarioSchema {
+            name: "pendulum",
+            file: "launch/pendulum.toml",
+            text: include_str!("../../../launch/pendulum.toml"),
+            state: &[],
+            input: &[],
+            estimate: &[],
+            signals: SIGNALS.iter().map(Signal::layout).collect(),
+        };
         let overrides: Vec<_> = sets.iter().map(|s| Override::parse(s).unwrap()).collect();
-        let (config, _) = resolve("pendulum", &overrides).unwrap();
-        (SensorEmulator::new(&config), config)
+        let config = resolve_config("pendulum", &overrides, &[schema]).unwrap();
+        (SensorEmulator::new(&config, SIGNALS), config)
     }
 
     /// A made-up truth whose θ and wheel speed change every tick.
@@ -134,7 +159,7 @@ mod tests {
         let mut previous = out;
         for k in 0..200 {
             let x = truth(k);
-            emu.tick(k, k as f64 * 1e-3, &x, &mut out);
+            emu.tick(k, k as f64 * 1e-3, &x, &[], &mut out);
             // Encoder: every tick, q(θ + 0.1).
             assert_eq!(out[0].fresh, 1);
             assert_eq!(out[0].value[0], ((x[0] + 0.1) / q).round() * q);
@@ -158,7 +183,7 @@ mod tests {
         let (mut emu, _) = emulator(&["sensors.wheel_speed.noise_std=0.0", "sensors.wheel_speed.delay_ticks=3"]);
         let mut out = [SensorReading::default(); 2];
         for k in 0..40 {
-            emu.tick(k, k as f64 * 1e-3, &truth(k), &mut out);
+            emu.tick(k, k as f64 * 1e-3, &truth(k), &[], &mut out);
             let speed = out[1];
             if k < 3 {
                 assert_eq!(speed.valid, 0, "nothing has arrived yet at tick {k}");
@@ -176,7 +201,7 @@ mod tests {
         let (mut emu, _) = emulator(&["sensors.wheel_speed.noise_std=0.0"]);
         let mut out = [SensorReading::default(); 2];
         for k in (0..30).filter(|k| *k != 10) {
-            emu.tick(k, k as f64 * 1e-3, &truth(k), &mut out);
+            emu.tick(k, k as f64 * 1e-3, &truth(k), &[], &mut out);
             let speed = out[1];
             let sampled_at = match k {
                 0..=9 => 0,
@@ -196,7 +221,7 @@ mod tests {
             let mut out = [SensorReading::default(); 2];
             (0..50)
                 .map(|k| {
-                    emu.tick(k, 0.0, &[0.0; 3], &mut out);
+                    emu.tick(k, 0.0, &[0.0; 3], &[], &mut out);
                     out[0].value[0]
                 })
                 .collect::<Vec<_>>()
@@ -207,5 +232,24 @@ mod tests {
         let mean = a.iter().sum::<f64>() / 50.0;
         let std = (a.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 49.0).sqrt();
         assert!((mean - 0.1).abs() < 0.005 && (std - 0.01).abs() < 0.004, "mean {mean}, std {std}");
+    }
+
+    #[test]
+    fn a_signal_may_read_time_and_the_applied_input() {
+        let (mut emu, _) = emulator(&[
+            "sensors.wheel_speed.signal=known_input",
+            "sensors.wheel_speed.noise_std=0.0",
+            "sensors.wheel_speed.period_s=0.002",
+            "sensors.wheel_speed.delay_ticks=1",
+        ]);
+        let mut out = [SensorReading::default(); 2];
+        for k in 0..10 {
+            let (t, u) = (k as f64 * 1e-3, [0.5 * k as f64]);
+            emu.tick(k, t, &truth(k), &u, &mut out);
+            // Sampled at even ticks, delivered one tick later: (t, u) of the sample instant.
+            let sampled_at = (k.max(1) - 1) / 2 * 2;
+            assert_eq!(out[1].value[..2], [sampled_at as f64 * 1e-3, 0.5 * sampled_at as f64], "tick {k}");
+            assert_eq!(out[1].fresh, u32::from(k % 2 == 1), "tick {k}");
+        }
     }
 }

@@ -2,6 +2,7 @@
 //! reading, the estimate and the command, taken once from the launch file and the scenario.
 
 use crate::config::launch::LaunchConfig;
+use crate::config::schema::Component;
 use crate::scenarios::Scenario;
 
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -16,16 +17,17 @@ pub struct Layout {
 
 impl Layout {
     pub fn new(config: &LaunchConfig, scenario: &dyn Scenario) -> Self {
-        let names = |names: &[&str]| names.iter().map(|n| n.to_string()).collect::<Vec<_>>();
+        let names = |components: &[Component]| components.iter().map(|c| c.name.to_string()).collect::<Vec<_>>();
+        let vectors = scenario.vectors();
         Self {
-            state: names(scenario.state_names()),
+            state: names(vectors.state),
             sensors: config
                 .sensors
                 .iter()
                 .map(|(name, spec)| (name.clone(), names(config.signal_of(spec).components)))
                 .collect(),
-            estimate: names(scenario.estimate_names()),
-            input: names(scenario.input_names()),
+            estimate: names(vectors.estimate),
+            input: names(vectors.input),
         }
     }
 

@@ -8,12 +8,12 @@ use std::time::Duration;
 use anyhow::{Result, anyhow};
 use iceoryx2::prelude::*;
 
-use crate::config::launch::{LaunchConfig, load_resolved};
+use crate::config::launch::LaunchConfig;
 use crate::contract::protocol::{ChildEvent, ProcessArgs, emit};
 use crate::contract::role::Role;
 use crate::runtime::ipc::Ipc;
 use crate::runtime::signals::StopFlag;
-use crate::scenarios::Scenario;
+use crate::scenarios::{Scenario, load_resolved};
 
 /// Longest a wait blocks before it looks at the stop flag again (a signal also ends it early).
 pub const WAIT_SLICE: Duration = Duration::from_millis(100);

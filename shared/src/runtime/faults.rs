@@ -50,7 +50,7 @@ impl StageFaults {
             })
             .collect();
         // One stream per process, so that faults in one do not shift another's draws.
-        let seed = config.seed ^ crate::model::sensors::fnv1a(&format!("faults/{role}"));
+        let seed = config.seed ^ crate::config::seed::fnv1a(&format!("faults/{role}"));
         Self { windows, rng: ChaCha8Rng::seed_from_u64(seed), dt: config.dt(), mode: config.mode }
     }
 

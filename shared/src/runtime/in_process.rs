@@ -55,7 +55,7 @@ pub fn run(
         bail!(why);
     }
     let mut plant = PlantCore::new(config, scenario, 0);
-    let mut sensors = StageRunner::new(SensorsTask::new(config), Role::Sensors, config, 0);
+    let mut sensors = StageRunner::new(SensorsTask::new(config, scenario), Role::Sensors, config, 0);
     let mut estimator = StageRunner::new(EstimatorTask::new(config, scenario), Role::Estimator, config, 0);
     let mut controller = StageRunner::new(ControllerTask::new(scenario), Role::Controller, config, 0);
     let loops = config.loops();

@@ -70,7 +70,7 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
 }
 
 pub fn sensors(context: &Context) -> Result<ChildEvent> {
-    relay(context, Role::Sensors, SensorsTask::new(&context.config))
+    relay(context, Role::Sensors, SensorsTask::new(&context.config, context.scenario.as_ref()))
 }
 
 pub fn estimator(context: &Context) -> Result<ChildEvent> {

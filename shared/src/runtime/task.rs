@@ -39,11 +39,17 @@ pub trait Task {
 pub struct SensorsTask {
     emulator: SensorEmulator,
     sensors: usize,
+    inputs: usize,
 }
 
 impl SensorsTask {
-    pub fn new(config: &LaunchConfig) -> Self {
-        Self { emulator: SensorEmulator::new(config), sensors: config.sensors.len() }
+    pub fn new(config: &LaunchConfig, scenario: &dyn Scenario) -> Self {
+        let vectors = scenario.vectors();
+        Self {
+            emulator: SensorEmulator::new(config, vectors.signals),
+            sensors: config.sensors.len(),
+            inputs: vectors.input.len(),
+        }
     }
 }
 
@@ -51,7 +57,9 @@ impl Task for SensorsTask {
     type In = PlantState;
     type Out = Measurements;
     fn process(&mut self, state: &PlantState, out: &mut Measurements) {
-        self.emulator.tick(state.header.k, state.header.t, &state.x, &mut out.readings[..self.sensors]);
+        let (k, t) = (state.header.k, state.header.t);
+        let u_applied = &state.u_applied[..self.inputs];
+        self.emulator.tick(k, t, &state.x, u_applied, &mut out.readings[..self.sensors]);
         out.u_applied = state.u_applied;
     }
 }
@@ -69,8 +77,8 @@ impl EstimatorTask {
         Self {
             estimator: scenario.estimator(),
             sensors: config.sensors.len(),
-            inputs: scenario.input_names().len(),
-            estimates: scenario.estimate_names().len(),
+            inputs: scenario.vectors().input.len(),
+            estimates: scenario.vectors().estimate.len(),
         }
     }
 }
@@ -102,7 +110,7 @@ impl ControllerTask {
     pub fn new(scenario: &dyn Scenario) -> Self {
         Self {
             controller: scenario.controller(),
-            estimates: scenario.estimate_names().len(),
+            estimates: scenario.vectors().estimate.len(),
             limits: scenario.input_limits(),
         }
     }

@@ -11,10 +11,10 @@ use std::process::ExitCode;
 use anyhow::{Context as _, Result};
 use serde::Serialize;
 
-use crate::launch::{self, LaunchConfig, Override};
+use crate::config::launch::{LaunchConfig, Override};
 use crate::launcher::{Outcome, run_once};
 use crate::report::Summary;
-use crate::scenarios::{Scenario, TheoreticalMargin};
+use crate::model::scenario::{Scenario, TheoreticalMargin};
 
 /// The error's peak in the last second over its peak in the first second of the fault above
 /// which the loop counts as unstable: the disturbance the fault caused grew instead of dying
@@ -108,7 +108,7 @@ pub fn run(args: SweepArgs) -> ExitCode {
             Ok(o) => overrides.push(o),
             Err(e) => return bad(e.to_string()),
         }
-        match launch::resolve(&args.target, &overrides) {
+        match crate::scenarios::resolve(&args.target, &overrides) {
             Ok((config, scenario)) => configs.push((value, config, scenario)),
             Err(e) => return bad(e.to_string()),
         }

@@ -30,9 +30,9 @@ use nalgebra::{Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::plant::Model;
-use crate::integrate::rk4;
-use crate::msg::SensorReading;
-use crate::scenarios::Estimator;
+use crate::contract::msg::SensorReading;
+use crate::model::integrate::rk4;
+use crate::model::scenario::Estimator;
 
 /// RK4 steps per loop interval: the fastest default error pole (about −200 s⁻¹ in the
 /// bias observer's l₁) stays far inside RK4's stability region at 1 kHz.
@@ -152,7 +152,7 @@ impl Estimator for PendulumEstimator {
     /// The bias estimate: it takes the observer about 0.4 s to find, and a restarted observer
     /// that starts from zero commands the full current limit the wrong way meanwhile (the
     /// pendulum falls), so it outlives the process.
-    fn calibration(&self) -> Option<crate::scenarios::Calibration> {
+    fn calibration(&self) -> Option<crate::model::scenario::Calibration> {
         let (x, _) = self.state?;
         (self.kind == Kind::BiasObserver).then(|| {
             let mut c = [0.0; 32];
@@ -161,7 +161,7 @@ impl Estimator for PendulumEstimator {
         })
     }
 
-    fn resume(&mut self, calibration: &crate::scenarios::Calibration) {
+    fn resume(&mut self, calibration: &crate::model::scenario::Calibration) {
         if self.kind == Kind::BiasObserver {
             self.resumed_bias = calibration[0];
         }
@@ -171,6 +171,7 @@ impl Estimator for PendulumEstimator {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::contract::msg::MAX_SENSOR_DIM;
     use crate::scenarios::pendulum::plant::tests::paper_model;
 
     fn max_real_part(m: nalgebra::Matrix3<f64>) -> f64 {
@@ -206,7 +207,7 @@ mod tests {
         let model = paper_model();
         let mut est =
             PendulumEstimator::new(Kind::NoBias, &model, Vector3::zeros(), no_bias_gains([-50.0, -50.0]), 0, 1);
-        let reading = |v: f64| SensorReading { value: [v; 12], valid: 1, fresh: 1, ..Default::default() };
+        let reading = |v: f64| SensorReading { value: [v; MAX_SENSOR_DIM], valid: 1, fresh: 1, ..Default::default() };
         let mut out = [0.0; 4];
         est.update(0.0, &[reading(0.3), reading(-2.0)], &[0.0], &mut out);
         for k in 1..=2000 {
@@ -225,7 +226,8 @@ mod tests {
         let (theta, delta) = (0.02, 0.1);
         let current = model.ml() * model.g * f64::sin(theta) / model.torque_constant;
         let mut est = PendulumEstimator::new(Kind::BiasObserver, &model, l, Vector2::zeros(), 0, 1);
-        let reading = SensorReading { value: [theta + delta; 12], valid: 1, fresh: 1, ..Default::default() };
+        let reading =
+            SensorReading { value: [theta + delta; MAX_SENSOR_DIM], valid: 1, fresh: 1, ..Default::default() };
         let mut out = [0.0; 4];
         for k in 0..3000 {
             est.update(f64::from(k) * 1e-3, &[reading, reading], &[current], &mut out);

@@ -19,8 +19,8 @@ use nalgebra::{Complex, DMatrix, DVector, Matrix3, Matrix4, RowVector3, SMatrix,
 
 use super::Pendulum;
 use super::estimator::Kind;
-use crate::integrate::rk4;
-use crate::launch::{LaunchConfig, SensorSpec};
+use crate::config::launch::{LaunchConfig, SensorSpec};
+use crate::model::integrate::rk4;
 
 /// The exact search gives up here: a second of delay at 1 kHz.
 const MAX_DELAY_TICKS: u32 = 1000;
@@ -175,7 +175,7 @@ fn plant_step(p: &Pendulum) -> (Matrix3<f64>, Vector3<f64>) {
     (e.fixed_view::<3, 3>(0, 0).into_owned(), e.fixed_view::<3, 1>(0, 3).into_owned())
 }
 
-/// A sensor as `crate::sensors` runs it: samples every `period` ticks from tick 0, delivers
+/// A sensor as `crate::model::sensors` runs it: samples every `period` ticks from tick 0, delivers
 /// `delay` ticks later, holds in between.
 #[derive(Debug, Clone, Copy)]
 struct Sampling {
@@ -398,10 +398,11 @@ mod tests {
     use std::collections::VecDeque;
 
     use super::*;
-    use crate::launch::{Override, resolve};
-    use crate::msg::SensorReading;
-    use crate::scenarios::Scenario;
-    use crate::sensors::SensorEmulator;
+    use crate::config::launch::Override;
+    use crate::contract::msg::SensorReading;
+    use crate::model::scenario::Scenario;
+    use crate::model::sensors::SensorEmulator;
+    use crate::scenarios::resolve;
 
     fn pendulum(sets: &[&str]) -> (LaunchConfig, Pendulum) {
         let overrides: Vec<_> = ["mode=lockstep"].iter().chain(sets).map(|s| Override::parse(s).unwrap()).collect();
@@ -432,7 +433,7 @@ mod tests {
     /// command of loop k applied over tick k+d → k+d+1 (zero before that).
     fn simulate(p: &Pendulum, config: &LaunchConfig, d: usize, ticks: u64) -> Vec<Recorded> {
         let (mut plant, mut estimator, mut controller) = (p.plant(), p.estimator(), p.controller());
-        let mut sensors = SensorEmulator::new(config);
+        let mut sensors = SensorEmulator::new(config, p.vectors().signals);
         let mut readings = vec![SensorReading::default(); config.sensors.len()];
         let (mut estimate, mut command) = ([0.0; 4], [0.0]);
         let mut pending: VecDeque<f64> = std::iter::repeat_n(0.0, d).collect();
@@ -441,7 +442,7 @@ mod tests {
         for k in 0..ticks {
             let t = k as f64 * p.dt;
             let x = Vector3::from_column_slice(plant.state());
-            sensors.tick(k, t, x.as_slice(), &mut readings);
+            sensors.tick(k, t, x.as_slice(), &[applied], &mut readings);
             estimator.update(t, &readings, &[applied], &mut estimate);
             controller.update(t, &estimate, &mut command);
             pending.push_back(command[0]);

@@ -4,12 +4,14 @@
 //! - `plant`: the nonlinear model;
 //! - `sensors`: what the encoder and the motor controller's speed sensor read;
 //! - `estimator`: the bias observer and the no-bias observer;
-//! - `controller`: the LQR state feedback with the current limit.
+//! - `controller`: the LQR state feedback with the current limit;
+//! - `reference`: the upright setpoint the controller, the metrics and the fault reports share.
 
 pub mod controller;
 pub mod estimator;
 pub mod margin;
 pub mod plant;
+pub mod reference;
 pub mod sensors;
 
 use std::collections::BTreeMap;
@@ -20,17 +22,39 @@ use serde::Deserialize;
 use self::controller::StateFeedback;
 use self::estimator::{Kind, PendulumEstimator};
 use self::plant::{Model, PendulumPlant};
-use super::{Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry, TheoreticalMargin};
-use crate::launch::{LaunchConfig, LaunchError};
+use self::reference::Upright;
+use crate::config::launch::{LaunchConfig, LaunchError};
+use crate::config::validate::{positive, positive_as};
+use crate::model::reference::Reference;
+use crate::model::scenario::{
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry, TheoreticalMargin,
+    check_substeps,
+};
+use crate::model::vectors::{Component, Vectors};
 
 pub const ENTRY: ScenarioEntry = ScenarioEntry {
     name: "pendulum",
     description: "reaction-wheel inverted pendulum with a biased encoder, LQR and a bias observer (paper 003)",
     file: "launch/pendulum.toml",
     text: include_str!("../../../../launch/pendulum.toml"),
-    sections: &["model", "plant", "estimator", "controller", "limits"],
-    signals: sensors::SIGNALS,
+    vectors: &VECTORS,
     build,
+};
+
+pub static VECTORS: Vectors = Vectors {
+    state: &[
+        Component::new("theta", "rad"),
+        Component::new("theta_dot", "rad/s"),
+        Component::new("wheel_speed", "rad/s"),
+    ],
+    input: &[Component::new("current", "A")],
+    estimate: &[
+        Component::new("theta", "rad"),
+        Component::new("theta_dot", "rad/s"),
+        Component::new("wheel_speed", "rad/s"),
+        Component::new("bias", "rad"),
+    ],
+    signals: sensors::SIGNALS,
 };
 
 #[derive(Debug, Clone, Deserialize)]
@@ -137,9 +161,7 @@ impl Pendulum {
             ("torque_constant", model.torque_constant),
             ("current_limit_a", model.current_limit_a),
         ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(c.error(&format!("model.{key}"), format!("must be a positive number, got {value}")));
-            }
+            positive(c, &format!("model.{key}"), value)?;
         }
         // Positive parameters can still overflow (1e300 kg): the linear model must be finite.
         let (a, b) = (model.a(), model.b());
@@ -153,7 +175,7 @@ impl Pendulum {
             ));
         }
         let plant: PlantSection = c.section("plant")?;
-        super::check_substeps(c, "plant.substeps", plant.substeps)?;
+        check_substeps(c, "plant.substeps", plant.substeps)?;
         let estimator: EstimatorSection = c.section("estimator")?;
         let poles_key = |kind: &str| format!("estimator.{kind}.poles");
         if estimator.bias_observer.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
@@ -183,9 +205,7 @@ impl Pendulum {
         let limits: LimitsSection = c.section("limits")?;
         for (key, value) in [("fall_angle_rad", limits.fall_angle_rad), ("recovery_band_rad", limits.recovery_band_rad)]
         {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(c.error(&format!("limits.{key}"), format!("must be a positive angle, got {value}")));
-            }
+            positive_as(c, &format!("limits.{key}"), value, "angle")?;
         }
         let (encoder, _, encoder_spec) = c.sensor_for("theta")?;
         let (wheel_speed, _, _) = c.sensor_for("wheel_speed")?;
@@ -215,16 +235,8 @@ impl Scenario for Pendulum {
         format!("reaction-wheel pendulum, {kind}")
     }
 
-    fn state_names(&self) -> &'static [&'static str] {
-        &["theta", "theta_dot", "wheel_speed"]
-    }
-
-    fn input_names(&self) -> &'static [&'static str] {
-        &["current"]
-    }
-
-    fn estimate_names(&self) -> &'static [&'static str] {
-        &["theta", "theta_dot", "wheel_speed", "bias"]
+    fn vectors(&self) -> &'static Vectors {
+        &VECTORS
     }
 
     fn input_limits(&self) -> Vec<(f64, f64)> {
@@ -255,16 +267,12 @@ impl Scenario for Pendulum {
         Box::new(StateFeedback {
             gains: RowVector3::from(self.controller.gains),
             current_limit: self.model.current_limit_a,
+            reference: Upright,
         })
     }
 
     fn error_measure(&self) -> ErrorMeasure {
-        ErrorMeasure {
-            name: "|theta| rad",
-            of_state: std::sync::Arc::new(|_, x| x[0].abs()),
-            recovery_band: self.limits.recovery_band_rad,
-            limit: self.limits.fall_angle_rad,
-        }
+        ErrorMeasure::of_reference("|theta| rad", Upright, self.limits.recovery_band_rad, self.limits.fall_angle_rad)
     }
 
     fn delay_margin(&self, config: &LaunchConfig) -> Option<TheoreticalMargin> {
@@ -297,6 +305,7 @@ const FINAL_WINDOW_S: f64 = 1.0;
 
 #[derive(Default)]
 struct PendulumMetrics {
+    reference: Upright,
     bias_true: f64,
     current_limit: f64,
     /// Loops whose command was at the current limit.
@@ -318,7 +327,7 @@ impl Metrics for PendulumMetrics {
             self.saturated += 1;
         }
         self.last = Some((row.t, theta, wheel_speed, bias_estimate));
-        self.theta_max_abs = self.theta_max_abs.max(theta.abs());
+        self.theta_max_abs = self.theta_max_abs.max(self.reference.error(row.t, row.state));
         if (bias_estimate - self.bias_true).abs() >= 0.02 * self.bias_true.abs() {
             self.bias_last_outside = Some(row.t);
         }

@@ -9,8 +9,8 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::integrate::rk4;
-use crate::scenarios::Plant;
+use crate::model::integrate::rk4;
+use crate::model::scenario::Plant;
 
 /// Physical parameters [paper 003 §1], plus the actuator's torque constant and current limit
 /// (choices, note §1 and §3).

@@ -22,8 +22,9 @@ use serde::Deserialize;
 
 use super::layout;
 use super::plant::{Model, rotation, skew};
-use super::reference::{Reference, ReferenceSection};
-use crate::scenarios::Controller;
+use super::reference::Reference;
+use crate::model::reference::Reference as _;
+use crate::model::scenario::Controller;
 
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -78,7 +79,7 @@ struct Belief {
 }
 
 impl Backstepping {
-    pub fn new(section: &ControllerSection, model: &Model, reference: &ReferenceSection) -> Self {
+    pub fn new(section: &ControllerSection, model: &Model, reference: Reference) -> Self {
         let delta = Vector3::from(section.delta);
         Self {
             k: section.gains,
@@ -87,7 +88,7 @@ impl Backstepping {
             rate_map: rate_map(&delta),
             parameters: section.parameters,
             model: model.clone(),
-            reference: Reference::new(reference),
+            reference,
             rate_integral: None,
         }
     }

@@ -24,8 +24,8 @@ use serde::Deserialize;
 
 use super::layout;
 use super::plant::{Model, orthonormalise, rotation};
-use crate::msg::SensorReading;
-use crate::scenarios::{Calibration, Estimator};
+use crate::contract::msg::SensorReading;
+use crate::model::scenario::{Calibration, Estimator};
 
 type Vector16 = SVector<f64, 16>;
 type Matrix16 = SMatrix<f64, 16, 16>;
@@ -369,7 +369,7 @@ mod tests {
         let f = |s: &nalgebra::Vector2<f64>| {
             nalgebra::Vector2::new(xi * s[1] / r * (1.0 - xi * s[0]), q - xi * xi / r * s[1] * s[1])
         };
-        let fine = crate::integrate::rk4(&f, &nalgebra::Vector2::new(0.1, 1.0), 0.3, 30_000);
+        let fine = crate::model::integrate::rk4(&f, &nalgebra::Vector2::new(0.1, 1.0), 0.3, 30_000);
         assert!((exact.estimate - fine[0]).abs() < 1e-12 && (exact.p - fine[1]).abs() < 1e-12, "{exact:?} vs {fine}");
         // It settles at m = 1/ξ with p = √(qr)/ξ.
         for _ in 0..100 {

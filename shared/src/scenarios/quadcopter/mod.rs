@@ -5,7 +5,8 @@
 //! - `sensors`: motion-capture pose, body velocity, body rate;
 //! - `estimator`: the 16-state KBF for ξ and the cascaded filters for m and J;
 //! - `controller`: the backstepping thrust (56) and torque (57);
-//! - `reference`: hover, the lemniscate (as meant and as printed), γ(t).
+//! - `reference`: hover, the lemniscate (as meant and as printed), γ(t); the controller tracks
+//!   it, and the metrics and the fault reports measure ‖p − p_d‖ from it.
 //!
 //! The cases of the paper are launch files in `launch/quadcopter/`.
 
@@ -16,25 +17,27 @@ pub mod reference;
 pub mod sensors;
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
 
-use nalgebra::Vector3;
 use serde::Deserialize;
 
 use self::controller::{Backstepping, ControllerSection, Parameters};
 use self::estimator::{EstimatorSection, Inputs, ParameterEstimator};
 use self::plant::{Actuation, Model, PlantSection, QuadcopterPlant};
 use self::reference::{Reference, ReferenceSection};
-use super::{Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry};
-use crate::launch::{LaunchConfig, LaunchError};
+use crate::config::launch::{LaunchConfig, LaunchError};
+use crate::config::validate::{not_negative, positive, within};
+use crate::model::reference::Reference as _;
+use crate::model::scenario::{
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry, check_substeps,
+};
+use crate::model::vectors::{Component, Vectors};
 
 pub const ENTRY: ScenarioEntry = ScenarioEntry {
     name: "quadcopter",
     description: "quadcopter, backstepping tracking with a Kalman-Bucy parameter estimator (paper 001)",
     file: "launch/quadcopter.toml",
     text: include_str!("../../../../launch/quadcopter.toml"),
-    sections: &["model", "plant", "estimator", "controller", "reference", "limits", "metrics"],
-    signals: sensors::SIGNALS,
+    vectors: &VECTORS,
     build,
 };
 
@@ -60,49 +63,86 @@ pub mod layout {
     pub const LEN: usize = 36;
 }
 
-const STATE_NAMES: [&str; STATE_LEN] = [
-    "p_x", "p_y", "p_z", "R_11", "R_12", "R_13", "R_21", "R_22", "R_23", "R_31", "R_32", "R_33", "v_x", "v_y", "v_z",
-    "w_x", "w_y", "w_z", "mass",
+const fn c(name: &'static str, unit: &'static str) -> Component {
+    Component::new(name, unit)
+}
+
+/// p in {I}, R row-major (the pose the motion capture measures).
+const POSE: [Component; 12] = [
+    c("p_x", "m"),
+    c("p_y", "m"),
+    c("p_z", "m"),
+    c("R_11", "1"),
+    c("R_12", "1"),
+    c("R_13", "1"),
+    c("R_21", "1"),
+    c("R_22", "1"),
+    c("R_23", "1"),
+    c("R_31", "1"),
+    c("R_32", "1"),
+    c("R_33", "1"),
+];
+/// Body-frame linear velocity.
+const VELOCITY: [Component; 3] = [c("v_x", "m/s"), c("v_y", "m/s"), c("v_z", "m/s")];
+/// Body angular velocity.
+const RATE: [Component; 3] = [c("w_x", "rad/s"), c("w_y", "rad/s"), c("w_z", "rad/s")];
+
+/// Concatenates component tables at compile time (the state and the estimate share the pose).
+const fn concat<const N: usize>(parts: &[&[Component]]) -> [Component; N] {
+    let mut out = [c("", ""); N];
+    let (mut i, mut n) = (0, 0);
+    while i < parts.len() {
+        let mut j = 0;
+        while j < parts[i].len() {
+            out[n] = parts[i][j];
+            (j, n) = (j + 1, n + 1);
+        }
+        i += 1;
+    }
+    assert!(n == N, "the parts do not add up to the vector's length");
+    out
+}
+
+const STATE: [Component; STATE_LEN] = concat(&[&POSE, &VELOCITY, &RATE, &[c("mass", "kg")]]);
+
+const INPUT: [Component; INPUTS] = [
+    c("thrust", "N"),
+    c("tau_x", "N·m"),
+    c("tau_y", "N·m"),
+    c("tau_z", "N·m"),
+    c("rate_cmd_x", "rad/s"),
+    c("rate_cmd_y", "rad/s"),
+    c("rate_cmd_z", "rad/s"),
 ];
 
-const ESTIMATE_NAMES: [&str; layout::LEN] = [
-    "p_x",
-    "p_y",
-    "p_z",
-    "R_11",
-    "R_12",
-    "R_13",
-    "R_21",
-    "R_22",
-    "R_23",
-    "R_31",
-    "R_32",
-    "R_33",
-    "v_x",
-    "v_y",
-    "v_z",
-    "w_x",
-    "w_y",
-    "w_z",
-    "xi_1",
-    "xi_2x",
-    "xi_2y",
-    "xi_2z",
-    "xi_3x",
-    "xi_3y",
-    "xi_3z",
-    "xi_4x",
-    "xi_4y",
-    "xi_4z",
-    "xi_2x_rate",
-    "xi_2y_rate",
-    "xi_2z_rate",
-    "mass",
-    "j_x",
-    "j_y",
-    "j_z",
-    "snr",
-];
+/// The estimate, in the order of [`layout`]: ξ = (1/m, b/m, the inertia ratios, 1/J).
+const ESTIMATE: [Component; layout::LEN] = concat(&[
+    &POSE,
+    &VELOCITY,
+    &RATE,
+    &[
+        c("xi_1", "1/kg"),
+        c("xi_2x", "m/s²"),
+        c("xi_2y", "m/s²"),
+        c("xi_2z", "m/s²"),
+        c("xi_3x", "1"),
+        c("xi_3y", "1"),
+        c("xi_3z", "1"),
+        c("xi_4x", "1/(kg·m²)"),
+        c("xi_4y", "1/(kg·m²)"),
+        c("xi_4z", "1/(kg·m²)"),
+        c("xi_2x_rate", "m/s³"),
+        c("xi_2y_rate", "m/s³"),
+        c("xi_2z_rate", "m/s³"),
+        c("mass", "kg"),
+        c("j_x", "kg·m²"),
+        c("j_y", "kg·m²"),
+        c("j_z", "kg·m²"),
+        c("snr", "1"),
+    ],
+]);
+
+pub static VECTORS: Vectors = Vectors { state: &STATE, input: &INPUT, estimate: &ESTIMATE, signals: sensors::SIGNALS };
 
 /// How fault reports judge the flight: the distance from the reference.
 #[derive(Debug, Clone, Deserialize)]
@@ -137,35 +177,13 @@ fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
     Ok(Box::new(Quadcopter::from_config(c)?))
 }
 
-/// An error unless `value` is finite and positive.
-fn positive(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(c.error(key, format!("must be a positive number, got {value}")))
-    }
-}
-
-/// An error unless `value` is finite and not negative.
-fn not_negative(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
-    if value.is_finite() && value >= 0.0 {
-        Ok(())
-    } else {
-        Err(c.error(key, format!("must be 0 or a positive number, got {value}")))
-    }
-}
-
 /// The largest magnitude of an initial position, velocity or rate and of the process noise
 /// (SI units): far beyond any flight, and small enough that their products stay finite.
 const MAX_MOTION: f64 = 1e4;
 
 /// An error unless `value` is within ±[`MAX_MOTION`].
 fn at_most(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
-    if value.abs() <= MAX_MOTION {
-        Ok(())
-    } else {
-        Err(c.error(key, format!("must be within ±{MAX_MOTION} (SI units), got {value}")))
-    }
+    within(c, key, value, MAX_MOTION, "SI units")
 }
 
 impl Quadcopter {
@@ -183,7 +201,7 @@ impl Quadcopter {
         positive(c, "model.rate_max_rad_s", model.rate_max_rad_s)?;
 
         let plant: PlantSection = c.section("plant")?;
-        super::check_substeps(c, "plant.substeps", plant.substeps)?;
+        check_substeps(c, "plant.substeps", plant.substeps)?;
         for (i, std) in plant.process_noise_std.iter().enumerate() {
             not_negative(c, &format!("plant.process_noise_std.{i}"), *std)?;
             at_most(c, &format!("plant.process_noise_std.{i}"), *std)?;
@@ -280,6 +298,11 @@ impl Quadcopter {
             seed: c.seed,
         })
     }
+
+    /// The reference the controller tracks and the metrics and fault reports measure from.
+    fn reference(&self) -> Reference {
+        Reference::new(&self.reference)
+    }
 }
 
 impl Scenario for Quadcopter {
@@ -296,16 +319,8 @@ impl Scenario for Quadcopter {
         format!("quadcopter, {:?} reference, {parameters}, {actuation}, {sensing}", self.reference.kind)
     }
 
-    fn state_names(&self) -> &'static [&'static str] {
-        &STATE_NAMES
-    }
-
-    fn input_names(&self) -> &'static [&'static str] {
-        &["thrust", "tau_x", "tau_y", "tau_z", "rate_cmd_x", "rate_cmd_y", "rate_cmd_z"]
-    }
-
-    fn estimate_names(&self) -> &'static [&'static str] {
-        &ESTIMATE_NAMES
+    fn vectors(&self) -> &'static Vectors {
+        &VECTORS
     }
 
     fn input_limits(&self) -> Vec<(f64, f64)> {
@@ -325,25 +340,21 @@ impl Scenario for Quadcopter {
     }
 
     fn controller(&self) -> Box<dyn Controller> {
-        Box::new(Backstepping::new(&self.controller, &self.model, &self.reference))
+        Box::new(Backstepping::new(&self.controller, &self.model, self.reference()))
     }
 
     fn error_measure(&self) -> ErrorMeasure {
-        let reference = Mutex::new(Reference::new(&self.reference));
-        ErrorMeasure {
-            name: "|p - p_d| m",
-            of_state: Arc::new(move |t, x| {
-                let target = reference.lock().expect("reference lock").at(t).p;
-                (Vector3::from_column_slice(&x[..3]) - target).norm()
-            }),
-            recovery_band: self.limits.recovery_band_m,
-            limit: self.limits.position_error_limit_m,
-        }
+        ErrorMeasure::of_reference(
+            "|p - p_d| m",
+            self.reference(),
+            self.limits.recovery_band_m,
+            self.limits.position_error_limit_m,
+        )
     }
 
     fn metrics(&self) -> Box<dyn Metrics> {
         Box::new(QuadcopterMetrics {
-            reference: Some(Reference::new(&self.reference)),
+            reference: Some(self.reference()),
             model: Some(self.model.clone()),
             plant: Some(self.plant.clone()),
             steady_from_s: self.metrics.steady_from_s,
@@ -463,8 +474,7 @@ fn block_change(now: &[f64], initial: &[f64]) -> f64 {
 impl Metrics for QuadcopterMetrics {
     fn observe(&mut self, row: &Row) {
         let t = row.t;
-        let target = self.reference.as_mut().expect("built with a reference").at(t).p;
-        let z1 = (Vector3::from_column_slice(&row.state[..3]) - target).norm();
+        let z1 = self.reference.as_mut().expect("built with a reference").error(t, row.state);
         if t >= self.steady_from_s {
             self.z1_steady.add(z1);
             self.snr_steady.add(row.estimate[layout::SNR]);

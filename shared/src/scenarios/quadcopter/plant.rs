@@ -19,8 +19,8 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
 use super::{INPUTS, STATE_LEN};
-use crate::integrate::rk4;
-use crate::scenarios::Plant;
+use crate::model::integrate::rk4;
+use crate::model::scenario::Plant;
 
 /// Skew-symmetric matrix: S(x) y = x × y (1).
 pub fn skew(x: &Vector3<f64>) -> Matrix3<f64> {
@@ -156,7 +156,7 @@ impl QuadcopterPlant {
         x[12..15].copy_from_slice(&i.velocity_m_s);
         x[15..18].copy_from_slice(&i.rate_rad_s);
         x[18] = section.mass_at(&model, 0.0);
-        let rng = ChaCha8Rng::seed_from_u64(seed ^ crate::sensors::fnv1a("plant"));
+        let rng = ChaCha8Rng::seed_from_u64(seed ^ crate::config::seed::fnv1a("plant"));
         Self { model, section, x, rng, link: None, applied: [0.0; INPUTS] }
     }
 

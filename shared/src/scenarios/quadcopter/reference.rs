@@ -103,8 +103,12 @@ impl Reference {
         let rest = t - i as f64 * PSI_STEP_S;
         if rest > 0.0 { self.rk4(i as f64 * PSI_STEP_S, psi, rest) } else { psi }
     }
+}
 
-    pub fn at(&mut self, t: f64) -> Point {
+impl crate::model::reference::Reference for Reference {
+    type Point = Point;
+
+    fn at(&mut self, t: f64) -> Point {
         if self.section.kind == Kind::Hover {
             let zero = Vector3::zeros();
             return Point { p: Vector3::from(self.section.hover_position), v: zero, a: zero, jerk: zero };
@@ -142,6 +146,11 @@ impl Reference {
             self.tilt * Vector3::new(x.0[order], y.0[order], z.0[order]) * factorial
         };
         Point { p: derivative(0), v: derivative(1), a: derivative(2), jerk: derivative(3) }
+    }
+
+    /// ‖z₁‖ = ‖p − p_d‖, m.
+    fn error(&mut self, t: f64, x: &[f64]) -> f64 {
+        (Vector3::from_column_slice(&x[..3]) - self.at(t).p).norm()
     }
 }
 
@@ -227,6 +236,7 @@ impl Jet {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::reference::Reference as _;
 
     pub(crate) fn section(kind: Kind) -> ReferenceSection {
         ReferenceSection {

@@ -27,7 +27,7 @@ use serde::Serialize;
 
 use self::pingpong::Transport;
 use crate::clock::{TickTimer, now_ns};
-use crate::launch::{self, Override};
+use crate::config::launch::Override;
 use crate::signals::{Interrupted, StopFlag};
 use crate::msg::{PlantState, SensorReading};
 use crate::report::Summary;
@@ -313,7 +313,7 @@ fn looplab_run(
         // SIGSTOP the monitor for the whole run once it is up: the loop runs without it.
         overrides.push(Override::fault(&format!("stop monitor at 0.001s for {}s", seconds + 1.0))?);
     }
-    let (config, scenario) = launch::resolve("pendulum", &overrides)?;
+    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
     let mut n = 0;
     let dir = loop {
         let dir = out.join(format!("{}-{n}", c.label));
@@ -332,9 +332,9 @@ fn looplab_run(
 
 /// The same four stages called in one process: the ceiling of lockstep speed.
 fn in_process_loops_per_s(loops: u64) -> Result<f64> {
-    let (config, scenario) = launch::resolve("pendulum", &[])?;
+    let (config, scenario) = crate::scenarios::resolve("pendulum", &[])?;
     let mut plant = scenario.plant();
-    let mut sensors = crate::sensors::SensorEmulator::new(&config);
+    let mut sensors = crate::model::sensors::SensorEmulator::new(&config, scenario.vectors().signals);
     let mut estimator = scenario.estimator();
     let mut controller = scenario.controller();
     let (n_sensors, n_est, n_in) =
@@ -347,7 +347,7 @@ fn in_process_loops_per_s(loops: u64) -> Result<f64> {
     for k in 0..loops {
         let t = k as f64 * dt;
         let state = plant.state().to_vec();
-        sensors.tick(k, t, &state, &mut readings);
+        sensors.tick(k, t, &state, &command, &mut readings);
         estimator.update(t, &readings, &command, &mut estimate);
         controller.update(t, &estimate, &mut command);
         plant.step(t, &command, dt);
@@ -440,7 +440,7 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let lockstep_seconds = if quick { 3.0 } else { 20.0 };
     let sets = ["mode=lockstep".to_string(), format!("duration_s={lockstep_seconds:?}")];
     let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
-    let (config, scenario) = launch::resolve("pendulum", &overrides)?;
+    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
     let dir = crate::launcher::create_run_dir(Some(&out.join("lockstep")), "pendulum")?;
     let (lockstep, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), &binaries, &dir, true)?;
     if matches!(outcome, crate::launcher::Outcome::Interrupted) {

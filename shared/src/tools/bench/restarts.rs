@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Result, anyhow};
 use serde::Serialize;
 
-use crate::launch::{self, Override};
+use crate::config::launch::Override;
 use crate::launcher::Outcome;
 use crate::signals::Interrupted;
 
@@ -112,7 +112,7 @@ fn measure(
         let at = 0.5 + i as f64 * KILL_INTERVAL_S;
         overrides.push(Override::fault(&format!("kill {} at {at}s", TARGETS[i % TARGETS.len()]))?);
     }
-    let (config, scenario) = launch::resolve("pendulum", &overrides)?;
+    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
     let dir = crate::launcher::create_run_dir(Some(&out.join(condition)), "pendulum")?;
     let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
     match outcome {

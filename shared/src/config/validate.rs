@@ -1,0 +1,54 @@
+//! Checks of single numbers in a scenario's sections, shared by every scenario: each fails with
+//! one line naming the dotted key, where its value came from, and what is allowed.
+
+use std::fmt::Display;
+use std::ops::RangeInclusive;
+
+use crate::config::launch::{LaunchConfig, LaunchError};
+
+/// An error unless `value` is finite and positive.
+pub fn positive(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
+    positive_as(c, key, value, "number")
+}
+
+/// An error unless `value` is finite and positive, saying what it is ("must be a positive angle").
+pub fn positive_as(c: &LaunchConfig, key: &str, value: f64, what: &str) -> Result<(), LaunchError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be a positive {what}, got {value}")))
+    }
+}
+
+/// An error unless `value` is finite and not negative.
+pub fn not_negative(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be 0 or a positive number, got {value}")))
+    }
+}
+
+/// An error unless `value` is within ±`bound` (`units` says in what: "SI units").
+pub fn within(c: &LaunchConfig, key: &str, value: f64, bound: f64, units: &str) -> Result<(), LaunchError> {
+    if value.abs() <= bound {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be within ±{bound} ({units}), got {value}")))
+    }
+}
+
+/// An error unless `value` is in `range`; `what` names the unit ("integration steps per loop").
+pub fn in_range<T: PartialOrd + Display>(
+    c: &LaunchConfig,
+    key: &str,
+    value: T,
+    range: RangeInclusive<T>,
+    what: &str,
+) -> Result<(), LaunchError> {
+    if range.contains(&value) {
+        Ok(())
+    } else {
+        Err(c.error(key, format!("must be {} to {} {what}, got {value}", range.start(), range.end())))
+    }
+}

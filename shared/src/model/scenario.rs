@@ -1,0 +1,208 @@
+//! The scenario interface: what a scenario gives the loop (a plant, an estimator, a controller,
+//! metrics, an error measure) and the registry entry that names it. The five processes and the
+//! monitor see scenarios only through these traits.
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+
+use crate::config::launch::{LaunchConfig, LaunchError};
+use crate::config::schema::{ScenarioSchema, names};
+use crate::config::validate;
+use crate::contract::msg::SensorReading;
+use crate::model::reference::Reference;
+use crate::model::vectors::Vectors;
+
+/// A scenario the launcher knows by name, with its default launch file compiled in.
+pub struct ScenarioEntry {
+    pub name: &'static str,
+    pub description: &'static str,
+    /// The launch file in the repository that holds the defaults.
+    pub file: &'static str,
+    pub text: &'static str,
+    /// Its vectors; the built scenario's [`Scenario::vectors`] returns the same.
+    pub vectors: &'static Vectors,
+    pub build: fn(&LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError>,
+}
+
+impl std::fmt::Debug for ScenarioEntry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name)
+    }
+}
+
+impl ScenarioEntry {
+    /// What a launch file for this scenario is checked against.
+    pub fn schema(&self) -> ScenarioSchema {
+        let v = self.vectors;
+        ScenarioSchema {
+            name: self.name,
+            file: self.file,
+            text: self.text,
+            state: v.state,
+            input: v.input,
+            estimate: v.estimate,
+            signals: v.signals.iter().map(|s| s.layout()).collect(),
+        }
+    }
+
+    pub fn defaults(&self) -> toml::Table {
+        self.schema().defaults()
+    }
+}
+
+/// The most integration steps per loop period: more would only make a loop slower than its
+/// period (and a huge count hangs the plant).
+pub const MAX_SUBSTEPS: u32 = 1000;
+
+/// An error unless `substeps` (at dotted `key`) is 1 to [`MAX_SUBSTEPS`].
+pub fn check_substeps(c: &LaunchConfig, key: &str, substeps: u32) -> Result<(), LaunchError> {
+    validate::in_range(c, key, substeps, 1..=MAX_SUBSTEPS, "integration steps per loop")
+}
+
+/// A configured scenario: its vectors and factories for its loop stages.
+pub trait Scenario: Send + Sync {
+    /// One line for reports, for example "reaction-wheel pendulum, bias-observer".
+    fn title(&self) -> String;
+    /// Names, units and sizes of its vectors (its entry's).
+    fn vectors(&self) -> &'static Vectors;
+    fn state_names(&self) -> Vec<&'static str> {
+        names(self.vectors().state)
+    }
+    fn input_names(&self) -> Vec<&'static str> {
+        names(self.vectors().input)
+    }
+    fn estimate_names(&self) -> Vec<&'static str> {
+        names(self.vectors().estimate)
+    }
+    /// The closed range of each input the actuator accepts; the plant rejects anything else.
+    fn input_limits(&self) -> Vec<(f64, f64)>;
+    fn plant(&self) -> Box<dyn Plant>;
+    fn estimator(&self) -> Box<dyn Estimator>;
+    fn controller(&self) -> Box<dyn Controller>;
+    fn metrics(&self) -> Box<dyn Metrics>;
+    /// How fault reports judge the physical system.
+    fn error_measure(&self) -> ErrorMeasure;
+    /// The loop's delay margin from the linearised model: the smallest extra controller delay,
+    /// in ticks, at which the sampled loop is unstable. None if the scenario has no such model.
+    fn delay_margin(&self, _config: &LaunchConfig) -> Option<TheoreticalMargin> {
+        None
+    }
+}
+
+/// A delay margin from theory, for `looplab sweep` to print next to the measured one.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct TheoreticalMargin {
+    /// Exact, from the spectral radius of the linearised sampled loop.
+    pub ticks: u32,
+    /// Continuous-time estimate: phase margin over crossover frequency, in ticks.
+    pub continuous_ticks: f64,
+    /// The same with the delays that sampling adds on each path (command hold, sensor holds).
+    pub lagged_ticks: f64,
+    pub crossover_rad_s: f64,
+    pub phase_margin_deg: f64,
+    /// Per-tick spectral radius one tick below the margin and at it.
+    pub radius_before: f64,
+    pub radius_at_margin: f64,
+}
+
+/// The error at simulation time t in true state x.
+pub type ErrorOfState = Arc<dyn Fn(f64, &[f64]) -> f64 + Send + Sync>;
+
+/// How far the physical system is from where it should be, for fault reports: the worst value
+/// during and after a fault, the band it must come back within (recovery), and the limit it
+/// must never pass (for the pendulum: the angle at which it has fallen).
+#[derive(Clone)]
+pub struct ErrorMeasure {
+    pub name: &'static str,
+    pub of_state: ErrorOfState,
+    pub recovery_band: f64,
+    pub limit: f64,
+}
+
+impl ErrorMeasure {
+    /// The error of the scenario's reference ([`Reference::error`]), so that fault reports
+    /// judge against what the controller tracks.
+    pub fn of_reference<R: Reference + 'static>(
+        name: &'static str,
+        reference: R,
+        recovery_band: f64,
+        limit: f64,
+    ) -> Self {
+        let reference = Mutex::new(reference);
+        ErrorMeasure {
+            name,
+            of_state: Arc::new(move |t, x| reference.lock().expect("reference lock").error(t, x)),
+            recovery_band,
+            limit,
+        }
+    }
+
+    pub fn describe(&self) -> ErrorMeasureInfo {
+        ErrorMeasureInfo { name: self.name.into(), recovery_band: self.recovery_band, limit: self.limit }
+    }
+}
+
+/// An [`ErrorMeasure`] as `summary.json` writes it.
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct ErrorMeasureInfo {
+    pub name: String,
+    pub recovery_band: f64,
+    pub limit: f64,
+}
+
+/// The physical model: the truth.
+pub trait Plant {
+    fn state(&self) -> &[f64];
+    /// Advances one loop period from simulation time `t` with the input held constant
+    /// (zero-order hold).
+    fn step(&mut self, t: f64, u: &[f64], dt: f64);
+    /// Sets the state, for a restarted plant going on from its snapshot.
+    fn restore(&mut self, state: &[f64]);
+    /// What the actuator applied over the last step, where it differs from the command (a
+    /// command link that samples the commands): the estimator predicts with it.
+    fn applied_input(&self) -> Option<&[f64]> {
+        None
+    }
+}
+
+pub trait Estimator {
+    /// Takes every sensor's held reading at simulation time `t` and the input the actuator
+    /// applied over the last interval; writes the estimate.
+    fn update(&mut self, t: f64, readings: &[SensorReading], u_applied: &[f64], estimate: &mut [f64]);
+    /// Slow states worth keeping across a restart, such as a calibrated sensor bias; the fast
+    /// ones start again from the current measurements. None: nothing to keep (yet).
+    fn calibration(&self) -> Option<Calibration> {
+        None
+    }
+    /// A restarted estimator gets its predecessor's calibration before its first update.
+    fn resume(&mut self, _calibration: &Calibration) {}
+}
+
+/// Up to 32 numbers an estimator keeps across restarts.
+pub type Calibration = [f64; 32];
+
+pub trait Controller {
+    fn update(&mut self, t: f64, estimate: &[f64], command: &mut [f64]);
+}
+
+/// One loop as the monitor joined it, for the scenario's metrics.
+pub struct Row<'a> {
+    pub k: u64,
+    pub t: f64,
+    pub state: &'a [f64],
+    pub readings: &'a [SensorReading],
+    pub estimate: &'a [f64],
+    pub command: &'a [f64],
+    /// What the actuator applied over the period that ended at tick k.
+    pub applied: &'a [f64],
+}
+
+/// The scenario's control metrics, fed every loop in order.
+pub trait Metrics: Send {
+    fn observe(&mut self, row: &Row);
+    fn finish(&self) -> BTreeMap<String, f64>;
+    /// Findings the numbers alone do not say.
+    fn notes(&self) -> Vec<String> {
+        Vec::new()
+    }
+}

@@ -1,0 +1,39 @@
+//! A scenario's vectors, declared once: the names, units and sizes of its true state, its
+//! input, its estimate, and each signal its sensors can measure with how it is read from the
+//! truth. Column headers, message sizes and launch-file checks all derive from this.
+
+pub use crate::config::schema::{Component, SignalLayout};
+
+/// How a signal is read from the truth at simulation time `t`: the true state `x` and the
+/// input the actuator applied over the last interval (an accelerometer or a known force needs
+/// it), into `out` (one value per component). The emulator then adds bias and noise.
+pub type ReadSignal = fn(t: f64, x: &[f64], u_applied: &[f64], out: &mut [f64]);
+
+/// Something a sensor can measure: named components read from the truth.
+pub struct Signal {
+    pub name: &'static str,
+    /// One per component; a scalar signal has one.
+    pub components: &'static [Component],
+    pub read: ReadSignal,
+}
+
+impl Signal {
+    pub fn layout(&self) -> SignalLayout {
+        SignalLayout { name: self.name, components: self.components }
+    }
+}
+
+/// Every vector of one scenario.
+pub struct Vectors {
+    pub state: &'static [Component],
+    /// The input's limits depend on the launch file: [`crate::model::scenario::Scenario::input_limits`].
+    pub input: &'static [Component],
+    pub estimate: &'static [Component],
+    pub signals: &'static [Signal],
+}
+
+impl Vectors {
+    pub fn signal(&self, name: &str) -> Option<&'static Signal> {
+        self.signals.iter().find(|s| s.name == name)
+    }
+}
