@@ -26,12 +26,13 @@ use anyhow::{Context, Result, anyhow};
 use serde::Serialize;
 
 use self::pingpong::Transport;
-use crate::clock::{TickTimer, now_ns};
-use crate::launch::{self, Override};
-use crate::signals::{Interrupted, StopFlag};
-use crate::msg::{PlantState, SensorReading};
-use crate::report::Summary;
+use crate::config::launch::{self, Override};
 use crate::config::wait::Strategy;
+use crate::contract::clock::{TickTimer, now_ns};
+use crate::contract::msg::{PlantState, SensorReading};
+use crate::contract::role::Role;
+use crate::launcher::{Binaries, Outcome, Summary};
+use crate::runtime::signals::{Interrupted, StopFlag};
 
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
@@ -174,7 +175,7 @@ fn traces(run_dir: &Path) -> Result<Vec<[u64; 8]>> {
     let text = std::fs::read_to_string(run_dir.join("loops.csv")).context("loops.csv")?;
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let columns: Vec<usize> = crate::msg::LoopTrace::STAMP_NAMES
+    let columns: Vec<usize> = crate::contract::msg::LoopTrace::STAMP_NAMES
         .iter()
         .map(|name| header.iter().position(|h| *h == format!("{name}_ns")).ok_or_else(|| anyhow!("no {name}_ns")))
         .collect::<Result<_>>()?;
@@ -193,7 +194,7 @@ struct LoopAccumulator {
     traces: Vec<[u64; 8]>,
     loops: u64,
     misses: u64,
-    cpu_s: BTreeMap<String, f64>,
+    cpu_s: BTreeMap<Role, f64>,
     seconds: f64,
 }
 
@@ -204,7 +205,7 @@ impl LoopAccumulator {
         self.misses += summary.deadline_misses;
         self.seconds += summary.duration_s;
         for p in &summary.processes {
-            *self.cpu_s.entry(p.name.clone()).or_default() += p.cpu_s;
+            *self.cpu_s.entry(p.name).or_default() += p.cpu_s;
         }
         Ok(())
     }
@@ -214,9 +215,11 @@ impl LoopAccumulator {
         let hop = |from: usize, to: usize| {
             Dist::of(&sorted(self.traces.iter().map(|s| s[to].saturating_sub(s[from])).collect()))
         };
+        let percent = |cpu_s: f64| 100.0 * cpu_s / self.seconds.max(1e-9);
         let cpu_percent: BTreeMap<String, f64> =
-            self.cpu_s.iter().map(|(k, v)| (k.clone(), 100.0 * v / self.seconds.max(1e-9))).collect();
-        let loop_cpu_percent = cpu_percent.iter().filter(|(k, _)| *k != "monitor").map(|(_, v)| v).sum();
+            self.cpu_s.iter().map(|(role, v)| (role.name().to_owned(), percent(*v))).collect();
+        let loop_cpu_percent =
+            self.cpu_s.iter().filter(|(role, _)| role.in_loop()).map(|(_, v)| percent(*v)).sum();
         LoopBench {
             name: name.into(),
             rate_hz,
@@ -299,7 +302,7 @@ fn looplab_run(
     out: &Path,
     c: &LoopConfig,
     seconds: f64,
-    binaries: &BTreeMap<&'static str, PathBuf>,
+    binaries: &Binaries,
 ) -> Result<(Summary, PathBuf)> {
     let sets = [
         "mode=realtime".to_string(),
@@ -324,7 +327,7 @@ fn looplab_run(
     };
     let dir = crate::launcher::create_run_dir(Some(&dir), "pendulum")?;
     let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
-    if matches!(outcome, crate::launcher::Outcome::Interrupted) {
+    if outcome == Outcome::Interrupted {
         return Err(Interrupted.into());
     }
     Ok((summary, dir))
@@ -334,7 +337,7 @@ fn looplab_run(
 fn in_process_loops_per_s(loops: u64) -> Result<f64> {
     let (config, scenario) = launch::resolve("pendulum", &[])?;
     let mut plant = scenario.plant();
-    let mut sensors = crate::sensors::SensorEmulator::new(&config);
+    let mut sensors = crate::model::sensors::SensorEmulator::new(&config);
     let mut estimator = scenario.estimator();
     let mut controller = scenario.controller();
     let (n_sensors, n_est, n_in) =
@@ -359,9 +362,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     // The ping-pongs' iceoryx2 files live in a run of their own (the loop runs clean up after
     // themselves); whatever happens to the parts, they go at the end.
     let run_id = crate::launcher::new_run_id();
-    let lock = crate::ipc::create_run_storage(&run_id)?;
+    let lock = crate::runtime::ipc::create_run_storage(&run_id)?;
     let result = run_parts(args, &run_id);
-    let cleanup = crate::ipc::clean_up_run(&run_id);
+    let cleanup = crate::runtime::ipc::clean_up_run(&run_id);
     drop(lock);
     let leftover = cleanup?.leftover;
     if result.is_ok() && !leftover.is_empty() {
@@ -416,8 +419,8 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         baseline.loops += result.loops;
         baseline.misses += result.deadline_misses;
         baseline.seconds += segment;
-        for (name, cpu) in ["plant", "sensors", "estimator", "controller"].iter().zip(result.cpu_s) {
-            *baseline.cpu_s.entry(name.to_string()).or_default() += cpu;
+        for (role, cpu) in Role::ALL.into_iter().filter(|r| r.in_loop()).zip(result.cpu_s) {
+            *baseline.cpu_s.entry(role).or_default() += cpu;
         }
     }
 
@@ -443,7 +446,7 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let (config, scenario) = launch::resolve("pendulum", &overrides)?;
     let dir = crate::launcher::create_run_dir(Some(&out.join("lockstep")), "pendulum")?;
     let (lockstep, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), &binaries, &dir, true)?;
-    if matches!(outcome, crate::launcher::Outcome::Interrupted) {
+    if outcome == Outcome::Interrupted {
         return Err(Interrupted.into());
     }
     let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 })?;
@@ -538,7 +541,7 @@ fn render(r: &BenchReport) -> String {
         let _ = writeln!(s, "    {:<36}{:>8.1}{:>8.1}{:>8.1}{:>8.1}", l.name, h[0].p50, h[1].p50, h[2].p50, h[3].p50);
     }
     if let Some(monitor) =
-        r.loops.iter().find(|l| l.name == "looplab adaptive").and_then(|l| l.cpu_percent.get("monitor"))
+        r.loops.iter().find(|l| l.name == "looplab adaptive").and_then(|l| l.cpu_percent.get(Role::Monitor.name()))
     {
         let _ = writeln!(s, "    monitor CPU in the adaptive run: {monitor:.1}% of a core");
     }
