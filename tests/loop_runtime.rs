@@ -283,8 +283,11 @@ fn children_of(launcher: u32) -> Vec<(String, i32, String)> {
 #[test]
 fn a_killed_process_is_reported_and_its_shared_memory_removed() {
     let (child, dir) = start_long_run("killed", &["--set", "supervision.restart=never"]);
-    let estimator =
-        children_of(child.id()).into_iter().find(|(name, _, _)| name == Role::Estimator.name()).expect("the estimator runs").1;
+    let estimator = children_of(child.id())
+        .into_iter()
+        .find(|(name, _, _)| name == Role::Estimator.name())
+        .expect("the estimator runs")
+        .1;
     unsafe { libc::kill(estimator, libc::SIGKILL) };
     let status = wait_exit(child);
     assert_eq!(status.code(), Some(1));
@@ -362,7 +365,8 @@ fn a_second_stop_request_kills_what_is_left_and_still_cleans_up() {
     let run_id = run_id_of(&children);
     // A frozen controller cannot act on SIGTERM until it is continued; the second Ctrl-C must
     // not wait for it.
-    let controller = children.iter().find(|(name, _, _)| name == Role::Controller.name()).expect("the controller runs").1;
+    let controller =
+        children.iter().find(|(name, _, _)| name == Role::Controller.name()).expect("the controller runs").1;
     unsafe { libc::kill(controller, libc::SIGSTOP) };
     // Two different signals, so that neither is merged into the other while pending.
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };

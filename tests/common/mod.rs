@@ -12,10 +12,9 @@ use std::sync::atomic::{AtomicU32, Ordering};
 pub use looplab_shared::config::faults::FaultKind;
 pub use looplab_shared::config::launch::Mode;
 pub use looplab_shared::contract::role::Role;
-pub use looplab_shared::launcher::StopReason;
-pub use looplab_shared::launcher::child::Exit;
 pub use looplab_shared::launcher::inject::DetectedBy;
 pub use looplab_shared::launcher::summary::{FaultReport, Summary};
+pub use looplab_shared::launcher::{Exit, StopReason};
 
 pub fn looplab() -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_looplab"));

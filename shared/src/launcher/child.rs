@@ -6,15 +6,13 @@ use std::io::{BufRead, BufReader};
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{ChildStdin, Stdio};
-use std::str::FromStr;
 
 use anyhow::{Context as _, Result, anyhow, bail};
 use crossbeam_channel::Sender;
-use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::outcome::{deserialize_text, serialize_text};
 use crate::contract::protocol::ChildEvent;
 use crate::contract::role::Role;
+use crate::launcher::outcome::Exit;
 
 /// The loop's binaries by role.
 pub type Binaries = BTreeMap<Role, PathBuf>;
@@ -81,50 +79,6 @@ pub fn supervised(command: &mut std::process::Command) {
     }
 }
 
-/// How a process ended, as `summary.json` writes it: "0", "1", "signal 9", or "running".
-#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::Display)]
-pub enum Exit {
-    #[strum(to_string = "{0}")]
-    Status(i32),
-    #[strum(to_string = "signal {0}")]
-    Signal(i32),
-    /// Not reaped: it never ended while the launcher looked.
-    #[strum(to_string = "running")]
-    Running,
-}
-
-impl Exit {
-    /// It exited on its own with status 0.
-    pub fn clean(self) -> bool {
-        self == Exit::Status(0)
-    }
-}
-
-impl FromStr for Exit {
-    type Err = String;
-
-    fn from_str(text: &str) -> Result<Self, String> {
-        let bad = || format!("not an exit status: {text:?}");
-        match text.strip_prefix("signal ") {
-            _ if text == "running" => Ok(Exit::Running),
-            Some(signal) => signal.parse().map(Exit::Signal).map_err(|_| bad()),
-            None => text.parse().map(Exit::Status).map_err(|_| bad()),
-        }
-    }
-}
-
-impl Serialize for Exit {
-    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        serialize_text(self, serializer)
-    }
-}
-
-impl<'de> Deserialize<'de> for Exit {
-    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        deserialize_text(deserializer)
-    }
-}
-
 /// One start of a process.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Start {
@@ -170,7 +124,10 @@ impl Start {
 pub enum Line {
     Event(ChildEvent),
     /// A line that is not an event.
-    Unreadable { line: String, error: String },
+    Unreadable {
+        line: String,
+        error: String,
+    },
     /// Its output ended: it is exiting.
     Closed,
 }
@@ -242,19 +199,4 @@ pub fn spawn<E: Send + 'static>(
         let _ = send(Line::Closed);
     });
     Ok(Spawned { start: Start { pid: child.id(), exit: Exit::Running, cpu_s: 0.0 }, stdin: child.stdin.take(), reader })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn exit_statuses_keep_their_text() {
-        for (exit, text) in [(Exit::Status(0), "0"), (Exit::Status(1), "1"), (Exit::Signal(9), "signal 9"), (Exit::Running, "running")] {
-            assert_eq!(serde_json::to_value(exit).unwrap(), text);
-            assert_eq!(serde_json::from_value::<Exit>(text.into()).unwrap(), exit);
-        }
-        assert!(Exit::Status(0).clean() && !Exit::Status(1).clean() && !Exit::Signal(15).clean());
-        assert!("signal x".parse::<Exit>().is_err() && "".parse::<Exit>().is_err());
-    }
 }

@@ -1,14 +1,12 @@
-//! Fault injection from outside: SIGKILL and SIGSTOP (then SIGCONT) at the fault's time in real
-//! time, or at its loop while the lockstep plant holds; and what was seen of each fault.
+//! Fault injection from outside: which kill and stop faults are due (at their time in real time,
+//! at their loop while the lockstep plant holds), the signal each sends, and what was seen of
+//! each fault. The supervisor sends the signals.
 
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use super::supervisor::Supervisor;
 use crate::config::faults::{FaultKind, FaultSpec};
-use crate::config::launch::Mode;
-use crate::contract::clock::now_ns;
 use crate::contract::role::Role;
 
 /// What noticed a fault first (`summary.json`'s `detected_by`).
@@ -70,72 +68,15 @@ pub fn injected(faults: &[FaultSpec], seen: &[FaultSeen], role: Role, kind: Faul
     found
 }
 
-impl Supervisor<'_> {
-    /// The faults on `role` of `kind` that were injected, newest first.
-    pub(super) fn injected(&self, role: Role, kind: FaultKind) -> Vec<usize> {
-        injected(&self.config.faults, &self.log.faults, role, kind)
-    }
-
-    /// Real time: injects the faults that are due.
-    pub(super) fn inject_due_by_time(&mut self) {
-        if self.config.mode != Mode::Realtime {
-            return;
+/// What injecting `spec` at `now` does to its process, if it runs: the signal to send, and for
+/// a stop when to continue it. None: the process does it itself (delay, drop, corrupt).
+pub fn injection(spec: &FaultSpec, now: Instant) -> Option<(i32, Option<Instant>)> {
+    match spec.kind {
+        FaultKind::Kill => Some((libc::SIGKILL, None)),
+        FaultKind::Stop => {
+            Some((libc::SIGSTOP, Some(now + Duration::from_secs_f64(spec.duration_s.unwrap_or_default()))))
         }
-        if let Some(start) = self.log.plant_start_ns {
-            for i in due_by_time(&self.config.faults, &self.log.faults, start, now_ns()) {
-                self.inject(i);
-            }
-        }
-    }
-
-    /// Lockstep: the plant holds loop `k`; injects the faults due there. The plant goes on once
-    /// every process is back up.
-    pub(super) fn pause_at(&mut self, k: u64) {
-        for i in due_at_loop(&self.config.faults, &self.log.faults, self.config.rate_hz, k) {
-            self.inject(i);
-        }
-        self.paused = true;
-    }
-
-    /// Sends SIGCONT to the processes whose stop is over at `now`.
-    pub(super) fn continue_stopped(&mut self, now: Instant) {
-        for i in 0..self.log.faults.len() {
-            if self.log.faults[i].continue_at.is_some_and(|at| now >= at) {
-                self.log.faults[i].continue_at = None;
-                let role = target(&self.config.faults[i]);
-                self.processes[role].signal(libc::SIGCONT);
-                self.processes[role].stopped = false;
-                let ns = now_ns();
-                self.log.faults[i].continued_ns = Some(ns);
-                self.note(ns, format!("SIGCONT {role}"));
-            }
-        }
-    }
-
-    fn inject(&mut self, i: usize) {
-        let config = self.config;
-        let fault = &config.faults[i];
-        let role = target(fault);
-        let ns = now_ns();
-        self.log.faults[i].injected_ns = Some(ns);
-        if !self.processes[role].running() {
-            self.note(ns, format!("{}: not injected, {role} is not running", fault.describe()));
-            return;
-        }
-        match fault.kind {
-            FaultKind::Kill => {
-                self.processes[role].signal(libc::SIGKILL);
-                self.processes[role].ready = false;
-            }
-            FaultKind::Stop => {
-                self.processes[role].signal(libc::SIGSTOP);
-                self.processes[role].stopped = true;
-                self.log.faults[i].continue_at =
-                    Some(Instant::now() + Duration::from_secs_f64(fault.duration_s.unwrap_or_default()));
-            }
-            _ => {}
-        }
-        self.note(ns, format!("inject: {}", fault.describe()));
+        FaultKind::Delay | FaultKind::Drop | FaultKind::Corrupt => None,
     }
 }
 
@@ -151,7 +92,8 @@ mod tests {
 
     #[test]
     fn real_time_faults_are_due_at_their_time_once_and_only_from_outside() {
-        let f = faults(&["kill estimator at 1s", "stop controller at 2s for 100ms", "delay controller by 3 ticks at 1s"]);
+        let f =
+            faults(&["kill estimator at 1s", "stop controller at 2s for 100ms", "delay controller by 3 ticks at 1s"]);
         let mut seen = vec![FaultSeen::default(); 3];
         let start = 5_000_000_000;
         assert_eq!(due_by_time(&f, &seen, start, start + 999_999_999), Vec::<usize>::new());
@@ -195,5 +137,14 @@ mod tests {
             assert_eq!(serde_json::to_value(by).unwrap(), text);
             assert_eq!(serde_json::from_value::<DetectedBy>(text.into()).unwrap(), by);
         }
+    }
+
+    #[test]
+    fn kills_and_stops_are_signals_and_a_stop_ends_after_its_duration() {
+        let f = faults(&["kill plant at 1s", "stop sensors at 1s for 250ms", "drop sensors 20% at 1s"]);
+        let now = Instant::now();
+        assert_eq!(injection(&f[0], now), Some((libc::SIGKILL, None)));
+        assert_eq!(injection(&f[1], now), Some((libc::SIGSTOP, Some(now + Duration::from_millis(250)))));
+        assert_eq!(injection(&f[2], now), None);
     }
 }

@@ -13,7 +13,8 @@ pub mod summary;
 pub mod supervisor;
 
 pub use child::{Binaries, locate_binaries, supervised};
-pub use outcome::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Outcome, StopReason, exit_code};
+pub use outcome::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Exit, Outcome, StopReason};
+pub use report::exit_code;
 pub use run_dir::{create_run_dir, new_run_id, write_atomically};
 pub use summary::Summary;
 pub use supervisor::run_once;

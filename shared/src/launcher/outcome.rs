@@ -1,11 +1,10 @@
-//! How a run ended: the supervisor's outcome, the reason `summary.json` gives, and the exit code.
+//! How a run ended (the supervisor's outcome, the reason `summary.json` gives, the exit codes)
+//! and how each of its processes ended.
 
 use std::fmt::Display;
 use std::str::FromStr;
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
-
-use super::summary::Summary;
 
 /// The run completed.
 pub const EXIT_OK: u8 = 0;
@@ -51,36 +50,62 @@ impl StopReason {
     }
 }
 
-/// The launcher's exit code for a finished run, and the error line it prints, if any.
-pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
-    match outcome {
-        Outcome::Completed if !summary.completed => {
-            let why = summary.stopped_because.as_ref().map_or("it ran fewer loops than planned".into(), |r| r.to_string());
-            let error = format!("the run did not complete: {why} ({} of {} loops)", summary.loops, summary.loops_planned);
-            (EXIT_FAILED, Some(error))
-        }
-        Outcome::Completed if summary.shared_memory.clean => (EXIT_OK, None),
-        Outcome::Completed => {
-            let error = format!("files of the run were left behind: {}", summary.shared_memory.leftover.join(", "));
-            (EXIT_FAILED, Some(error))
-        }
-        Outcome::Interrupted => (EXIT_INTERRUPTED, None),
-        Outcome::Failed(why) => (EXIT_FAILED, Some(why.clone())),
-    }
-}
-
 /// Serializes a type as its `Display` text.
-pub(crate) fn serialize_text<T: Display, S: Serializer>(value: &T, serializer: S) -> Result<S::Ok, S::Error> {
+fn serialize_text<T: Display, S: Serializer>(value: &T, serializer: S) -> Result<S::Ok, S::Error> {
     serializer.collect_str(value)
 }
 
 /// Reads a type from its text with `FromStr`.
-pub(crate) fn deserialize_text<'de, T, D>(deserializer: D) -> Result<T, D::Error>
+fn deserialize_text<'de, T, D>(deserializer: D) -> Result<T, D::Error>
 where
     T: FromStr<Err: Display>,
     D: Deserializer<'de>,
 {
     String::deserialize(deserializer)?.parse().map_err(serde::de::Error::custom)
+}
+
+/// How a process ended, as `summary.json` writes it: "0", "1", "signal 9", or "running".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::Display)]
+pub enum Exit {
+    #[strum(to_string = "{0}")]
+    Status(i32),
+    #[strum(to_string = "signal {0}")]
+    Signal(i32),
+    /// Not reaped: it never ended while the launcher looked.
+    #[strum(to_string = "running")]
+    Running,
+}
+
+impl Exit {
+    /// It exited on its own with status 0.
+    pub fn clean(self) -> bool {
+        self == Exit::Status(0)
+    }
+}
+
+impl FromStr for Exit {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        let bad = || format!("not an exit status: {text:?}");
+        match text.strip_prefix("signal ") {
+            _ if text == "running" => Ok(Exit::Running),
+            Some(signal) => signal.parse().map(Exit::Signal).map_err(|_| bad()),
+            None => text.parse().map(Exit::Status).map_err(|_| bad()),
+        }
+    }
+}
+
+impl Serialize for Exit {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serialize_text(self, serializer)
+    }
+}
+
+impl<'de> Deserialize<'de> for Exit {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        deserialize_text(deserializer)
+    }
 }
 
 impl Serialize for StopReason {
@@ -98,7 +123,6 @@ impl<'de> Deserialize<'de> for StopReason {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::launcher::summary::tests::summary;
 
     #[test]
     fn stop_reasons_keep_their_text() {
@@ -117,31 +141,14 @@ mod tests {
     }
 
     #[test]
-    fn each_outcome_has_its_exit_code_and_error_line() {
-        let done = summary();
-        assert_eq!(exit_code(&Outcome::Completed, &done), (0, None));
-        assert_eq!(exit_code(&Outcome::Interrupted, &done), (130, None));
-        assert_eq!(exit_code(&Outcome::Failed("sensors could not be restarted".into()), &done), (1, Some("sensors could not be restarted".into())));
-
-        let mut short = summary();
-        short.completed = false;
-        short.loops = 10;
-        assert_eq!(
-            exit_code(&Outcome::Completed, &short),
-            (1, Some("the run did not complete: it ran fewer loops than planned (10 of 1000 loops)".into()))
-        );
-        short.stopped_because = Some(StopReason::PlantStoppedEarly);
-        assert_eq!(
-            exit_code(&Outcome::Completed, &short),
-            (1, Some("the run did not complete: the plant stopped before the last loop (10 of 1000 loops)".into()))
-        );
-
-        let mut left = summary();
-        left.shared_memory.clean = false;
-        left.shared_memory.leftover = vec!["/dev/shm/a".into(), "/dev/shm/b".into()];
-        assert_eq!(
-            exit_code(&Outcome::Completed, &left),
-            (1, Some("files of the run were left behind: /dev/shm/a, /dev/shm/b".into()))
-        );
+    fn exit_statuses_keep_their_text() {
+        for (exit, text) in
+            [(Exit::Status(0), "0"), (Exit::Status(1), "1"), (Exit::Signal(9), "signal 9"), (Exit::Running, "running")]
+        {
+            assert_eq!(serde_json::to_value(exit).unwrap(), text);
+            assert_eq!(serde_json::from_value::<Exit>(text.into()).unwrap(), exit);
+        }
+        assert!(Exit::Status(0).clean() && !Exit::Status(1).clean() && !Exit::Signal(15).clean());
+        assert!("signal x".parse::<Exit>().is_err() && "".parse::<Exit>().is_err());
     }
 }

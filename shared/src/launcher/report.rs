@@ -1,11 +1,33 @@
-//! The report printed at the end of a run, from its summary.
+//! What the user sees at the end of a run: the report printed from its summary, the error
+//! line and the exit code.
 
 use std::fmt::Write as _;
 
 // The scenarios' old path to this type, until issue 11 moves it below them.
-pub use super::summary::ErrorMeasureInfo;
-use super::summary::Summary;
+use crate::launcher::outcome::{EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Outcome};
+pub use crate::launcher::summary::ErrorMeasureInfo;
+use crate::launcher::summary::Summary;
 use crate::monitor::{HOPS, MissingLoops, Stats};
+
+/// The launcher's exit code for a finished run, and the error line it prints, if any.
+pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
+    match outcome {
+        Outcome::Completed if !summary.completed => {
+            let why =
+                summary.stopped_because.as_ref().map_or("it ran fewer loops than planned".into(), |r| r.to_string());
+            let error =
+                format!("the run did not complete: {why} ({} of {} loops)", summary.loops, summary.loops_planned);
+            (EXIT_FAILED, Some(error))
+        }
+        Outcome::Completed if summary.shared_memory.clean => (EXIT_OK, None),
+        Outcome::Completed => {
+            let error = format!("files of the run were left behind: {}", summary.shared_memory.leftover.join(", "));
+            (EXIT_FAILED, Some(error))
+        }
+        Outcome::Interrupted => (EXIT_INTERRUPTED, None),
+        Outcome::Failed(why) => (EXIT_FAILED, Some(why.clone())),
+    }
+}
 
 fn micros(ns: Option<u64>) -> String {
     match ns {
@@ -31,8 +53,15 @@ fn stats_row(out: &mut String, label: &str, s: &Stats) {
 /// The human-readable report.
 pub fn render(s: &Summary) -> String {
     let mut out = String::new();
-    let _ =
-        writeln!(out, "\nLoopLab · {} · {} · {} Hz · {} s · seed {}", s.title, s.mode.name(), s.rate_hz, s.duration_s, s.seed);
+    let _ = writeln!(
+        out,
+        "\nLoopLab · {} · {} · {} Hz · {} s · seed {}",
+        s.title,
+        s.mode.name(),
+        s.rate_hz,
+        s.duration_s,
+        s.seed
+    );
     let status = match (&s.stopped_because, s.completed) {
         (Some(why), _) => format!("stopped early: {why}"),
         (None, true) => "completed".into(),
@@ -226,9 +255,11 @@ fn render_restarts(out: &mut String, s: &Summary) {
 mod tests {
     use super::*;
     use crate::config::faults::FaultKind;
+    use crate::contract::protocol::WaitCounts;
     use crate::contract::role::Role;
-    use crate::launcher::summary::FaultReport;
+    use crate::launcher::outcome::StopReason;
     use crate::launcher::summary::tests::summary;
+    use crate::launcher::summary::{FaultReport, RestartSteps};
     use crate::monitor::FaultEffect;
 
     fn summary_with_fault() -> Summary {
@@ -281,5 +312,70 @@ mod tests {
             let end_of = |line: &str, cell: &str| line.find(cell).map(|i| i + cell.len());
             assert_eq!(end_of(lines[header], title), end_of(lines[header + 1], value), "{title}");
         }
+    }
+
+    #[test]
+    fn each_outcome_has_its_exit_code_and_error_line() {
+        let done = summary();
+        assert_eq!(exit_code(&Outcome::Completed, &done), (0, None));
+        assert_eq!(exit_code(&Outcome::Interrupted, &done), (130, None));
+        assert_eq!(
+            exit_code(&Outcome::Failed("sensors could not be restarted".into()), &done),
+            (1, Some("sensors could not be restarted".into()))
+        );
+
+        let mut short = summary();
+        short.completed = false;
+        short.loops = 10;
+        assert_eq!(
+            exit_code(&Outcome::Completed, &short),
+            (1, Some("the run did not complete: it ran fewer loops than planned (10 of 1000 loops)".into()))
+        );
+        short.stopped_because = Some(StopReason::PlantStoppedEarly);
+        assert_eq!(
+            exit_code(&Outcome::Completed, &short),
+            (1, Some("the run did not complete: the plant stopped before the last loop (10 of 1000 loops)".into()))
+        );
+
+        let mut left = summary();
+        left.shared_memory.clean = false;
+        left.shared_memory.leftover = vec!["/dev/shm/a".into(), "/dev/shm/b".into()];
+        assert_eq!(
+            exit_code(&Outcome::Completed, &left),
+            (1, Some("files of the run were left behind: /dev/shm/a, /dev/shm/b".into()))
+        );
+    }
+
+    #[test]
+    fn the_status_line_restarts_table_and_adaptive_waits_are_printed() {
+        let mut s = summary();
+        s.restart_steps = vec![RestartSteps {
+            process: Role::Sensors,
+            incarnation: 1,
+            died_at_ms: 1500.3,
+            cleaned_after_ms: Some(4.0),
+            backoff_ms: 10.0,
+            spawned_after_ms: Some(12.5),
+            ready_after_ms: None,
+        }];
+        s.adaptive_waits = [
+            (Role::Plant, WaitCounts { caught: 5, blocked: 1 }),
+            (Role::Controller, WaitCounts { caught: 2, blocked: 0 }),
+        ]
+        .into();
+        let text = render(&s);
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(lines[2].starts_with("  completed: 1000 of 1000 loops in 1.00 s (1000 loops/s)"), "{}", lines[2]);
+        let header = lines.iter().position(|l| l.trim_start().starts_with("process ")).expect("restarts table");
+        assert_eq!(cells(lines[header]), ["process", "died at", "cleaned", "backoff", "started", "ready"]);
+        assert_eq!(cells(lines[header + 1]), ["sensors", "1500.3", "4.0", "10.0", "12.5", "-"]);
+        let waits: Vec<&str> = lines.iter().filter(|l| l.contains("adaptive wait")).copied().collect();
+        assert_eq!(
+            waits,
+            [
+                "  adaptive wait, controller: 2 caught by polling, 0 blocked after the cap",
+                "  adaptive wait, plant: 5 caught by polling, 1 blocked after the cap"
+            ]
+        );
     }
 }

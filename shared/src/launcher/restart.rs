@@ -3,7 +3,6 @@
 
 use std::time::Duration;
 
-use super::summary::{RestartSteps, RunLog};
 use crate::config::faults::{Policy, Restart};
 use crate::contract::role::Role;
 
@@ -88,21 +87,6 @@ pub struct RestartRecord {
     pub ready_ns: Option<u64>,
 }
 
-impl RestartRecord {
-    pub fn steps(&self, log: &RunLog) -> RestartSteps {
-        let after = |ns: Option<u64>| ns.map(|ns| (ns as f64 - self.died_ns as f64) / 1e6);
-        RestartSteps {
-            process: self.process,
-            incarnation: self.incarnation,
-            died_at_ms: log.since_start_ms(self.died_ns),
-            cleaned_after_ms: after(self.cleaned_ns),
-            backoff_ms: self.backoff.as_secs_f64() * 1e3,
-            spawned_after_ms: after(self.spawned_ns),
-            ready_after_ms: after(self.ready_ns),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -133,7 +117,10 @@ mod tests {
 
     #[test]
     fn the_backoff_doubles_up_to_one_second() {
-        assert_eq!(backoffs(&ON_FAILURE, 9), [ms(10), ms(20), ms(40), ms(80), ms(160), ms(320), ms(640), ms(1000), ms(1000)]);
+        assert_eq!(
+            backoffs(&ON_FAILURE, 9),
+            [ms(10), ms(20), ms(40), ms(80), ms(160), ms(320), ms(640), ms(1000), ms(1000)]
+        );
         let big = Policy { backoff_s: 60.0, ..ON_FAILURE };
         assert_eq!(backoffs(&big, 2), [MAX_BACKOFF, MAX_BACKOFF]);
         let none = Policy { backoff_s: 0.0, ..ON_FAILURE };
@@ -151,7 +138,10 @@ mod tests {
             Decision::Restart { backoff: ms(160), quick_restarts: 5 }
         );
         // Never ready since its last start: not healthy.
-        assert_eq!(decide(&ON_FAILURE, 1.0, killed(4, 4, None)), Decision::Restart { backoff: ms(160), quick_restarts: 5 });
+        assert_eq!(
+            decide(&ON_FAILURE, 1.0, killed(4, 4, None)),
+            Decision::Restart { backoff: ms(160), quick_restarts: 5 }
+        );
     }
 
     #[test]

@@ -8,15 +8,15 @@ use std::path::Path;
 use anyhow::Result;
 use serde::{Deserialize, Serialize, Serializer};
 
-use super::child::{Exit, Start};
-use super::inject::{DetectedBy, FaultSeen};
-use super::outcome::{Outcome, StopReason};
-use super::restart::RestartRecord;
-use super::run_dir::write_atomically;
 use crate::config::faults::FaultKind;
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::protocol::{PlantReport, StageReport, WaitCounts};
 use crate::contract::role::Role;
+use crate::launcher::child::Start;
+use crate::launcher::inject::{DetectedBy, FaultSeen, target};
+use crate::launcher::outcome::{Exit, Outcome, StopReason};
+use crate::launcher::restart::RestartRecord;
+use crate::launcher::run_dir::write_atomically;
 use crate::monitor::{FaultEffect, MissingLoops, MonitorReport, Stats};
 use crate::scenarios::Scenario;
 
@@ -317,7 +317,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         error_measure: scenario.error_measure().describe(),
         faults: fault_reports(config, log, &monitor),
         timeline: log.timeline.clone(),
-        restart_steps: log.restarts.iter().map(|r| r.steps(log)).collect(),
+        restart_steps: log.restarts.iter().map(|r| restart_steps(r, log)).collect(),
         shared_memory,
     }
 }
@@ -383,7 +383,7 @@ fn fault_reports(config: &LaunchConfig, log: &RunLog, monitor: &MonitorReport) -
             FaultReport {
                 fault: spec.describe(),
                 kind: spec.kind,
-                process: super::inject::target(spec),
+                process: target(spec),
                 at_s: spec.at_s,
                 injected_at_ms: seen.injected_ns.map(|ns| log.since_start_ms(ns)),
                 detected_after_ms: after(seen.detected_ns),
@@ -395,6 +395,20 @@ fn fault_reports(config: &LaunchConfig, log: &RunLog, monitor: &MonitorReport) -
             }
         })
         .collect()
+}
+
+/// A restart's steps in ms after its death was seen.
+fn restart_steps(r: &RestartRecord, log: &RunLog) -> RestartSteps {
+    let after = |ns: Option<u64>| ns.map(|ns| (ns as f64 - r.died_ns as f64) / 1e6);
+    RestartSteps {
+        process: r.process,
+        incarnation: r.incarnation,
+        died_at_ms: log.since_start_ms(r.died_ns),
+        cleaned_after_ms: after(r.cleaned_ns),
+        backoff_ms: r.backoff.as_secs_f64() * 1e3,
+        spawned_after_ms: after(r.spawned_ns),
+        ready_after_ms: after(r.ready_ns),
+    }
 }
 
 #[cfg(test)]
@@ -457,14 +471,16 @@ pub(crate) mod tests {
             waited: 2,
             ..Default::default()
         };
-        let stage = StageReport { processed: 500, waited: 1, wait: WaitCounts { caught: 3, blocked: 4 }, ..Default::default() };
+        let stage =
+            StageReport { processed: 500, waited: 1, wait: WaitCounts { caught: 3, blocked: 4 }, ..Default::default() };
         let monitor = MonitorReport { records: 500, loops_seen: 500, ..Default::default() };
         let reports = Reports {
             plant: Some(plant),
             stages: Role::STAGES.into_iter().map(|r| (r, vec![stage.clone()])).collect(),
             monitor: Some(monitor),
         };
-        let starts: BTreeMap<Role, Vec<Start>> = [(Role::Sensors, vec![Start { pid: 7, exit: Exit::Status(0), cpu_s: 0.5 }])].into();
+        let starts: BTreeMap<Role, Vec<Start>> =
+            [(Role::Sensors, vec![Start { pid: 7, exit: Exit::Status(0), cpu_s: 0.5 }])].into();
         let summary = build(SummaryInputs {
             config: &config,
             scenario: scenario.as_ref(),
@@ -521,7 +537,8 @@ pub(crate) mod tests {
     fn maps_by_process_keep_their_alphabetical_keys_and_every_value_reads_back() {
         let mut s = summary();
         s.restarts = Role::ALL.into_iter().map(|r| (r, 0)).collect();
-        s.adaptive_waits = [(Role::Plant, WaitCounts { caught: 1, blocked: 0 }), (Role::Controller, WaitCounts::default())].into();
+        s.adaptive_waits =
+            [(Role::Plant, WaitCounts { caught: 1, blocked: 0 }), (Role::Controller, WaitCounts::default())].into();
         s.stopped_because = Some(StopReason::Interrupted);
         s.processes = vec![ProcessInfo {
             name: Role::Monitor,
@@ -536,8 +553,15 @@ pub(crate) mod tests {
         let keys: Vec<&String> = json["restarts"].as_object().unwrap().keys().collect();
         assert_eq!(keys, ["controller", "estimator", "monitor", "plant", "sensors"]);
         let text = serde_json::to_string(&s).unwrap();
-        assert!(text.contains(r#""adaptive_waits":{"controller":{"caught":0,"blocked":0},"plant":{"caught":1,"blocked":0}}"#), "{text}");
-        assert!(text.contains(r#""mode":"lockstep""#) && text.contains(r#""stopped_because":"interrupted by a signal""#));
+        assert!(
+            text.contains(
+                r#""adaptive_waits":{"controller":{"caught":0,"blocked":0},"plant":{"caught":1,"blocked":0}}"#
+            ),
+            "{text}"
+        );
+        assert!(
+            text.contains(r#""mode":"lockstep""#) && text.contains(r#""stopped_because":"interrupted by a signal""#)
+        );
         assert!(text.contains(r#""name":"monitor","incarnation":0,"pid":9,"exit":"signal 9""#), "{text}");
         assert_eq!(serde_json::from_str::<Summary>(&text).unwrap(), s);
     }

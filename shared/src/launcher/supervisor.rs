@@ -13,17 +13,17 @@ use anyhow::Result;
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use super::child::{self, Binaries, ChildArgs, ChildLine, Line, Start};
-use super::inject::DetectedBy;
-use super::outcome::Outcome;
-use super::restart::{self, Death, Decision, RestartRecord};
-use super::run_dir::{new_run_id, write_atomically};
-use super::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::config::faults::{FaultKind, Policy};
-use crate::config::launch::LaunchConfig;
+use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::clock::now_ns;
 use crate::contract::protocol::{ChildEvent, MonitorStatus};
 use crate::contract::role::Role;
+use crate::launcher::child::{self, Binaries, ChildArgs, ChildLine, Line, Start};
+use crate::launcher::inject::{self, DetectedBy};
+use crate::launcher::outcome::{Exit, Outcome};
+use crate::launcher::restart::{self, Death, Decision, RestartRecord};
+use crate::launcher::run_dir::{new_run_id, write_atomically};
+use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::runtime::ipc;
 use crate::runtime::signals::StopFlag;
 use crate::scenarios::Scenario;
@@ -53,14 +53,14 @@ pub fn run_once(
 }
 
 /// A process of the loop across its restarts.
-pub(super) struct Process {
-    pub role: Role,
+struct Process {
+    role: Role,
     policy: Policy,
     /// Every start; the last is the running incarnation.
-    pub runs: Vec<Start>,
+    runs: Vec<Start>,
     stdin: Option<ChildStdin>,
     /// Its ports are up (cleared when it dies or is killed).
-    pub ready: bool,
+    ready: bool,
     /// When its running incarnation became ready.
     ready_since: Option<Instant>,
     /// Set while it waits for its clean-up and backoff before a restart.
@@ -68,7 +68,7 @@ pub(super) struct Process {
     /// Restarts since it last ran healthy (`backoff_reset_s`): the backoff doubles with each.
     quick_restarts: u32,
     /// SIGSTOPped by a fault and not continued yet.
-    pub stopped: bool,
+    stopped: bool,
     /// It died and will not be restarted (the monitor may; the others end the run).
     gone: bool,
 }
@@ -79,15 +79,15 @@ impl Process {
         self.runs.len().saturating_sub(1) as u32
     }
 
-    pub fn running(&self) -> bool {
-        self.runs.last().is_some_and(|r| r.exit == child::Exit::Running)
+    fn running(&self) -> bool {
+        self.runs.last().is_some_and(|r| r.exit == Exit::Running)
     }
 
     fn try_reap(&mut self) -> bool {
         self.runs.last_mut().is_none_or(Start::try_reap)
     }
 
-    pub fn signal(&self, signal: i32) {
+    fn signal(&self, signal: i32) {
         if let Some(run) = self.runs.last() {
             run.signal(signal);
         }
@@ -95,7 +95,7 @@ impl Process {
 
     fn exit_text(&self) -> String {
         match self.runs.last().map(|r| r.exit) {
-            Some(exit) if exit != child::Exit::Running => format!("{} exited with status {exit}", self.role),
+            Some(exit) if exit != Exit::Running => format!("{} exited with status {exit}", self.role),
             _ => format!("{} closed its output", self.role),
         }
     }
@@ -111,7 +111,7 @@ impl Process {
 }
 
 /// The run's processes, in start order, by role.
-pub(super) struct Processes(Vec<Process>);
+struct Processes(Vec<Process>);
 
 impl Processes {
     fn iter(&self) -> impl Iterator<Item = &Process> {
@@ -137,7 +137,10 @@ impl IndexMut<Role> for Processes {
 enum Event {
     Child(ChildLine),
     /// The clean-up after a death of `role` is done.
-    Cleaned { role: Role, removed: u64 },
+    Cleaned {
+        role: Role,
+        removed: u64,
+    },
 }
 
 /// A restart under way: it starts once the dead process's resources are removed and the backoff
@@ -147,22 +150,22 @@ struct PendingRestart {
     cleaned: bool,
 }
 
-pub(super) struct Supervisor<'a> {
-    pub config: &'a LaunchConfig,
+struct Supervisor<'a> {
+    config: &'a LaunchConfig,
     binaries: &'a Binaries,
     launch_file: PathBuf,
     run_id: String,
     run_dir: PathBuf,
-    pub processes: Processes,
+    processes: Processes,
     tx: Sender<Event>,
     events: Receiver<Event>,
     readers: Vec<std::thread::JoinHandle<()>>,
     reports: Reports,
     progress: ProgressBar,
     /// Faults, restarts and the timeline, for the summary.
-    pub log: RunLog,
+    log: RunLog,
     /// Lockstep: the plant is paused and waits for `go`.
-    pub paused: bool,
+    paused: bool,
     last_status: Instant,
     removed_dead_nodes: u64,
     stop: StopFlag,
@@ -261,7 +264,8 @@ impl<'a> Supervisor<'a> {
         let _ = clean_thread.join();
         let cleanup = ipc::clean_up_run(&supervisor.run_id)?;
         drop(storage_lock);
-        let starts: BTreeMap<Role, Vec<Start>> = supervisor.processes.iter().map(|p| (p.role, p.runs.clone())).collect();
+        let starts: BTreeMap<Role, Vec<Start>> =
+            supervisor.processes.iter().map(|p| (p.role, p.runs.clone())).collect();
         let summary = summary::build(SummaryInputs {
             config,
             scenario,
@@ -302,7 +306,7 @@ impl<'a> Supervisor<'a> {
     }
 
     /// Notes `event` on the timeline, at `ns`.
-    pub fn note(&mut self, ns: u64, event: String) {
+    fn note(&mut self, ns: u64, event: String) {
         self.log.note(ns, event);
     }
 
@@ -408,6 +412,69 @@ impl<'a> Supervisor<'a> {
             }
         }
         None
+    }
+
+    /// The faults on `role` of `kind` that were injected, newest first.
+    fn injected(&self, role: Role, kind: FaultKind) -> Vec<usize> {
+        inject::injected(&self.config.faults, &self.log.faults, role, kind)
+    }
+
+    /// Real time: injects the faults that are due.
+    fn inject_due_by_time(&mut self) {
+        if self.config.mode != Mode::Realtime {
+            return;
+        }
+        if let Some(start) = self.log.plant_start_ns {
+            for i in inject::due_by_time(&self.config.faults, &self.log.faults, start, now_ns()) {
+                self.inject(i);
+            }
+        }
+    }
+
+    /// Lockstep: the plant holds loop `k`; injects the faults due there. The plant goes on once
+    /// every process is back up.
+    fn pause_at(&mut self, k: u64) {
+        for i in inject::due_at_loop(&self.config.faults, &self.log.faults, self.config.rate_hz, k) {
+            self.inject(i);
+        }
+        self.paused = true;
+    }
+
+    /// Sends SIGCONT to the processes whose stop is over at `now`.
+    fn continue_stopped(&mut self, now: Instant) {
+        for i in 0..self.log.faults.len() {
+            if self.log.faults[i].continue_at.is_some_and(|at| now >= at) {
+                self.log.faults[i].continue_at = None;
+                let role = inject::target(&self.config.faults[i]);
+                self.processes[role].signal(libc::SIGCONT);
+                self.processes[role].stopped = false;
+                let ns = now_ns();
+                self.log.faults[i].continued_ns = Some(ns);
+                self.note(ns, format!("SIGCONT {role}"));
+            }
+        }
+    }
+
+    fn inject(&mut self, i: usize) {
+        let config = self.config;
+        let fault = &config.faults[i];
+        let role = inject::target(fault);
+        let ns = now_ns();
+        self.log.faults[i].injected_ns = Some(ns);
+        if !self.processes[role].running() {
+            self.note(ns, format!("{}: not injected, {role} is not running", fault.describe()));
+            return;
+        }
+        if let Some((signal, continue_at)) = inject::injection(fault, Instant::now()) {
+            let process = &mut self.processes[role];
+            process.signal(signal);
+            match fault.kind {
+                FaultKind::Kill => process.ready = false,
+                _ => process.stopped = true,
+            }
+            self.log.faults[i].continue_at = continue_at;
+        }
+        self.note(ns, format!("inject: {}", fault.describe()));
     }
 
     /// Lockstep: once the faults due at the paused tick are in and every process is back up,
@@ -568,7 +635,10 @@ impl<'a> Supervisor<'a> {
                 spawned_ns: None,
                 ready_ns: None,
             });
-            self.note(ns, format!("{exit}; restart after its clean-up and {:.0} ms of backoff", backoff.as_secs_f64() * 1e3));
+            self.note(
+                ns,
+                format!("{exit}; restart after its clean-up and {:.0} ms of backoff", backoff.as_secs_f64() * 1e3),
+            );
             return None;
         }
         let why = format!("{exit}; {}", decision.refusal().expect("a refusal says why"));
@@ -610,8 +680,7 @@ impl<'a> Supervisor<'a> {
     /// After a run whose plant finished: every other process must have ended cleanly too, and
     /// the monitor must have reported.
     fn check_ends(&self) -> Outcome {
-        let failed: Vec<String> =
-            self.processes.iter().filter(|p| !p.ended_cleanly()).map(|p| p.exit_text()).collect();
+        let failed: Vec<String> = self.processes.iter().filter(|p| !p.ended_cleanly()).map(|p| p.exit_text()).collect();
         if !failed.is_empty() {
             Outcome::Failed(format!("{}; see the logs folder", failed.join(", ")))
         } else if self.reports.monitor.is_none() {

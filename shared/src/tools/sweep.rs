@@ -329,9 +329,12 @@ mod tests {
 
     #[test]
     fn verdicts_keep_their_text() {
-        for (verdict, text) in
-            [(Verdict::Stable, "stable"), (Verdict::Unstable, "unstable"), (Verdict::Failed, "failed"), (Verdict::NoFault, "no fault")]
-        {
+        for (verdict, text) in [
+            (Verdict::Stable, "stable"),
+            (Verdict::Unstable, "unstable"),
+            (Verdict::Failed, "failed"),
+            (Verdict::NoFault, "no fault"),
+        ] {
             assert_eq!(serde_json::to_value(verdict).unwrap(), text);
             assert_eq!(format!("{verdict:<9}|"), format!("{text:<9}|"));
         }

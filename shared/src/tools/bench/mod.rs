@@ -218,8 +218,7 @@ impl LoopAccumulator {
         let percent = |cpu_s: f64| 100.0 * cpu_s / self.seconds.max(1e-9);
         let cpu_percent: BTreeMap<String, f64> =
             self.cpu_s.iter().map(|(role, v)| (role.name().to_owned(), percent(*v))).collect();
-        let loop_cpu_percent =
-            self.cpu_s.iter().filter(|(role, _)| role.in_loop()).map(|(_, v)| percent(*v)).sum();
+        let loop_cpu_percent = self.cpu_s.iter().filter(|(role, _)| role.in_loop()).map(|(_, v)| percent(*v)).sum();
         LoopBench {
             name: name.into(),
             rate_hz,
@@ -298,12 +297,7 @@ const LOOP_CONFIGS: [LoopConfig; 6] = [
 ];
 
 /// One LoopLab run of the pendulum in real time.
-fn looplab_run(
-    out: &Path,
-    c: &LoopConfig,
-    seconds: f64,
-    binaries: &Binaries,
-) -> Result<(Summary, PathBuf)> {
+fn looplab_run(out: &Path, c: &LoopConfig, seconds: f64, binaries: &Binaries) -> Result<(Summary, PathBuf)> {
     let sets = [
         "mode=realtime".to_string(),
         format!("rate_hz={:?}", c.rate_hz),

@@ -99,12 +99,7 @@ impl Drop for Load {
     }
 }
 
-fn measure(
-    condition: &str,
-    kills: usize,
-    out: &Path,
-    binaries: &Binaries,
-) -> Result<Vec<RestartBench>> {
+fn measure(condition: &str, kills: usize, out: &Path, binaries: &Binaries) -> Result<Vec<RestartBench>> {
     let duration = kills as f64 * KILL_INTERVAL_S + 1.0;
     let mut overrides = vec![
         Override::parse(&format!("duration_s={duration:?}"))?,
