@@ -6,29 +6,27 @@ mod common;
 
 use common::*;
 
-fn assert_clean(s: &serde_json::Value) {
-    assert_eq!(s["shared_memory"]["clean"], true, "{}", s["shared_memory"]);
-    let left = looplab_shared::ipc::files_of_run(s["run_id"].as_str().unwrap());
+fn assert_clean(s: &Summary) {
+    assert!(s.shared_memory.clean, "{:?}", s.shared_memory);
+    let left = looplab_shared::runtime::ipc::files_of_run(&s.run_id);
     assert!(left.is_empty(), "files left behind: {left:?}");
-    for p in s["processes"].as_array().unwrap() {
-        assert!(!alive(p["pid"].as_i64().unwrap()), "{p} is still running");
+    for p in &s.processes {
+        assert!(!alive(i64::from(p.pid)), "{p:?} is still running");
     }
-}
-
-fn fault(s: &serde_json::Value, i: usize) -> &serde_json::Value {
-    &s["faults"][i]
 }
 
 /// Every process's last incarnation ended cleanly.
-fn assert_every_process_ended_alive(s: &serde_json::Value) {
-    let mut last = std::collections::BTreeMap::new();
-    for p in s["processes"].as_array().unwrap() {
-        last.insert(p["name"].as_str().unwrap().to_owned(), p["exit"].clone());
-    }
+fn assert_every_process_ended_alive(s: &Summary) {
+    let last = last_incarnations(s);
     assert_eq!(last.len(), 5);
-    for (name, exit) in last {
-        assert_eq!(exit, "0", "{name}'s last incarnation: {}", s["processes"]);
+    for (name, p) in last {
+        assert_eq!(p.exit, Exit::Status(0), "{name}'s last incarnation: {:?}", s.processes);
     }
+}
+
+/// The fault's effect, which the monitor recorded.
+fn effect(f: &FaultReport) -> &looplab_shared::contract::report::FaultEffect {
+    f.effect.as_ref().unwrap_or_else(|| panic!("no effect recorded: {f:?}"))
 }
 
 #[test]
@@ -50,26 +48,26 @@ fn each_loop_process_killed_in_lockstep_restarts_where_it_died_and_the_pendulum_
             "kill controller at 4.5s",
         ],
     );
-    let s = &r.summary;
-    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
-    assert_eq!(s["loops"], 6000);
+    let s = r.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.loops, 6000);
     for (i, (process, at)) in
-        [("plant", 1.5), ("sensors", 2.5), ("estimator", 3.5), ("controller", 4.5)].iter().enumerate()
+        [(Role::Plant, 1.5), (Role::Sensors, 2.5), (Role::Estimator, 3.5), (Role::Controller, 4.5)].iter().enumerate()
     {
-        assert_eq!(s["restarts"][process], 1, "{process}");
-        let f = fault(s, i);
-        assert_eq!(f["detected_by"], "the process exited", "{f}");
-        assert!(f["detected_after_ms"].as_f64().is_some() && f["restarted_after_ms"].as_f64().is_some(), "{f}");
-        let e = &f["effect"];
+        assert_eq!(s.restarts[process], 1, "{process}");
+        let f = &s.faults[i];
+        assert_eq!(f.detected_by, Some(DetectedBy::ProcessExited), "{f:?}");
+        assert!(f.detected_after_ms.is_some() && f.restarted_after_ms.is_some(), "{f:?}");
+        let e = effect(f);
         // Lockstep holds the loop while the process is replaced: the restarted one handles the
         // very loop at which its predecessor was killed, and not one command is missed.
-        assert_eq!(e["rejoined_at_s"].as_f64(), Some(*at), "{process}: {e}");
-        assert_eq!(e["outage_ticks"], 0, "{process}: {e}");
-        assert_eq!(e["within_limits"], true, "{process}: {e}");
-        assert_eq!(e["recovery_s"].as_f64(), Some(0.0), "{process}: {e}");
+        assert_eq!(e.rejoined_at_s, Some(*at), "{process}: {e:?}");
+        assert_eq!(e.outage_ticks, 0, "{process}: {e:?}");
+        assert!(e.within_limits, "{process}: {e:?}");
+        assert_eq!(e.recovery_s, Some(0.0), "{process}: {e:?}");
     }
     // Every loop has its record: the restarted plant went on from its snapshot.
-    assert_eq!(s["monitor"]["records"], 6000);
+    assert_eq!(s.monitor.records, 6000);
     assert!(r.metric("theta_max_abs_rad") < 0.1);
     assert!((r.metric("bias_estimate_final_rad") - 0.1).abs() < 0.002, "the estimator kept its calibration");
     assert_every_process_ended_alive(s);
@@ -93,21 +91,20 @@ fn each_loop_process_killed_in_real_time_restarts_and_the_loop_goes_on() {
             "kill controller at 2.5s",
         ],
     );
-    let s = &r.summary;
-    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
-    assert_eq!(s["loops"], 3500, "the restarted plant keeps the schedule: ticks it missed are integrated");
-    for (i, process) in ["plant", "sensors", "estimator", "controller"].iter().enumerate() {
-        assert_eq!(s["restarts"][process], 1);
-        let f = fault(s, i);
-        let e = &f["effect"];
-        assert!(f["restarted_after_ms"].as_f64().is_some(), "{f}");
-        assert!(e["rejoined_at_s"].as_f64().is_some(), "{process}: the restarted process never handled a loop: {e}");
-        assert!(e["outage_ticks"].as_u64().unwrap() > 0, "a real outage has missed commands: {e}");
-        // Whether the pendulum stays up depends on how long the restart takes, which is the
-        // machine's business; the lockstep test above checks it.
-        assert!(e["within_limits"].is_boolean(), "{process}: {e}");
+    let s = r.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.loops, 3500, "the restarted plant keeps the schedule: ticks it missed are integrated");
+    for (i, process) in [Role::Plant, Role::Sensors, Role::Estimator, Role::Controller].iter().enumerate() {
+        assert_eq!(s.restarts[process], 1);
+        let f = &s.faults[i];
+        // Whether the pendulum stays up (`within_limits`) depends on how long the restart
+        // takes, which is the machine's business; the lockstep test above checks it.
+        let e = effect(f);
+        assert!(f.restarted_after_ms.is_some(), "{f:?}");
+        assert!(e.rejoined_at_s.is_some(), "{process}: the restarted process never handled a loop: {e:?}");
+        assert!(e.outage_ticks > 0, "a real outage has missed commands: {e:?}");
     }
-    let timeline: Vec<&str> = s["timeline"].as_array().unwrap().iter().map(|t| t["event"].as_str().unwrap()).collect();
+    let timeline: Vec<&str> = s.timeline.iter().map(|t| t.event.as_str()).collect();
     assert!(timeline.contains(&"inject: kill estimator at 2s"), "{timeline:?}");
     assert!(timeline.contains(&"estimator ready again"), "{timeline:?}");
     assert!(r.stdout().contains("timeline"), "the printed report has the timeline");
@@ -121,19 +118,19 @@ fn a_stopped_controller_is_detected_by_its_input_deadline_and_the_plant_applies_
         "stop",
         &["--duration", "2", "--set", "supervision.on_stale=zero", "--fault", "stop controller at 1s for 150ms"],
     );
-    let s = &r.summary;
-    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
-    let f = fault(s, 0);
-    assert_eq!(f["detected_by"], "the monitor's input deadline", "{f}");
-    let detected = f["detected_after_ms"].as_f64().unwrap();
-    let resumed = f["resumed_after_ms"].as_f64().unwrap();
-    assert!(detected < resumed, "detected while stopped: {f}");
-    assert!(f["continued_after_ms"].as_f64().unwrap() <= resumed, "{f}");
+    let s = r.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    let f = &s.faults[0];
+    assert_eq!(f.detected_by, Some(DetectedBy::InputDeadline), "{f:?}");
+    let detected = f.detected_after_ms.unwrap();
+    let resumed = f.resumed_after_ms.unwrap();
+    assert!(detected < resumed, "detected while stopped: {f:?}");
+    assert!(f.continued_after_ms.unwrap() <= resumed, "{f:?}");
     // 150 ms without commands with a 20 ms command timeout: the plant applied zero current for
     // the rest of the stop.
-    assert!(s["stale_ticks"].as_u64().unwrap() > 50, "{}", s["stale_ticks"]);
-    assert!(f["effect"]["outage_ticks"].as_u64().unwrap() >= 100, "{f}");
-    assert_eq!(s["restarts"]["controller"], 0, "a stopped process is not restarted");
+    assert!(s.stale_ticks > 50, "{}", s.stale_ticks);
+    assert!(effect(f).outage_ticks >= 100, "{f:?}");
+    assert_eq!(s.restarts[&Role::Controller], 0, "a stopped process is not restarted");
     assert_clean(s);
 }
 
@@ -152,10 +149,10 @@ fn corrupt_commands_are_rejected_and_never_reach_the_plants_state() {
             "corrupt controller out-of-range at 3s for 50ms",
         ],
     );
-    let s = &r.summary;
-    assert_eq!(s["rejected_commands"], 150);
-    assert_eq!(fault(s, 0)["effect"]["outage_ticks"], 100);
-    assert_eq!(fault(s, 1)["effect"]["outage_ticks"], 50);
+    let s = r.summary();
+    assert_eq!(s.rejected_commands, 150);
+    assert_eq!(effect(&s.faults[0]).outage_ticks, 100);
+    assert_eq!(effect(&s.faults[1]).outage_ticks, 50);
     let trajectory = r.trajectory();
     for column in ["theta", "theta_dot", "wheel_speed"] {
         let values = trajectory.col(column);
@@ -166,7 +163,7 @@ fn corrupt_commands_are_rejected_and_never_reach_the_plants_state() {
     let commands = trajectory.col("cmd.current");
     assert!(commands[2000..2100].iter().all(|u| u.is_nan()));
     assert!(commands[3000..3050].iter().all(|u| *u == 50.0));
-    assert!(fault(s, 0)["effect"]["within_limits"] == true && fault(s, 1)["effect"]["within_limits"] == true);
+    assert!(effect(&s.faults[0]).within_limits && effect(&s.faults[1]).within_limits);
 }
 
 #[test]
@@ -183,17 +180,17 @@ fn drops_and_delays_in_lockstep_are_deterministic() {
     ];
     let a = run("drop-a", &args);
     let b = run("drop-b", &args);
-    let lost = a.summary["lost_commands"].as_u64().unwrap();
+    let lost = a.summary().lost_commands;
     assert!((200..400).contains(&lost), "about 30% of 1000 loops: {lost}");
-    assert_eq!(a.summary["lost_commands"], b.summary["lost_commands"]);
-    assert_eq!(a.summary["faults"][0]["effect"]["outage_ticks"], lost);
+    assert_eq!(a.summary().lost_commands, b.summary().lost_commands);
+    assert_eq!(effect(&a.summary().faults[0]).outage_ticks, lost);
     assert!(a.trajectory().rows == b.trajectory().rows, "two lockstep runs with the same faults differ");
 }
 
 #[test]
 fn a_random_storm_of_kills_and_stops_leaves_every_process_alive_and_nothing_behind() {
     // 20 faults at seeded random times over a 30 s run, on every process, the monitor too.
-    let processes = ["plant", "sensors", "estimator", "controller", "monitor"];
+    let processes = Role::ALL;
     let mut state: u64 = 0x9e37_79b9_7f4a_7c15;
     let mut next = move || {
         state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -224,19 +221,14 @@ fn a_random_storm_of_kills_and_stops_leaves_every_process_alive_and_nothing_behi
         args.extend(["--fault", f.as_str()]);
     }
     let r = run("storm", &args);
-    let s = &r.summary;
-    assert_eq!(s["completed"], true, "{}: {faults:?}", s["stopped_because"]);
-    assert_eq!(s["loops"], 30_000);
+    let s = r.summary();
+    assert!(s.completed, "{:?}: {faults:?}", s.stopped_because);
+    assert_eq!(s.loops, 30_000);
     assert_every_process_ended_alive(s);
-    let missing: u64 = s["monitor"]["missing"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|r| r[1].as_u64().unwrap() - r[0].as_u64().unwrap() + 1)
-        .sum();
-    assert_eq!(s["monitor"]["records"].as_u64().unwrap(), 30_000 - missing, "{}", s["monitor"]);
-    let kills = faults.iter().filter(|f| f.starts_with("kill")).count() as u64;
-    let restarts: u64 = s["restarts"].as_object().unwrap().values().map(|v| v.as_u64().unwrap()).sum();
+    let missing = listed_missing(s);
+    assert_eq!(s.monitor.records, 30_000 - missing, "{:?}", s.monitor);
+    let kills = faults.iter().filter(|f| f.starts_with("kill")).count() as u32;
+    let restarts: u32 = s.restarts.values().sum();
     assert_eq!(restarts, kills, "{faults:?}");
     assert_clean(s);
 }
@@ -247,24 +239,22 @@ fn a_restarted_monitor_accounts_for_every_loop_and_continues_the_latency_log() {
         "kill-monitor",
         &["--mode", "lockstep", "--duration", "4", "--fault", "kill monitor at 1s", "--fault", "kill monitor at 2.5s"],
     );
-    let s = &r.summary;
-    let m = &s["monitor"];
-    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
-    assert_eq!(s["restarts"]["monitor"], 2);
-    let loops = s["loops"].as_u64().unwrap();
+    let s = r.summary();
+    let m = &s.monitor;
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.restarts[&Role::Monitor], 2);
+    let loops = s.loops;
     assert_eq!(loops, 4000);
-    let count = |key: &str| m[key].as_u64().unwrap_or_else(|| panic!("no monitor.{key}: {m}"));
     // Every loop is either recorded or accounted for as missing; lockstep loses no record.
-    assert_eq!(count("records") + count("missing_loops"), loops, "{m}");
-    assert_eq!(count("lost"), 0, "{m}");
-    assert_eq!(count("missing_ranges_omitted"), 0, "{m}");
-    let listed: u64 =
-        m["missing"].as_array().unwrap().iter().map(|r| r[1].as_u64().unwrap() - r[0].as_u64().unwrap() + 1).sum();
-    assert_eq!(listed, count("missing_loops"), "{m}");
+    assert_eq!(m.records + m.missing.missing_loops, loops, "{m:?}");
+    assert_eq!(m.lost, 0, "{m:?}");
+    assert_eq!(m.missing.missing_ranges_omitted, 0, "{m:?}");
+    assert_eq!(listed_missing(s), m.missing.missing_loops, "{m:?}");
     // The last monitor started after the second kill, at 2.5 s: the loops before it are its
     // missing ones, with that reason.
-    assert!(count("missing_before_restart") >= 2500, "{m}");
-    assert_eq!(m["missing"][0], serde_json::json!([0, count("missing_before_restart") - 1]), "{m}");
+    let before_restart = m.missing.missing_before_restart;
+    assert!(before_restart >= 2500, "{m:?}");
+    assert_eq!(m.missing.ranges.first(), Some(&[0, before_restart - 1]), "{m:?}");
 
     // The interval log's time stamps go on across the restarts.
     let hlog = std::fs::read(r.dir.join("latency.hlog")).unwrap();
@@ -281,11 +271,11 @@ fn a_restarted_monitor_accounts_for_every_loop_and_continues_the_latency_log() {
 }
 
 /// Runs `looplab run` expecting the run to fail (exit 1); returns its summary.
-fn run_failing(name: &str, args: &[&str]) -> serde_json::Value {
+fn run_failing(name: &str, args: &[&str]) -> Summary {
     let dir = fresh_dir(name);
     let output = looplab().arg("run").args(args).arg("-q").arg("--out").arg(&dir).output().unwrap();
     assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
-    let s = read_summary(&dir);
+    let s = load_summary(&dir);
     assert_clean(&s);
     std::fs::remove_dir_all(&dir).unwrap();
     s
@@ -300,7 +290,7 @@ fn a_process_that_may_not_restart_ends_the_run_and_a_lockstep_stall_is_reported_
             .chain(["--set", "supervision.controller.restart=never"])
             .collect::<Vec<_>>(),
     );
-    let why = s["stopped_because"].as_str().unwrap();
+    let why = failure(&s);
     assert!(why.contains("controller exited with status signal 9; not restarted (restart = never)"), "{why}");
 
     let s = run_failing(
@@ -310,9 +300,17 @@ fn a_process_that_may_not_restart_ends_the_run_and_a_lockstep_stall_is_reported_
             .chain(["--set", "supervision.lockstep_stall_s=0.3"])
             .collect::<Vec<_>>(),
     );
-    let why = s["stopped_because"].as_str().unwrap();
+    let why = failure(&s);
     assert!(why.contains("the loop stalled at loop 1000"), "{why}");
-    assert_eq!(fault(&s, 0)["detected_by"], "the monitor's input deadline");
+    assert_eq!(s.faults[0].detected_by, Some(DetectedBy::InputDeadline));
+}
+
+/// Why a failed run stopped.
+fn failure(s: &Summary) -> &str {
+    match &s.stopped_because {
+        Some(StopReason::Failed(why)) => why,
+        other => panic!("not a failure: {other:?}"),
+    }
 }
 
 #[test]

@@ -5,7 +5,7 @@ mod common;
 
 use std::time::{Duration, Instant};
 
-use common::{Table, alive, fresh_dir, looplab, read_summary, run};
+use common::{Exit, Mode, Role, StopReason, Summary, Table, alive, fresh_dir, load_summary, looplab, run};
 
 const STATS_FIELDS: [&str; 8] = ["count", "min", "p50", "p90", "p99", "p999", "max", "mean"];
 const HOPS: [&str; 7] = [
@@ -19,76 +19,68 @@ const HOPS: [&str; 7] = [
 ];
 
 fn assert_no_files_left(run_id: &str) {
-    let left = looplab_shared::ipc::files_of_run(run_id);
+    let left = looplab_shared::runtime::ipc::files_of_run(run_id);
     assert!(left.is_empty(), "files of run {run_id} left behind: {left:?}");
 }
 
-fn assert_processes_gone(summary: &serde_json::Value) {
-    let processes = summary["processes"].as_array().unwrap();
-    assert_eq!(processes.len(), 5);
-    for p in processes {
-        let pid = p["pid"].as_i64().unwrap();
-        assert!(!alive(pid), "{} (pid {pid}) is still running", p["name"]);
-        assert_ne!(p["exit"], "running");
+fn assert_processes_gone(summary: &Summary) {
+    assert_eq!(summary.processes.len(), 5);
+    for p in &summary.processes {
+        assert!(!alive(i64::from(p.pid)), "{} (pid {}) is still running", p.name, p.pid);
+        assert_ne!(p.exit, Exit::Running);
     }
 }
 
 #[test]
 fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     let r = run("realtime", &["pendulum", "--duration", "2"]);
-    let s = &r.summary;
+    // The keys scripts rely on, null or not: the typed summary below would read a missing
+    // optional one as None.
+    let json = &r.summary;
     for key in ["scenario", "mode", "rate_hz", "duration_s", "seed", "loops", "deadline_misses", "processes", "metrics"]
     {
-        assert!(s.get(key).is_some(), "summary.json has no {key}");
+        assert!(json.get(key).is_some(), "summary.json has no {key}");
     }
-    assert_eq!(s["scenario"], "pendulum");
-    assert_eq!(s["mode"], "realtime");
-    assert_eq!(s["rate_hz"], 1000.0);
-    assert_eq!(s["loops"], 2000);
-    assert_eq!(s["completed"], true);
-    let names: Vec<_> =
-        s["processes"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap().to_owned()).collect();
-    for name in ["plant", "sensors", "estimator", "controller", "monitor"] {
-        assert!(names.iter().any(|n| n == name), "no process {name} in {names:?}");
+    for field in STATS_FIELDS {
+        assert!(json["latency_ns"]["end_to_end"].get(field).is_some(), "end_to_end has no {field}");
+        assert!(json["jitter_ns"]["plant_tick"].get(field).is_some(), "plant_tick jitter has no {field}");
     }
-    for p in s["processes"].as_array().unwrap() {
-        assert!(p["pid"].as_u64().unwrap() > 0);
-        assert_eq!(p["exit"], "0", "{p}");
+    let s = r.summary();
+    assert_eq!(s.scenario, "pendulum");
+    assert_eq!(s.mode, Mode::Realtime);
+    assert_eq!(s.rate_hz, 1000.0);
+    assert_eq!(s.loops, 2000);
+    assert!(s.completed);
+    let names: Vec<Role> = s.processes.iter().map(|p| p.name).collect();
+    for name in Role::ALL {
+        assert!(names.contains(&name), "no process {name} in {names:?}");
+    }
+    for p in &s.processes {
+        assert!(p.pid > 0);
+        assert_eq!(p.exit, Exit::Status(0), "{p:?}");
     }
 
-    let records = s["monitor"]["records"].as_u64().unwrap();
-    let published = s["loops"].as_u64().unwrap() - s["skipped_ticks"].as_u64().unwrap();
-    let without_command = s["loops_without_command"].as_u64().unwrap();
-    assert_eq!(records + s["monitor"]["lost"].as_u64().unwrap() + without_command, published, "nothing lost silently");
-    let e2e = &s["latency_ns"]["end_to_end"];
-    for field in STATS_FIELDS {
-        assert!(e2e.get(field).is_some(), "end_to_end has no {field}");
-        assert!(s["jitter_ns"]["plant_tick"].get(field).is_some(), "plant_tick jitter has no {field}");
-    }
-    assert_eq!(e2e["count"], records);
-    let (min, p50, p99, max) = (
-        e2e["min"].as_u64().unwrap(),
-        e2e["p50"].as_u64().unwrap(),
-        e2e["p99"].as_u64().unwrap(),
-        e2e["max"].as_u64().unwrap(),
-    );
-    assert!(0 < min && min <= p50 && p50 <= p99 && p99 <= max, "{e2e}");
+    let records = s.monitor.records;
+    let published = s.loops - s.skipped_ticks;
+    assert_eq!(records + s.monitor.lost + s.loops_without_command, published, "nothing lost silently");
+    let e2e = &s.latency_ns.end_to_end;
+    assert_eq!(e2e.count, records);
+    let (min, p50, p99, max) = (e2e.min.unwrap(), e2e.p50.unwrap(), e2e.p99.unwrap(), e2e.max.unwrap());
+    assert!(0 < min && min <= p50 && p50 <= p99 && p99 <= max, "{e2e:?}");
     let mut hop_sum = 0.0;
     for hop in HOPS {
-        let h = &s["latency_ns"]["hops"][hop];
-        assert_eq!(h["count"], records, "hop {hop}");
-        hop_sum += h["mean"].as_f64().unwrap();
+        let h = s.latency_ns.hops.get(hop).unwrap_or_else(|| panic!("no hop {hop}"));
+        assert_eq!(h.count, records, "hop {hop}");
+        hop_sum += h.mean.unwrap();
     }
     // The hops partition each loop, so their means add up to the end-to-end mean.
-    assert!((hop_sum - e2e["mean"].as_f64().unwrap()).abs() < 1.0, "hops {hop_sum} vs e2e {}", e2e["mean"]);
+    let e2e_mean = e2e.mean.unwrap();
+    assert!((hop_sum - e2e_mean).abs() < 1.0, "hops {hop_sum} vs e2e {e2e_mean}");
     // One period per published state after the first.
-    assert_eq!(
-        s["jitter_ns"]["plant_tick"]["count"].as_u64().unwrap() + 1,
-        s["monitor"]["received"]["state"].as_u64().unwrap()
-    );
-    assert_eq!(s["shared_memory"]["clean"], true);
+    assert_eq!(s.jitter_ns.plant_tick.count + 1, s.monitor.received["state"]);
+    assert!(s.shared_memory.clean);
     assert_processes_gone(s);
-    assert_no_files_left(s["run_id"].as_str().unwrap());
+    assert_no_files_left(&s.run_id);
 
     // The run folder.
     for file in ["summary.json", "trajectory.csv", "loops.csv", "latency.hlog", "launch.toml"] {
@@ -99,7 +91,7 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     let loops = Table::read(&r.dir.join("loops.csv"));
     // One row per loop seen (a skipped tick after the last published state has none).
     let rows = loops.rows.len() as u64;
-    assert!(published <= rows && rows <= s["loops"].as_u64().unwrap(), "{rows} rows");
+    assert!(published <= rows && rows <= s.loops, "{rows} rows");
     let trajectory = r.trajectory();
     for column in
         ["t", "theta", "theta_dot", "wheel_speed", "meas.encoder", "meas.wheel_speed", "est.bias", "cmd.current"]
@@ -142,12 +134,12 @@ fn base64_decode(text: &str) -> Vec<u8> {
 #[test]
 fn lockstep_records_loop_zero_and_every_loop_after_it() {
     let r = run("lockstep-all", &["pendulum", "--mode", "lockstep", "--duration", "3"]);
-    let s = &r.summary;
-    assert_eq!(s["loops"], 3000);
-    assert_eq!(s["monitor"]["records"], 3000);
-    assert_eq!(s["monitor"]["lost"], 0);
-    assert_eq!(s["monitor"]["missing"].as_array().unwrap().len(), 0);
-    assert_eq!(s["deadline_misses"], 0);
+    let s = r.summary();
+    assert_eq!(s.loops, 3000);
+    assert_eq!(s.monitor.records, 3000);
+    assert_eq!(s.monitor.lost, 0);
+    assert_eq!(s.monitor.missing.ranges.len(), 0);
+    assert_eq!(s.deadline_misses, 0);
     let loops = Table::read(&r.dir.join("loops.csv"));
     assert_eq!(loops.col("k")[0], 0.0);
     // Loop 0 has every stamp, in the order the data passed.
@@ -165,7 +157,7 @@ fn lockstep_records_loop_zero_and_every_loop_after_it() {
     .map(|c| loops.col(c)[0])
     .collect();
     assert!(stamps[0] > 0.0 && stamps.windows(2).all(|w| w[0] <= w[1]), "{stamps:?}");
-    assert!(s["loops_per_s"].as_f64().unwrap() > 0.0);
+    assert!(s.loops_per_s > 0.0);
 }
 
 /// A run so short that the plant is gone microseconds after it starts: the monitor must still
@@ -174,10 +166,11 @@ fn lockstep_records_loop_zero_and_every_loop_after_it() {
 fn very_short_runs_record_every_loop() {
     for _ in 0..8 {
         let r = run("very-short", &["pendulum", "--mode", "lockstep", "--duration", "0.005"]);
-        assert_eq!(r.summary["loops"], 5);
-        assert_eq!(r.summary["monitor"]["records"], 5, "{}", r.summary["monitor"]);
+        let s = r.summary();
+        assert_eq!(s.loops, 5);
+        assert_eq!(s.monitor.records, 5, "{:?}", s.monitor);
         for topic in ["state", "measurements", "estimate", "command", "loop"] {
-            assert_eq!(r.summary["monitor"]["received"][topic], 5, "{topic}: {}", r.summary["monitor"]);
+            assert_eq!(s.monitor.received.get(topic), Some(&5), "{topic}: {:?}", s.monitor);
         }
     }
 }
@@ -192,10 +185,10 @@ fn lockstep_runs_are_deterministic_and_concurrent_runs_are_isolated() {
         let b = scope.spawn(|| run("determinism-b", &args("seed=42")));
         (a.join().unwrap(), b.join().unwrap())
     });
-    assert_ne!(a.summary["run_id"], b.summary["run_id"]);
+    assert_ne!(a.summary().run_id, b.summary().run_id);
     for r in [&a, &b] {
-        assert_eq!(r.summary["monitor"]["records"], 3000, "a concurrent run must not see the other's messages");
-        assert_eq!(r.summary["monitor"]["received"]["state"], 3000);
+        assert_eq!(r.summary().monitor.records, 3000, "a concurrent run must not see the other's messages");
+        assert_eq!(r.summary().monitor.received.get("state"), Some(&3000));
     }
     let trajectory = |r: &common::Run| std::fs::read(r.dir.join("trajectory.csv")).unwrap();
     assert!(trajectory(&a) == trajectory(&b), "two lockstep runs with one seed differ");
@@ -215,7 +208,7 @@ fn a_launch_file_path_runs() {
     )
     .unwrap();
     let r = run("launch-file-run", &[file.to_str().unwrap()]);
-    assert_eq!(r.summary["loops"], 500);
+    assert_eq!(r.summary().loops, 500);
     assert_eq!(r.metric("bias_true_rad"), 0.02);
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -259,16 +252,16 @@ fn sigint_and_sigterm_stop_the_run_cleanly_with_a_report() {
         unsafe { libc::kill(child.id() as i32, signal) };
         let status = wait_exit(child);
         assert_eq!(status.code(), Some(130), "{name}: exit status");
-        let s = read_summary(&dir);
-        assert_eq!(s["completed"], false);
-        assert_eq!(s["stopped_because"], "interrupted by a signal");
-        assert!(s["loops"].as_u64().unwrap() > 0);
-        assert_eq!(s["shared_memory"]["clean"], true, "{name}: {}", s["shared_memory"]);
-        for p in s["processes"].as_array().unwrap() {
-            assert_eq!(p["exit"], "0", "{name}: every process exits cleanly: {p}");
+        let s = load_summary(&dir);
+        assert!(!s.completed);
+        assert_eq!(s.stopped_because, Some(StopReason::Interrupted));
+        assert!(s.loops > 0);
+        assert!(s.shared_memory.clean, "{name}: {:?}", s.shared_memory);
+        for p in &s.processes {
+            assert_eq!(p.exit, Exit::Status(0), "{name}: every process exits cleanly: {p:?}");
         }
         assert_processes_gone(&s);
-        assert_no_files_left(s["run_id"].as_str().unwrap());
+        assert_no_files_left(&s.run_id);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
@@ -290,17 +283,20 @@ fn children_of(launcher: u32) -> Vec<(String, i32, String)> {
 #[test]
 fn a_killed_process_is_reported_and_its_shared_memory_removed() {
     let (child, dir) = start_long_run("killed", &["--set", "supervision.restart=never"]);
-    let estimator =
-        children_of(child.id()).into_iter().find(|(name, _, _)| name == "estimator").expect("the estimator runs").1;
+    let estimator = children_of(child.id())
+        .into_iter()
+        .find(|(name, _, _)| name == Role::Estimator.name())
+        .expect("the estimator runs")
+        .1;
     unsafe { libc::kill(estimator, libc::SIGKILL) };
     let status = wait_exit(child);
     assert_eq!(status.code(), Some(1));
-    let s = read_summary(&dir);
-    let why = s["stopped_because"].as_str().unwrap();
+    let s = load_summary(&dir);
+    let Some(StopReason::Failed(why)) = &s.stopped_because else { panic!("not a failure: {:?}", s.stopped_because) };
     assert!(why.contains("estimator exited with status signal 9"), "{why}");
-    assert_eq!(s["shared_memory"]["clean"], true, "{}", s["shared_memory"]);
+    assert!(s.shared_memory.clean, "{:?}", s.shared_memory);
     assert_processes_gone(&s);
-    assert_no_files_left(s["run_id"].as_str().unwrap());
+    assert_no_files_left(&s.run_id);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -336,7 +332,7 @@ fn a_run_killed_all_at_once_is_removed_by_looplab_clean_with_its_frozen_orphan()
     let run_id = run_id_of(&children);
     // The monitor frozen (it cannot act on the launcher's death), everything else killed at once:
     // nobody is left to tidy up.
-    let monitor = children.iter().find(|(name, _, _)| name == "monitor").expect("the monitor runs").1;
+    let monitor = children.iter().find(|(name, _, _)| name == Role::Monitor.name()).expect("the monitor runs").1;
     unsafe { libc::kill(monitor, libc::SIGSTOP) };
     unsafe { libc::kill(launcher.id() as i32, libc::SIGKILL) };
     for (_, pid, _) in children.iter().filter(|(_, pid, _)| *pid != monitor) {
@@ -369,17 +365,18 @@ fn a_second_stop_request_kills_what_is_left_and_still_cleans_up() {
     let run_id = run_id_of(&children);
     // A frozen controller cannot act on SIGTERM until it is continued; the second Ctrl-C must
     // not wait for it.
-    let controller = children.iter().find(|(name, _, _)| name == "controller").expect("the controller runs").1;
+    let controller =
+        children.iter().find(|(name, _, _)| name == Role::Controller.name()).expect("the controller runs").1;
     unsafe { libc::kill(controller, libc::SIGSTOP) };
     // Two different signals, so that neither is merged into the other while pending.
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
     let status = wait_exit(child);
     assert_eq!(status.code(), Some(130));
-    let s = read_summary(&dir);
-    assert_eq!(s["stopped_because"], "interrupted by a signal");
-    for p in s["processes"].as_array().unwrap() {
-        assert_eq!(p["exit"], "signal 9", "every process is killed, none asked: {p}");
+    let s = load_summary(&dir);
+    assert_eq!(s.stopped_because, Some(StopReason::Interrupted));
+    for p in &s.processes {
+        assert_eq!(p.exit, Exit::Signal(9), "every process is killed, none asked: {p:?}");
     }
     assert_processes_gone(&s);
     assert_no_files_left(&run_id);
@@ -391,8 +388,8 @@ fn a_plant_killed_at_the_last_tick_still_makes_a_complete_run() {
     // The plant dies after publishing one of the last ticks, and its successor starts after the
     // run's end: no tick may count twice, and the run completed.
     let r = run("kill-last-tick", &["--duration", "2", "--fault", "kill plant at 1.999"]);
-    let s = &r.summary;
-    assert_eq!(s["completed"], true, "{}", s["stopped_because"]);
-    assert_eq!(s["loops"], 2000);
-    assert_eq!(s["restarts"]["plant"], 1);
+    let s = r.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.loops, 2000);
+    assert_eq!(s.restarts[&Role::Plant], 1);
 }

@@ -2,6 +2,7 @@
 //! contract → config → model → scenarios → runtime → monitor → launcher → tools.
 //! The binaries in `services/` are one call each into here. ARCHITECTURE.md has the picture.
 
+pub mod cli;
 pub mod config;
 pub mod contract;
 pub mod launcher;

@@ -1,12 +1,20 @@
 //! Helpers for the integration tests: run the real `looplab` binary (which starts the real
 //! processes over real iceoryx2 shared memory) and read what it wrote.
 
-#![allow(dead_code)]
+// Each test file uses a part of these helpers and re-exports.
+#![allow(dead_code, unused_imports)]
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::atomic::{AtomicU32, Ordering};
+
+pub use looplab_shared::config::faults::FaultKind;
+pub use looplab_shared::config::launch::Mode;
+pub use looplab_shared::contract::role::Role;
+pub use looplab_shared::launcher::inject::DetectedBy;
+pub use looplab_shared::launcher::summary::{FaultReport, Summary};
+pub use looplab_shared::launcher::{Exit, StopReason};
 
 pub fn looplab() -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_looplab"));
@@ -28,10 +36,17 @@ pub fn fresh_dir(name: &str) -> PathBuf {
 pub struct Run {
     pub dir: PathBuf,
     pub output: Output,
+    /// summary.json as JSON, for the contract of its keys; `summary()` has it typed.
     pub summary: serde_json::Value,
+    typed: Summary,
 }
 
 impl Run {
+    /// summary.json, typed.
+    pub fn summary(&self) -> &Summary {
+        &self.typed
+    }
+
     pub fn metric(&self, name: &str) -> f64 {
         self.summary["metrics"][name]
             .as_f64()
@@ -67,12 +82,29 @@ pub fn run(name: &str, args: &[&str]) -> Run {
         String::from_utf8_lossy(&output.stderr)
     );
     let summary = read_summary(&dir);
-    Run { dir, output, summary }
+    let typed = load_summary(&dir);
+    Run { dir, output, summary, typed }
 }
 
 pub fn read_summary(dir: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
     serde_json::from_str(&text).expect("summary.json is JSON")
+}
+
+/// summary.json, typed.
+pub fn load_summary(dir: &Path) -> Summary {
+    let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("summary.json is a Summary: {e}"))
+}
+
+/// Every process's last incarnation, by role.
+pub fn last_incarnations(s: &Summary) -> BTreeMap<Role, &looplab_shared::launcher::summary::ProcessInfo> {
+    s.processes.iter().map(|p| (p.name, p)).collect()
+}
+
+/// The loops in the monitor's listed missing ranges.
+pub fn listed_missing(s: &Summary) -> u64 {
+    s.monitor.missing.ranges.iter().map(|[first, last]| last - first + 1).sum()
 }
 
 /// A CSV file by column name.

@@ -1,172 +1,32 @@
-//! `summary.json` and the report printed at the end of a run.
+//! What the user sees at the end of a run: the report printed from its summary, the error
+//! line and the exit code.
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use serde::{Deserialize, Serialize};
+// The scenarios' old path to this type, until issue 11 moves it below them.
+use crate::launcher::outcome::{EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Outcome};
+pub use crate::launcher::summary::ErrorMeasureInfo;
+use crate::launcher::summary::Summary;
+use crate::contract::report::{HOPS, MissingLoops, Stats};
 
-use crate::contract::report::{HOPS, Stats};
-use crate::model::scenario::ErrorMeasureInfo;
-
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct Summary {
-    pub scenario: String,
-    /// One line naming the system and its variant.
-    pub title: String,
-    pub mode: String,
-    pub rate_hz: f64,
-    pub duration_s: f64,
-    pub seed: u64,
-    pub run_id: String,
-    pub run_dir: String,
-    /// Wall-clock start of the run (UTC, RFC 3339).
-    pub started_at: String,
-    /// Loops (ticks) that ran: states published plus skipped ticks.
-    pub loops: u64,
-    pub loops_planned: u64,
-    /// Every planned loop ran and every process ended cleanly.
-    pub completed: bool,
-    /// Why the run ended early, when it did.
-    pub stopped_because: Option<String>,
-    pub deadline_misses: u64,
-    pub rejected_commands: u64,
-    pub skipped_ticks: u64,
-    /// Ticks integrated with `supervision.on_stale` applied (real time: no fresh command).
-    pub stale_ticks: u64,
-    /// Commands that arrived marked lost (lockstep `drop` faults).
-    pub lost_commands: u64,
-    /// Loops whose state went out but whose command never reached the plant: a stage was held
-    /// up and a newer input replaced it (real-time mode; each is also a deadline miss).
-    pub loops_without_command: u64,
-    /// Wall-clock time from the first to the last state published.
-    pub wall_time_s: f64,
-    /// Loops per wall-clock second over that time.
-    pub loops_per_s: f64,
-    /// Restarts per process.
-    pub restarts: BTreeMap<String, u32>,
-    /// One entry per start of each process.
-    pub processes: Vec<ProcessInfo>,
-    /// Per process with an adaptive wait (real time): inputs caught by polling, and waits that
-    /// gave up polling and blocked.
-    #[serde(default)]
-    pub adaptive_waits: BTreeMap<String, crate::contract::protocol::WaitCounts>,
-    pub latency_ns: Latency,
-    pub jitter_ns: Jitter,
-    /// Per sensor: how old the sample behind command k was when command k took effect.
-    pub data_age_ns: BTreeMap<String, Stats>,
-    pub monitor: MonitorCounts,
-    pub metrics: BTreeMap<String, f64>,
-    /// What the scenario's metrics mean, in words (for example a parameter that could not be
-    /// identified).
-    #[serde(default)]
-    pub notes: Vec<String>,
-    /// What the fault report's errors measure, the band a recovery must reach and the limit
-    /// the physical system must stay within.
-    pub error_measure: ErrorMeasureInfo,
-    pub faults: Vec<FaultReport>,
-    /// What the launcher saw, in order: injections, exits, restarts, stalls.
-    pub timeline: Vec<TimelineEntry>,
-    /// Each restart, step by step, so that a slow one shows where its time went.
-    #[serde(default)]
-    pub restart_steps: Vec<RestartSteps>,
-    pub shared_memory: SharedMemoryCheck,
-}
-
-/// One injected fault: what the launcher saw (wall-clock, from the injection) and what it did
-/// to the loop and the physical system (simulation time, from the monitor).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct FaultReport {
-    /// In the `--fault` form.
-    pub fault: String,
-    pub kind: String,
-    pub process: String,
-    /// Simulation time of the injection.
-    pub at_s: f64,
-    /// When the launcher injected it (kill, stop), ms after tick 0 in wall-clock time.
-    pub injected_at_ms: Option<f64>,
-    /// Kill: until the launcher saw the process exit. Stop: until the monitor's input deadline
-    /// (or, for the monitor itself, its silent heartbeat) flagged it.
-    pub detected_after_ms: Option<f64>,
-    pub detected_by: Option<String>,
-    /// Kill: until the restarted process reported its ports up.
-    pub restarted_after_ms: Option<f64>,
-    /// Stop: until SIGCONT was sent, and until the monitor saw the process handle input again.
-    pub continued_after_ms: Option<f64>,
-    pub resumed_after_ms: Option<f64>,
-    /// None when the monitor has no record of the fault's loops.
-    pub effect: Option<crate::contract::report::FaultEffect>,
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct TimelineEntry {
-    /// Wall-clock ms after tick 0.
-    pub at_ms: f64,
-    pub event: String,
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct ProcessInfo {
-    pub name: String,
-    /// 0 for the first start, then one more per restart.
-    pub incarnation: u32,
-    pub pid: u32,
-    /// Exit status as text: "0", "1", "signal 9", or "running" if it never ended.
-    pub exit: String,
-    /// User + system CPU time, seconds.
-    pub cpu_s: f64,
-    /// Sensors, estimator, controller: inputs handled, and loops never seen (real-time mode: a
-    /// newer input replaced them, or the plant skipped the tick).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub processed: Option<u64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub skipped: Option<u64>,
-}
-
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
-pub struct Latency {
-    pub end_to_end: Stats,
-    pub hops: BTreeMap<String, Stats>,
-}
-
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
-pub struct Jitter {
-    /// |actual tick period − dt|, real-time mode only.
-    pub plant_tick: Stats,
-    /// Wake-up − scheduled tick time, real-time mode only.
-    pub plant_wake_latency: Stats,
-}
-
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
-pub struct MonitorCounts {
-    /// Loops with their loop record (the last monitor's, after restarts).
-    pub records: u64,
-    /// Loop records the plant published that never reached the monitor while it ran.
-    pub lost: u64,
-    /// Which loops have no record (`missing`, as inclusive ranges, the first 100 listed), how
-    /// many (`missing_loops`: `records` + `missing_loops` = `loops`), and why: not published
-    /// (skipped ticks, loops without command), lost, or before a restarted monitor's first
-    /// loop (`missing_before_restart`).
-    #[serde(flatten)]
-    pub missing: crate::contract::report::MissingLoops,
-    /// Samples the monitor received per topic.
-    pub received: BTreeMap<String, u64>,
-    /// Trajectory rows with some part missing.
-    pub partial_rows: u64,
-    /// Lockstep only: samples a stage had to hold back because the monitor's buffer was full
-    /// (lockstep keeps every record, so a slow monitor holds the loop instead of losing them),
-    /// and samples dropped for it after the 5 s limit.
-    pub loop_waits: u64,
-    pub dropped_for_monitor: u64,
-}
-
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
-pub struct SharedMemoryCheck {
-    /// No file of the run is left in /dev/shm or /tmp/iceoryx2.
-    pub clean: bool,
-    /// Stale resources of dead processes the launcher removed.
-    pub removed_dead_nodes: u64,
-    /// Files still there.
-    pub leftover: Vec<String>,
+/// The launcher's exit code for a finished run, and the error line it prints, if any.
+pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
+    match outcome {
+        Outcome::Completed if !summary.completed => {
+            let why =
+                summary.stopped_because.as_ref().map_or("it ran fewer loops than planned".into(), |r| r.to_string());
+            let error =
+                format!("the run did not complete: {why} ({} of {} loops)", summary.loops, summary.loops_planned);
+            (EXIT_FAILED, Some(error))
+        }
+        Outcome::Completed if summary.shared_memory.clean => (EXIT_OK, None),
+        Outcome::Completed => {
+            let error = format!("files of the run were left behind: {}", summary.shared_memory.leftover.join(", "));
+            (EXIT_FAILED, Some(error))
+        }
+        Outcome::Interrupted => (EXIT_INTERRUPTED, None),
+        Outcome::Failed(why) => (EXIT_FAILED, Some(why.clone())),
+    }
 }
 
 fn micros(ns: Option<u64>) -> String {
@@ -193,8 +53,15 @@ fn stats_row(out: &mut String, label: &str, s: &Stats) {
 /// The human-readable report.
 pub fn render(s: &Summary) -> String {
     let mut out = String::new();
-    let _ =
-        writeln!(out, "\nLoopLab · {} · {} · {} Hz · {} s · seed {}", s.title, s.mode, s.rate_hz, s.duration_s, s.seed);
+    let _ = writeln!(
+        out,
+        "\nLoopLab · {} · {} · {} Hz · {} s · seed {}",
+        s.title,
+        s.mode.name(),
+        s.rate_hz,
+        s.duration_s,
+        s.seed
+    );
     let status = match (&s.stopped_because, s.completed) {
         (Some(why), _) => format!("stopped early: {why}"),
         (None, true) => "completed".into(),
@@ -233,7 +100,10 @@ pub fn render(s: &Summary) -> String {
         stats_row(&mut out, &format!("data age: {sensor}"), stats);
     }
 
-    for (process, w) in &s.adaptive_waits {
+    // By name, as the report always listed them.
+    let mut waits: Vec<_> = s.adaptive_waits.iter().collect();
+    waits.sort_by_key(|(process, _)| process.name());
+    for (process, w) in waits {
         let _ = writeln!(
             out,
             "  adaptive wait, {process}: {} caught by polling, {} blocked after the cap",
@@ -273,7 +143,7 @@ pub fn render(s: &Summary) -> String {
 }
 
 /// The loops without a record, for the report's monitor line.
-fn missing_text(m: &crate::contract::report::MissingLoops) -> String {
+fn missing_text(m: &MissingLoops) -> String {
     if m.missing_loops == 0 {
         return String::new();
     }
@@ -362,22 +232,6 @@ fn render_faults(out: &mut String, s: &Summary) {
     }
 }
 
-/// One restart, in wall-clock ms after the launcher saw the process die (its output closed and
-/// it was reaped): its dead node's resources removed, the backoff, the new process started, its
-/// ports up. `null` for a step that never came (the run ended first).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct RestartSteps {
-    pub process: String,
-    /// The incarnation that was started.
-    pub incarnation: u32,
-    /// When the death was seen, ms after tick 0.
-    pub died_at_ms: f64,
-    pub cleaned_after_ms: Option<f64>,
-    pub backoff_ms: f64,
-    pub spawned_after_ms: Option<f64>,
-    pub ready_after_ms: Option<f64>,
-}
-
 fn render_restarts(out: &mut String, s: &Summary) {
     if s.restart_steps.is_empty() {
         return;
@@ -386,7 +240,7 @@ fn render_restarts(out: &mut String, s: &Summary) {
     let mut rows = vec![["process", "died at", "cleaned", "backoff", "started", "ready"].map(String::from).to_vec()];
     for r in &s.restart_steps {
         rows.push(vec![
-            r.process.clone(),
+            r.process.to_string(),
             format!("{:.1}", r.died_at_ms),
             ms(r.cleaned_after_ms),
             format!("{:.1}", r.backoff_ms),
@@ -400,46 +254,21 @@ fn render_restarts(out: &mut String, s: &Summary) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::contract::report::FaultEffect;
+    use crate::config::faults::FaultKind;
+    use crate::contract::protocol::WaitCounts;
+    use crate::contract::role::Role;
+    use crate::launcher::outcome::StopReason;
+    use crate::launcher::summary::tests::summary;
+    use crate::launcher::summary::{FaultReport, RestartSteps};
+    use crate::monitor::FaultEffect;
 
     fn summary_with_fault() -> Summary {
         Summary {
-            scenario: "pendulum".into(),
-            title: "pendulum".into(),
-            mode: "lockstep".into(),
-            rate_hz: 200.0,
-            duration_s: 5.0,
-            seed: 1,
-            run_id: "r".into(),
-            run_dir: "/tmp/r".into(),
-            started_at: "2024-01-01T00:00:00Z".into(),
-            loops: 1000,
-            loops_planned: 1000,
-            completed: true,
-            stopped_because: None,
-            deadline_misses: 0,
-            rejected_commands: 0,
-            skipped_ticks: 0,
-            stale_ticks: 0,
-            lost_commands: 0,
-            loops_without_command: 0,
-            wall_time_s: 1.0,
-            loops_per_s: 1000.0,
-            restarts: BTreeMap::new(),
-            processes: vec![],
-            adaptive_waits: BTreeMap::new(),
-            latency_ns: Latency::default(),
-            jitter_ns: Jitter::default(),
-            data_age_ns: BTreeMap::new(),
-            monitor: MonitorCounts::default(),
-            metrics: BTreeMap::new(),
-            notes: vec![],
-            error_measure: ErrorMeasureInfo { name: "angle".into(), recovery_band: 0.05, limit: 1.0 },
             // The widths that used to run together: "206.0" filled its column, "200 ticks" too.
             faults: vec![FaultReport {
                 fault: "kill controller at 1s".into(),
-                kind: "kill".into(),
-                process: "controller".into(),
+                kind: FaultKind::Kill,
+                process: Role::Controller,
                 at_s: 1.0,
                 injected_at_ms: Some(1000.0),
                 detected_after_ms: Some(3.25),
@@ -456,9 +285,7 @@ mod tests {
                     ..Default::default()
                 }),
             }],
-            timeline: vec![],
-            restart_steps: vec![],
-            shared_memory: SharedMemoryCheck { clean: true, ..Default::default() },
+            ..summary()
         }
     }
 
@@ -485,5 +312,70 @@ mod tests {
             let end_of = |line: &str, cell: &str| line.find(cell).map(|i| i + cell.len());
             assert_eq!(end_of(lines[header], title), end_of(lines[header + 1], value), "{title}");
         }
+    }
+
+    #[test]
+    fn each_outcome_has_its_exit_code_and_error_line() {
+        let done = summary();
+        assert_eq!(exit_code(&Outcome::Completed, &done), (0, None));
+        assert_eq!(exit_code(&Outcome::Interrupted, &done), (130, None));
+        assert_eq!(
+            exit_code(&Outcome::Failed("sensors could not be restarted".into()), &done),
+            (1, Some("sensors could not be restarted".into()))
+        );
+
+        let mut short = summary();
+        short.completed = false;
+        short.loops = 10;
+        assert_eq!(
+            exit_code(&Outcome::Completed, &short),
+            (1, Some("the run did not complete: it ran fewer loops than planned (10 of 1000 loops)".into()))
+        );
+        short.stopped_because = Some(StopReason::PlantStoppedEarly);
+        assert_eq!(
+            exit_code(&Outcome::Completed, &short),
+            (1, Some("the run did not complete: the plant stopped before the last loop (10 of 1000 loops)".into()))
+        );
+
+        let mut left = summary();
+        left.shared_memory.clean = false;
+        left.shared_memory.leftover = vec!["/dev/shm/a".into(), "/dev/shm/b".into()];
+        assert_eq!(
+            exit_code(&Outcome::Completed, &left),
+            (1, Some("files of the run were left behind: /dev/shm/a, /dev/shm/b".into()))
+        );
+    }
+
+    #[test]
+    fn the_status_line_restarts_table_and_adaptive_waits_are_printed() {
+        let mut s = summary();
+        s.restart_steps = vec![RestartSteps {
+            process: Role::Sensors,
+            incarnation: 1,
+            died_at_ms: 1500.3,
+            cleaned_after_ms: Some(4.0),
+            backoff_ms: 10.0,
+            spawned_after_ms: Some(12.5),
+            ready_after_ms: None,
+        }];
+        s.adaptive_waits = [
+            (Role::Plant, WaitCounts { caught: 5, blocked: 1 }),
+            (Role::Controller, WaitCounts { caught: 2, blocked: 0 }),
+        ]
+        .into();
+        let text = render(&s);
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(lines[2].starts_with("  completed: 1000 of 1000 loops in 1.00 s (1000 loops/s)"), "{}", lines[2]);
+        let header = lines.iter().position(|l| l.trim_start().starts_with("process ")).expect("restarts table");
+        assert_eq!(cells(lines[header]), ["process", "died at", "cleaned", "backoff", "started", "ready"]);
+        assert_eq!(cells(lines[header + 1]), ["sensors", "1500.3", "4.0", "10.0", "12.5", "-"]);
+        let waits: Vec<&str> = lines.iter().filter(|l| l.contains("adaptive wait")).copied().collect();
+        assert_eq!(
+            waits,
+            [
+                "  adaptive wait, controller: 2 caught by polling, 0 blocked after the cap",
+                "  adaptive wait, plant: 5 caught by polling, 1 blocked after the cap"
+            ]
+        );
     }
 }

@@ -11,10 +11,13 @@ use std::process::ExitCode;
 use anyhow::{Context as _, Result};
 use serde::Serialize;
 
+use crate::config::faults::FaultKind;
 use crate::config::launch::{LaunchConfig, Override};
-use crate::launcher::{Outcome, run_once};
-use crate::report::Summary;
-use crate::model::scenario::{Scenario, TheoreticalMargin};
+use crate::contract::role::Role;
+use crate::launcher::inject::target;
+use crate::launcher::{Binaries, EXIT_BAD_INPUT, EXIT_INTERRUPTED, Outcome, StopReason, Summary, run_once};
+use crate::runtime::signals::StopFlag;
+use crate::scenarios::{Scenario, TheoreticalMargin};
 
 /// The error's peak in the last second over its peak in the first second of the fault above
 /// which the loop counts as unstable: the disturbance the fault caused grew instead of dying
@@ -39,15 +42,29 @@ pub struct SweepArgs {
 pub struct SweepPoint {
     pub value: f64,
     pub completed: bool,
-    pub stopped_because: Option<String>,
-    /// stable | unstable | failed (the run did not complete) | no fault (nothing to judge)
-    pub verdict: String,
+    pub stopped_because: Option<StopReason>,
+    pub verdict: Verdict,
     /// The swept fault's error peak, last second over first second.
     pub growth: Option<f64>,
     pub worst_error: Option<f64>,
     pub within_limits: Option<bool>,
     pub metrics: BTreeMap<String, f64>,
     pub run_dir: String,
+}
+
+/// What one value did to the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, strum::Display)]
+#[serde(rename_all = "lowercase")]
+#[strum(serialize_all = "lowercase")]
+pub enum Verdict {
+    Stable,
+    Unstable,
+    /// The run did not complete.
+    Failed,
+    /// The run has no fault to judge.
+    #[serde(rename = "no fault")]
+    #[strum(serialize = "no fault")]
+    NoFault,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -82,7 +99,7 @@ fn swept_fault(param: &str) -> Option<usize> {
 pub fn run(args: SweepArgs) -> ExitCode {
     let bad = |message: String| {
         eprintln!("error: {message}");
-        ExitCode::from(2)
+        ExitCode::from(EXIT_BAD_INPUT)
     };
     if !(args.step.is_finite() && args.step > 0.0 && args.from.is_finite() && args.to.is_finite()) {
         return bad(format!("--from, --to and --step must be numbers with --step > 0 (got step {})", args.step));
@@ -127,7 +144,7 @@ pub fn run(args: SweepArgs) -> ExitCode {
     }
 
     eprintln!("sweeping {} over {} values, {} at a time, in lockstep mode", args.param, values.len(), args.jobs);
-    let stop = match crate::signals::StopFlag::install() {
+    let stop = match StopFlag::install() {
         Ok(stop) => stop,
         Err(e) => {
             eprintln!("error: cannot install the signal handlers: {e}");
@@ -142,7 +159,7 @@ pub fn run(args: SweepArgs) -> ExitCode {
             configs.len(),
             out.display()
         );
-        return ExitCode::from(crate::launcher::EXIT_INTERRUPTED);
+        return ExitCode::from(EXIT_INTERRUPTED);
     }
     let mut points = vec![];
     for ((value, _, _), result) in configs.iter().zip(results) {
@@ -154,11 +171,11 @@ pub fn run(args: SweepArgs) -> ExitCode {
             }
         }
     }
-    let first_unstable = points.iter().find(|p| p.verdict == "unstable").map(|p| p.value);
+    let first_unstable = points.iter().find(|p| p.verdict == Verdict::Unstable).map(|p| p.value);
     let (_, config, scenario) = &configs[0];
     let controller_delay = fault_index
         .and_then(|i| config.faults.get(i))
-        .is_some_and(|f| f.kind == crate::faults::FaultKind::Delay && f.process == "controller")
+        .is_some_and(|f| f.kind == FaultKind::Delay && target(f) == Role::Controller)
         && args.param.ends_with(".delay_ticks");
     let theory = if controller_delay { scenario.delay_margin(config) } else { None };
     let report =
@@ -172,18 +189,18 @@ pub fn run(args: SweepArgs) -> ExitCode {
         eprintln!("error: {e:#}");
         return ExitCode::FAILURE;
     }
-    if report.points.iter().any(|p| p.verdict == "failed") { ExitCode::FAILURE } else { ExitCode::SUCCESS }
+    if report.points.iter().any(|p| p.verdict == Verdict::Failed) { ExitCode::FAILURE } else { ExitCode::SUCCESS }
 }
 
 /// Runs every value, `jobs` at a time, until a stop request; results in the order of `configs`
 /// (None: not run, or interrupted).
 fn run_all(
     configs: &[(f64, LaunchConfig, Box<dyn Scenario>)],
-    binaries: &BTreeMap<&'static str, PathBuf>,
+    binaries: &Binaries,
     out: &Path,
     param: &str,
     jobs: usize,
-    stop: &crate::signals::StopFlag,
+    stop: &StopFlag,
 ) -> Vec<Option<Result<(Summary, Outcome)>>> {
     let next = std::sync::atomic::AtomicUsize::new(0);
     type Slot = std::sync::Mutex<Option<Result<(Summary, Outcome)>>>;
@@ -221,20 +238,20 @@ fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>)
         _ => None,
     });
     let within_limits = effect.as_ref().map(|e| e.within_limits);
-    let verdict = if !summary.completed || !matches!(outcome, Outcome::Completed) {
-        "failed"
+    let verdict = if !summary.completed || *outcome != Outcome::Completed {
+        Verdict::Failed
     } else if effect.is_none() {
-        "no fault"
+        Verdict::NoFault
     } else if within_limits == Some(false) || growth.is_some_and(|g| g > UNSTABLE_GROWTH) {
-        "unstable"
+        Verdict::Unstable
     } else {
-        "stable"
+        Verdict::Stable
     };
     SweepPoint {
         value,
         completed: summary.completed,
         stopped_because: summary.stopped_because.clone(),
-        verdict: verdict.into(),
+        verdict,
         growth,
         worst_error: effect
             .as_ref()
@@ -308,5 +325,18 @@ mod tests {
         assert_eq!(swept_fault("sensors.encoder.bias"), None);
         assert_eq!(value_text(31.0), "31");
         assert_eq!(value_text(0.25), "0.25");
+    }
+
+    #[test]
+    fn verdicts_keep_their_text() {
+        for (verdict, text) in [
+            (Verdict::Stable, "stable"),
+            (Verdict::Unstable, "unstable"),
+            (Verdict::Failed, "failed"),
+            (Verdict::NoFault, "no fault"),
+        ] {
+            assert_eq!(serde_json::to_value(verdict).unwrap(), text);
+            assert_eq!(format!("{verdict:<9}|"), format!("{text:<9}|"));
+        }
     }
 }

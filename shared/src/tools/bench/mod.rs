@@ -26,12 +26,13 @@ use anyhow::{Context, Result, anyhow};
 use serde::Serialize;
 
 use self::pingpong::Transport;
-use crate::clock::{TickTimer, now_ns};
 use crate::config::launch::Override;
-use crate::signals::{Interrupted, StopFlag};
-use crate::msg::{PlantState, SensorReading};
-use crate::report::Summary;
 use crate::config::wait::Strategy;
+use crate::contract::clock::{TickTimer, now_ns};
+use crate::contract::msg::PlantState;
+use crate::contract::role::Role;
+use crate::launcher::{Binaries, Outcome, Summary};
+use crate::runtime::signals::{Interrupted, StopFlag};
 
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
@@ -174,7 +175,7 @@ fn traces(run_dir: &Path) -> Result<Vec<[u64; 8]>> {
     let text = std::fs::read_to_string(run_dir.join("loops.csv")).context("loops.csv")?;
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let columns: Vec<usize> = crate::msg::LoopTrace::STAMP_NAMES
+    let columns: Vec<usize> = crate::contract::msg::LoopTrace::STAMP_NAMES
         .iter()
         .map(|name| header.iter().position(|h| *h == format!("{name}_ns")).ok_or_else(|| anyhow!("no {name}_ns")))
         .collect::<Result<_>>()?;
@@ -193,7 +194,7 @@ struct LoopAccumulator {
     traces: Vec<[u64; 8]>,
     loops: u64,
     misses: u64,
-    cpu_s: BTreeMap<String, f64>,
+    cpu_s: BTreeMap<Role, f64>,
     seconds: f64,
 }
 
@@ -204,7 +205,7 @@ impl LoopAccumulator {
         self.misses += summary.deadline_misses;
         self.seconds += summary.duration_s;
         for p in &summary.processes {
-            *self.cpu_s.entry(p.name.clone()).or_default() += p.cpu_s;
+            *self.cpu_s.entry(p.name).or_default() += p.cpu_s;
         }
         Ok(())
     }
@@ -214,9 +215,10 @@ impl LoopAccumulator {
         let hop = |from: usize, to: usize| {
             Dist::of(&sorted(self.traces.iter().map(|s| s[to].saturating_sub(s[from])).collect()))
         };
+        let percent = |cpu_s: f64| 100.0 * cpu_s / self.seconds.max(1e-9);
         let cpu_percent: BTreeMap<String, f64> =
-            self.cpu_s.iter().map(|(k, v)| (k.clone(), 100.0 * v / self.seconds.max(1e-9))).collect();
-        let loop_cpu_percent = cpu_percent.iter().filter(|(k, _)| *k != "monitor").map(|(_, v)| v).sum();
+            self.cpu_s.iter().map(|(role, v)| (role.name().to_owned(), percent(*v))).collect();
+        let loop_cpu_percent = self.cpu_s.iter().filter(|(role, _)| role.in_loop()).map(|(_, v)| percent(*v)).sum();
         LoopBench {
             name: name.into(),
             rate_hz,
@@ -295,12 +297,7 @@ const LOOP_CONFIGS: [LoopConfig; 6] = [
 ];
 
 /// One LoopLab run of the pendulum in real time.
-fn looplab_run(
-    out: &Path,
-    c: &LoopConfig,
-    seconds: f64,
-    binaries: &BTreeMap<&'static str, PathBuf>,
-) -> Result<(Summary, PathBuf)> {
+fn looplab_run(out: &Path, c: &LoopConfig, seconds: f64, binaries: &Binaries) -> Result<(Summary, PathBuf)> {
     let sets = [
         "mode=realtime".to_string(),
         format!("rate_hz={:?}", c.rate_hz),
@@ -324,44 +321,32 @@ fn looplab_run(
     };
     let dir = crate::launcher::create_run_dir(Some(&dir), "pendulum")?;
     let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
-    if matches!(outcome, crate::launcher::Outcome::Interrupted) {
+    if outcome == Outcome::Interrupted {
         return Err(Interrupted.into());
     }
     Ok((summary, dir))
 }
 
-/// The same four stages called in one process: the ceiling of lockstep speed.
-fn in_process_loops_per_s(loops: u64) -> Result<f64> {
-    let (config, scenario) = crate::scenarios::resolve("pendulum", &[])?;
-    let mut plant = scenario.plant();
-    let mut sensors = crate::model::sensors::SensorEmulator::new(&config, scenario.vectors().signals);
-    let mut estimator = scenario.estimator();
-    let mut controller = scenario.controller();
-    let (n_sensors, n_est, n_in) =
-        (config.sensors.len(), scenario.estimate_names().len(), scenario.input_names().len());
-    let mut readings = vec![SensorReading::default(); n_sensors];
-    let mut estimate = vec![0.0; n_est];
-    let mut command = vec![0.0; n_in];
-    let dt = config.dt();
+/// The in-process twin (`runtime::in_process`: the same plant core, stage runners and tasks in
+/// one thread, nothing recorded): the ceiling of lockstep speed.
+fn in_process_loops_per_s(loops: u64, stop: &StopFlag) -> Result<f64> {
+    let (probe, _) = crate::scenarios::resolve("pendulum", &[])?;
+    let duration = format!("duration_s={}", loops as f64 / probe.rate_hz);
+    let overrides = [Override::parse("mode=lockstep")?, Override::parse(&duration)?];
+    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
     let start = Instant::now();
-    for k in 0..loops {
-        let t = k as f64 * dt;
-        let state = plant.state().to_vec();
-        sensors.tick(k, t, &state, &command, &mut readings);
-        estimator.update(t, &readings, &command, &mut estimate);
-        controller.update(t, &estimate, &mut command);
-        plant.step(t, &command, dt);
-    }
-    Ok(loops as f64 / start.elapsed().as_secs_f64())
+    let reports = crate::runtime::in_process::run(&config, scenario.as_ref(), stop, |_| Ok(()))?;
+    check(stop)?;
+    Ok(reports.plant.loops as f64 / start.elapsed().as_secs_f64())
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
     // The ping-pongs' iceoryx2 files live in a run of their own (the loop runs clean up after
     // themselves); whatever happens to the parts, they go at the end.
     let run_id = crate::launcher::new_run_id();
-    let lock = crate::ipc::create_run_storage(&run_id)?;
+    let lock = crate::runtime::ipc::create_run_storage(&run_id)?;
     let result = run_parts(args, &run_id);
-    let cleanup = crate::ipc::clean_up_run(&run_id);
+    let cleanup = crate::runtime::ipc::clean_up_run(&run_id);
     drop(lock);
     let leftover = cleanup?.leftover;
     if result.is_ok() && !leftover.is_empty() {
@@ -416,8 +401,8 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         baseline.loops += result.loops;
         baseline.misses += result.deadline_misses;
         baseline.seconds += segment;
-        for (name, cpu) in ["plant", "sensors", "estimator", "controller"].iter().zip(result.cpu_s) {
-            *baseline.cpu_s.entry(name.to_string()).or_default() += cpu;
+        for (role, cpu) in Role::ALL.into_iter().filter(|r| r.in_loop()).zip(result.cpu_s) {
+            *baseline.cpu_s.entry(role).or_default() += cpu;
         }
     }
 
@@ -443,10 +428,10 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
     let dir = crate::launcher::create_run_dir(Some(&out.join("lockstep")), "pendulum")?;
     let (lockstep, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), &binaries, &dir, true)?;
-    if matches!(outcome, crate::launcher::Outcome::Interrupted) {
+    if outcome == Outcome::Interrupted {
         return Err(Interrupted.into());
     }
-    let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 })?;
+    let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 }, &stop)?;
 
     let mut loops: Vec<LoopBench> =
         LOOP_CONFIGS.iter().filter_map(|c| ours.remove(c.name).map(|acc| acc.finish(c.name, c.rate_hz))).collect();
@@ -538,7 +523,7 @@ fn render(r: &BenchReport) -> String {
         let _ = writeln!(s, "    {:<36}{:>8.1}{:>8.1}{:>8.1}{:>8.1}", l.name, h[0].p50, h[1].p50, h[2].p50, h[3].p50);
     }
     if let Some(monitor) =
-        r.loops.iter().find(|l| l.name == "looplab adaptive").and_then(|l| l.cpu_percent.get("monitor"))
+        r.loops.iter().find(|l| l.name == "looplab adaptive").and_then(|l| l.cpu_percent.get(Role::Monitor.name()))
     {
         let _ = writeln!(s, "    monitor CPU in the adaptive run: {monitor:.1}% of a core");
     }

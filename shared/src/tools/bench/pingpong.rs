@@ -23,9 +23,9 @@ use iceoryx2::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::codec;
-use crate::clock::now_ns;
-use crate::ipc::{retry, run_config};
 use crate::config::wait::{Strategy, WaitSettings};
+use crate::contract::clock::now_ns;
+use crate::runtime::ipc::{retry, run_config};
 use crate::runtime::wait::{ArrivalModel, Waiter, sleep_until};
 
 /// Bytes at the start of every message: sequence, ping sent, echo received, echo sent.
@@ -240,7 +240,7 @@ pub fn ping(
     let Setup { exe, run_id, scratch } = *setup;
     let bytes = bytes.max(STAMPS);
     // A stop request ends the series early, the echo process told to go as usual.
-    let stop = crate::signals::StopFlag::install()?;
+    let stop = crate::runtime::signals::StopFlag::install()?;
     let mut args = vec![
         "--run-id".into(),
         run_id.into(),
@@ -331,7 +331,7 @@ pub fn ping(
         }
     }
     if stop.requested() {
-        return Err(crate::signals::Interrupted.into());
+        return Err(crate::runtime::signals::Interrupted.into());
     }
     Ok(Series { one_way_ns: one_way })
 }

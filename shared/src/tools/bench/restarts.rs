@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -12,11 +12,13 @@ use anyhow::{Result, anyhow};
 use serde::Serialize;
 
 use crate::config::launch::Override;
-use crate::launcher::Outcome;
-use crate::signals::Interrupted;
+use crate::contract::role::Role;
+use crate::launcher::summary::RestartSteps;
+use crate::launcher::{Binaries, Outcome};
+use crate::runtime::signals::Interrupted;
 
 /// The processes killed in turn; one kill every `KILL_INTERVAL_S`.
-const TARGETS: [&str; 5] = ["plant", "sensors", "estimator", "controller", "monitor"];
+const TARGETS: [Role; 5] = Role::ALL;
 const KILL_INTERVAL_S: f64 = 0.25;
 
 /// A distribution of one step, ms.
@@ -97,12 +99,7 @@ impl Drop for Load {
     }
 }
 
-fn measure(
-    condition: &str,
-    kills: usize,
-    out: &Path,
-    binaries: &BTreeMap<&'static str, PathBuf>,
-) -> Result<Vec<RestartBench>> {
+fn measure(condition: &str, kills: usize, out: &Path, binaries: &Binaries) -> Result<Vec<RestartBench>> {
     let duration = kills as f64 * KILL_INTERVAL_S + 1.0;
     let mut overrides = vec![
         Override::parse(&format!("duration_s={duration:?}"))?,
@@ -121,17 +118,17 @@ fn measure(
         Outcome::Completed => {}
     }
     // The n-th kill of a process goes with its n-th restart (deaths can be seen out of order).
-    let mut kills_of: BTreeMap<&str, Vec<Option<f64>>> = BTreeMap::new();
+    let mut kills_of: BTreeMap<Role, Vec<Option<f64>>> = BTreeMap::new();
     for f in &summary.faults {
-        kills_of.entry(f.process.as_str()).or_default().push(f.detected_after_ms);
+        kills_of.entry(f.process).or_default().push(f.detected_after_ms);
     }
-    let mut restarts_of: BTreeMap<&str, Vec<&crate::report::RestartSteps>> = BTreeMap::new();
+    let mut restarts_of: BTreeMap<Role, Vec<&RestartSteps>> = BTreeMap::new();
     for r in &summary.restart_steps {
-        restarts_of.entry(r.process.as_str()).or_default().push(r);
+        restarts_of.entry(r.process).or_default().push(r);
     }
     let mut groups: BTreeMap<&str, Steps> = BTreeMap::new();
     for (process, kills) in &kills_of {
-        let group = groups.entry(if *process == "monitor" { "monitor" } else { "loop" }).or_default();
+        let group = groups.entry(if *process == Role::Monitor { "monitor" } else { "loop" }).or_default();
         let restarts = restarts_of.get(process).map_or(&[][..], Vec::as_slice);
         for (i, detected) in kills.iter().enumerate() {
             group.kills += 1;
@@ -175,7 +172,7 @@ struct Steps {
 /// Measures restarts idle and under load, prints a table and writes `restarts.json`. The monitor
 /// is apart: it runs at nice 19 (it never takes a CPU from the loop), so under load it is slow
 /// to die and to start.
-pub fn run(kills: usize, out: &Path, binaries: &BTreeMap<&'static str, PathBuf>) -> Result<()> {
+pub fn run(kills: usize, out: &Path, binaries: &Binaries) -> Result<()> {
     if kills == 0 {
         return Err(anyhow!("--restarts needs at least one kill"));
     }

@@ -17,12 +17,15 @@ use anyhow::{Context, Result, anyhow};
 use serde::{Deserialize, Serialize};
 
 use super::codec;
-use crate::clock::{cpu_seconds, now_ns};
-use crate::msg::{Estimate, Measurements, PlantState};
-use crate::wait::sleep_until;
+use crate::contract::clock::{cpu_seconds, now_ns};
+use crate::contract::msg::{Command as CommandMessage, Estimate, Measurements, PlantState};
+use crate::contract::role::Role;
+use crate::runtime::signals::{Interrupted, StopFlag};
+use crate::runtime::wait::sleep_until;
 
 const END: u64 = u64::MAX;
-const ROLES: [&str; 3] = ["sensors", "estimator", "controller"];
+/// The processes of the loop, each with its socket; the plant is the bench process itself.
+const LOOP: [Role; 4] = [Role::Plant, Role::Sensors, Role::Estimator, Role::Controller];
 
 #[derive(Serialize, Deserialize)]
 struct LoopMessage {
@@ -34,40 +37,38 @@ struct LoopMessage {
 #[derive(Debug, Clone, clap::Args)]
 pub struct StageArgs {
     #[arg(long)]
-    pub role: String,
+    pub role: Role,
     #[arg(long)]
     pub dir: PathBuf,
 }
 
-fn next_of(role: &str) -> &'static str {
-    match role {
-        "plant" => "sensors",
-        "sensors" => "estimator",
-        "estimator" => "controller",
-        _ => "plant",
-    }
+/// The loop process that reads what `role` sends.
+fn next_of(role: Role) -> Role {
+    LOOP.into_iter().find(|next| next.input() == role.output()).expect("every loop topic has a reader")
 }
 
 /// Floats in the message a role sends: LoopLab's message of that hop, in bytes, over 8.
-fn floats_sent_by(role: &str) -> usize {
+fn floats_sent_by(role: Role) -> usize {
     let bytes = match role {
-        "plant" => std::mem::size_of::<PlantState>(),
-        "sensors" => std::mem::size_of::<Measurements>(),
-        "estimator" => std::mem::size_of::<Estimate>(),
-        _ => std::mem::size_of::<crate::msg::Command>(),
+        Role::Plant => std::mem::size_of::<PlantState>(),
+        Role::Sensors => std::mem::size_of::<Measurements>(),
+        Role::Estimator => std::mem::size_of::<Estimate>(),
+        Role::Controller => std::mem::size_of::<CommandMessage>(),
+        Role::Monitor => unreachable!("the monitor is not in the baseline loop"),
     };
     bytes / 8
 }
 
 /// A child stage: receive, stamp, relay to the next, until the end marker has passed.
 pub fn stage_main(args: &StageArgs) -> Result<()> {
-    let index = ROLES.iter().position(|r| *r == args.role).ok_or_else(|| anyhow!("unknown role {}", args.role))?;
+    let index =
+        Role::STAGES.iter().position(|r| *r == args.role).ok_or_else(|| anyhow!("unknown role {}", args.role))?;
     let socket = UnixDatagram::bind(args.dir.join(format!("{}.sock", args.role)))?;
-    let next = args.dir.join(format!("{}.sock", next_of(&args.role)));
+    let next = args.dir.join(format!("{}.sock", next_of(args.role)));
     println!("ready");
     let mut buffer = vec![0u8; 64 * 1024];
     let mut out = Vec::new();
-    let floats = floats_sent_by(&args.role);
+    let floats = floats_sent_by(args.role);
     loop {
         let n = socket.recv(&mut buffer)?;
         let received = now_ns();
@@ -115,15 +116,15 @@ fn reap(child: Child) -> Result<f64> {
 /// Runs the baseline loop for `loops` ticks at `rate_hz`.
 pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResult> {
     std::fs::create_dir_all(dir)?;
-    for role in ["plant", "sensors", "estimator", "controller"] {
+    for role in LOOP {
         let _ = std::fs::remove_file(dir.join(format!("{role}.sock")));
     }
     let plant_socket = UnixDatagram::bind(dir.join("plant.sock"))?;
     let mut children = Vec::new();
-    for role in ROLES {
+    for role in Role::STAGES {
         let mut command = Command::new(exe);
         command
-            .args(["bench-uds-stage", "--role", role, "--dir"])
+            .args(["bench-uds-stage", "--role", role.name(), "--dir"])
             .arg(dir)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -157,11 +158,11 @@ pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResul
         }
     });
     let sensors = dir.join("sensors.sock");
-    let stop = crate::signals::StopFlag::install()?;
+    let stop = StopFlag::install()?;
     let send_stop = stop.clone();
     let send = std::thread::spawn(move || -> Result<f64> {
         let mut out = Vec::new();
-        let floats = floats_sent_by("plant");
+        let floats = floats_sent_by(Role::Plant);
         // A stop request ends the loop early; the stages are told to go as usual.
         for k in (0..loops).take_while(|_| !send_stop.requested()) {
             sleep_until(start + k * period);
@@ -181,11 +182,11 @@ pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResul
     for (i, child) in children.into_iter().enumerate() {
         cpu_s[1 + i] = reap(child)?;
     }
-    for role in ["plant", "sensors", "estimator", "controller"] {
+    for role in LOOP {
         let _ = std::fs::remove_file(dir.join(format!("{role}.sock")));
     }
     if stop.requested() {
-        return Err(crate::signals::Interrupted.into());
+        return Err(Interrupted.into());
     }
     Ok(LoopResult { traces, loops, deadline_misses, cpu_s })
 }

@@ -1,0 +1,295 @@
+//! The top layer: `looplab`'s command line. Parses the arguments and hands each command to the
+//! layer that does it: `run` to the launcher, `sweep` and `bench` to the tools.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Result;
+use clap::{Args, Parser, Subcommand};
+
+use crate::config::launch::{self, Override};
+use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
+use crate::runtime::ipc;
+use crate::scenarios;
+use crate::tools::{bench, sweep};
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "looplab",
+    version,
+    about = "Run a closed control loop as separate processes over iceoryx2 shared memory, and measure it",
+    long_about = "Run a closed control loop as separate processes over iceoryx2 shared memory, and measure it.\n\n\
+The plant, sensors, estimator, controller and a monitor each run as their own process. LoopLab \
+reports the latency of every hop and end to end, the plant's tick jitter, deadline misses, sensor \
+data age and the scenario's control metrics, and writes a run folder with summary.json, \
+trajectory.csv, loops.csv, latency.hlog and the resolved launch file.\n\n\
+With no command, runs the default: the pendulum scenario, real time, 1 kHz, 10 s.",
+    after_help = "Examples:\n  looplab\n  looplab list\n  looplab show pendulum\n  looplab run pendulum --mode lockstep --duration 30 \
+--set sensors.encoder.bias=0.05 --set estimator.kind=no-bias\n  looplab run my-launch.toml --out /tmp/run1"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run a scenario or a launch file and report latency, jitter and control metrics
+    Run(RunArgs),
+    /// List the built-in scenarios and their launch files
+    List,
+    /// Print a scenario's launch file: every key, its default and what it means
+    Show {
+        /// The scenario (see `looplab list`)
+        scenario: String,
+    },
+    /// Run a scenario repeatedly in lockstep while one key varies; report the metrics per value
+    /// and, for a controller delay, the measured delay margin against theory
+    Sweep(SweepCli),
+    /// Remove what runs killed with SIGKILL left in shared memory (their launcher is gone): kill
+    /// their orphaned processes, remove their files. `looplab run` does this too before it starts.
+    Clean,
+    /// Measure LoopLab's own latency against the transport's floor and a hand-written Unix-socket
+    /// loop, per wait strategy, plus zero copy, the monitor's cost and lockstep speed; writes
+    /// bench.json and SVG charts
+    Bench(bench::BenchArgs),
+    /// (internal) the far end of the bench's ping-pong
+    #[command(hide = true)]
+    BenchEcho(bench::pingpong::EchoArgs),
+    /// (internal) one stage of the bench's Unix-socket baseline loop
+    #[command(hide = true)]
+    BenchUdsStage(bench::uds_loop::StageArgs),
+}
+
+#[derive(Debug, Args)]
+#[command(after_help = "Example: the pendulum's delay margin, measured against its linearised model:\n  \
+looplab sweep pendulum --set sensors.encoder.quantum=0 --set sensors.wheel_speed.noise_std=0 \
+--fault \"delay controller by 0 ticks at 2s\" --param faults.0.delay_ticks --from 25 --to 35 --duration 20\n\
+A value is unstable when the swept fault's error (see `looplab show`, [limits]) passes the limit, or its peak in \
+the run's last second is larger than in the fault's first second: the disturbance grew instead of dying out. \
+Turn sensor noise and quantisation off to judge linear stability near the margin, as the theory does. \
+Writes sweep.json and one run folder per value.")]
+struct SweepCli {
+    /// A scenario name or a launch file
+    #[arg(default_value = "pendulum")]
+    target: String,
+    /// The dotted key to vary, as for --set; a number indexes a list (faults.0.delay_ticks)
+    #[arg(long, value_name = "KEY")]
+    param: String,
+    #[arg(long)]
+    from: f64,
+    #[arg(long)]
+    to: f64,
+    #[arg(long, default_value_t = 1.0)]
+    step: f64,
+    #[command(flatten)]
+    launch: LaunchArgs,
+    /// Folder for sweep.json and the runs (default: runs/<time>-sweep-<scenario>)
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Runs at a time
+    #[arg(long, default_value_t = 2)]
+    jobs: usize,
+}
+
+/// The options `run` and `sweep` share: each becomes a launch-file override.
+#[derive(Debug, Default, Args)]
+struct LaunchArgs {
+    /// Simulated duration in seconds (same as --set duration_s=S)
+    #[arg(long, value_name = "SECONDS")]
+    duration: Option<f64>,
+    /// Loop rate in Hz (same as --set rate_hz=HZ)
+    #[arg(long, value_name = "HZ")]
+    rate: Option<f64>,
+    /// Noise seed (same as --set seed=N)
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Override any key of the launch file by its dotted path, for example
+    /// --set sensors.encoder.bias=0.05 or --set estimator.kind=no-bias. Repeatable.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Inject a fault, added to the launch file's [[faults]]: KIND PROCESS [by AMOUNT]
+    /// [P%] [nan|inf|out-of-range] [at TIME] [for DURATION]. Kinds: kill, stop (SIGSTOP, then
+    /// SIGCONT), delay, drop, corrupt. Examples: "kill estimator at 3s", "stop controller at 2s
+    /// for 200ms", "delay controller by 3 ticks at 2s", "drop sensors 20% at 1s for 2s",
+    /// "corrupt controller nan at 4s for 100ms". Repeatable.
+    #[arg(long = "fault", value_name = "FAULT")]
+    fault: Vec<String>,
+}
+
+#[derive(Debug, Args)]
+#[command(
+    after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
+and meaning; --set takes any of them.\n\
+Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, launch.toml (resolved), logs/.\n\
+Exit codes: 0 completed, 1 the run failed (a process died, or files were left in shared memory), \
+2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
+)]
+struct RunArgs {
+    /// A scenario name (see `looplab list`) or the path of a launch file (.toml). A launch file
+    /// overrides its scenario's defaults key by key.
+    #[arg(default_value = "pendulum")]
+    target: String,
+    /// realtime: the plant ticks on a timer and counts deadline misses; lockstep: the plant
+    /// waits for each command, deterministic and as fast as the loop allows
+    #[arg(long, value_parser = ["realtime", "lockstep"])]
+    mode: Option<String>,
+    #[command(flatten)]
+    launch: LaunchArgs,
+    /// The run folder to write (default: runs/<time>-<scenario>); created if missing, must be
+    /// empty if it exists
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// No live status line
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+impl Default for RunArgs {
+    fn default() -> Self {
+        Self { target: "pendulum".into(), mode: None, launch: LaunchArgs::default(), out: None, quiet: false }
+    }
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Some(Command::List) => {
+            list();
+            ExitCode::SUCCESS
+        }
+        Some(Command::Show { scenario }) => match scenarios::builtin(&scenario) {
+            Some(entry) => {
+                print!("{}", entry.text);
+                ExitCode::SUCCESS
+            }
+            None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", scenarios::scenario_names())),
+        },
+        Some(Command::Run(args)) => run(args),
+        Some(Command::Clean) => clean(),
+        Some(Command::Sweep(args)) => sweep(args),
+        Some(Command::Bench(args)) => report_failure(bench::run(&args)),
+        Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
+        Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
+        None => run(RunArgs::default()),
+    }
+}
+
+/// Tells what the clean-up of runs whose launcher was killed found.
+fn report_abandoned(done: &ipc::Abandoned) {
+    if !done.runs.is_empty() {
+        eprintln!(
+            "looplab: removed the shared-memory files of {} run(s) whose launcher was killed ({}){}",
+            done.runs.len(),
+            done.runs.join(", "),
+            if done.killed > 0 { format!("; killed {} orphaned process(es)", done.killed) } else { String::new() }
+        );
+    }
+    for path in &done.leftover {
+        eprintln!("looplab: could not remove {path}");
+    }
+}
+
+fn clean() -> ExitCode {
+    let done = ipc::clean_abandoned_runs();
+    report_abandoned(&done);
+    if done.runs.is_empty() {
+        println!("nothing to clean: no abandoned run of this user in {}", ipc::SHM_DIR);
+    }
+    if done.leftover.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE }
+}
+
+fn report_failure(result: Result<()>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.is::<crate::runtime::signals::Interrupted>() => {
+            eprintln!("looplab: interrupted; stopped in order, nothing left behind");
+            ExitCode::from(EXIT_INTERRUPTED)
+        }
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn list() {
+    println!("Scenarios (looplab run <name>; defaults in the launch file named):");
+    for s in scenarios::ALL {
+        println!("  {:<12} {}  [{}]", s.name, s.description, s.file);
+    }
+}
+
+fn bad_input(message: impl std::fmt::Display) -> ExitCode {
+    eprintln!("error: {message}");
+    ExitCode::from(EXIT_BAD_INPUT)
+}
+
+fn sweep(args: SweepCli) -> ExitCode {
+    let overrides = match overrides(None, &args.launch) {
+        Ok(o) => o,
+        Err(e) => return bad_input(e),
+    };
+    sweep::run(sweep::SweepArgs {
+        target: args.target,
+        param: args.param,
+        from: args.from,
+        to: args.to,
+        step: args.step,
+        overrides,
+        out: args.out,
+        jobs: args.jobs,
+    })
+}
+
+/// The launch-file overrides the command line gives, in the order they apply: the options,
+/// then each --set, then each --fault.
+fn overrides(mode: Option<&str>, launch: &LaunchArgs) -> Result<Vec<Override>, launch::LaunchError> {
+    let mut texts: Vec<String> = Vec::new();
+    if let Some(mode) = mode {
+        texts.push(format!("mode={mode}"));
+    }
+    if let Some(d) = launch.duration {
+        texts.push(format!("duration_s={d:?}"));
+    }
+    if let Some(r) = launch.rate {
+        texts.push(format!("rate_hz={r:?}"));
+    }
+    if let Some(s) = launch.seed {
+        texts.push(format!("seed={s}"));
+    }
+    texts.extend(launch.set.iter().cloned());
+    texts.iter().map(|t| Override::parse(t)).chain(launch.fault.iter().map(|f| Override::fault(f))).collect()
+}
+
+fn run(args: RunArgs) -> ExitCode {
+    let overrides = overrides(args.mode.as_deref(), &args.launch);
+    let resolved = overrides.and_then(|o| scenarios::resolve(&args.target, &o));
+    let (config, scenario) = match resolved {
+        Ok(r) => r,
+        Err(e) => return bad_input(e),
+    };
+    let binaries = match launcher::locate_binaries() {
+        Ok(b) => b,
+        Err(e) => return bad_input(format!("{e:#}")),
+    };
+    let run_dir = match launcher::create_run_dir(args.out.as_deref(), &config.scenario) {
+        Ok(d) => d,
+        Err(e) => return bad_input(format!("{e:#}")),
+    };
+    report_abandoned(&ipc::clean_abandoned_runs());
+    match launcher::run_once(&config, scenario.as_ref(), &binaries, &run_dir, args.quiet) {
+        Ok((summary, outcome)) => {
+            print!("{}", report::render(&summary));
+            let (code, error) = launcher::exit_code(&outcome, &summary);
+            if let Some(error) = error {
+                eprintln!("error: {error}");
+            }
+            ExitCode::from(code)
+        }
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,202 @@
+//! The loop's processes as children: finding their binaries, starting one supervised, reading
+//! its event lines, and reaping it with its exit status and CPU time.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader};
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{ChildStdin, Stdio};
+
+use anyhow::{Context as _, Result, anyhow, bail};
+use crossbeam_channel::Sender;
+
+use crate::contract::protocol::ChildEvent;
+use crate::contract::role::Role;
+use crate::launcher::outcome::Exit;
+
+/// The loop's binaries by role.
+pub type Binaries = BTreeMap<Role, PathBuf>;
+
+/// The five loop binaries, next to this one.
+pub fn locate_binaries() -> Result<Binaries> {
+    let exe = std::env::current_exe().context("cannot find the looplab executable")?;
+    let dir = exe.parent().ok_or_else(|| anyhow!("{} has no parent folder", exe.display()))?;
+    build_siblings_under_cargo(dir)?;
+    let mut found = BTreeMap::new();
+    for role in Role::START_ORDER {
+        let path = dir.join(role.name());
+        if !path.is_file() {
+            bail!(
+                "missing binary {}: the loop processes are built with the launcher; run `cargo build --release` \
+                 (or start with `cargo run --release`)",
+                path.display()
+            );
+        }
+        found.insert(role, path);
+    }
+    Ok(found)
+}
+
+/// `cargo run` builds only the binary it runs. When we were started by it, ask the same cargo
+/// to build the loop binaries too, with the same profile and target folder, so that they are
+/// never missing or stale.
+fn build_siblings_under_cargo(exe_dir: &Path) -> Result<()> {
+    let (Ok(cargo), Ok(manifest_dir)) = (std::env::var("CARGO"), std::env::var("CARGO_MANIFEST_DIR")) else {
+        return Ok(());
+    };
+    let profile_dir = exe_dir.file_name().and_then(|n| n.to_str()).unwrap_or("debug");
+    let profile = if profile_dir == "debug" { "dev" } else { profile_dir };
+    let target_dir = exe_dir.parent().unwrap_or(exe_dir);
+    let status = std::process::Command::new(cargo)
+        .args(["build", "--quiet", "--bins", "--profile", profile, "--manifest-path"])
+        .arg(Path::new(&manifest_dir).join("Cargo.toml"))
+        .arg("--target-dir")
+        .arg(target_dir)
+        .status()
+        .context("cannot run cargo to build the loop processes")?;
+    if !status.success() {
+        bail!("building the loop processes failed ({status})");
+    }
+    Ok(())
+}
+
+/// Makes `command` a child that this process stops: in its own process group, so that a Ctrl-C
+/// in the terminal reaches only us and we stop the children in order; and asked to stop
+/// (SIGTERM) if we die, so that nothing is orphaned.
+pub fn supervised(command: &mut std::process::Command) {
+    command.process_group(0);
+    let parent = std::process::id() as libc::pid_t;
+    // SAFETY: prctl and getppid are async-signal-safe. If the parent died before prctl took
+    // effect, the child does not start at all.
+    unsafe {
+        command.pre_exec(move || {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            if libc::getppid() != parent {
+                return Err(std::io::Error::other("the parent is gone"));
+            }
+            Ok(())
+        });
+    }
+}
+
+/// One start of a process.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Start {
+    pub pid: u32,
+    pub exit: Exit,
+    /// User + system CPU seconds, once reaped.
+    pub cpu_s: f64,
+}
+
+impl Start {
+    /// Reaps it if it has exited (without blocking), with its CPU time; true once it is reaped.
+    pub fn try_reap(&mut self) -> bool {
+        if self.exit != Exit::Running {
+            return true;
+        }
+        let mut status = 0;
+        // SAFETY: plain wait4 on our own child; rusage is a valid out-parameter.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        let pid = unsafe { libc::wait4(self.pid as i32, &mut status, libc::WNOHANG, &mut usage) };
+        if pid != self.pid as i32 {
+            return false;
+        }
+        self.cpu_s = crate::contract::clock::cpu_seconds(&usage);
+        self.exit = if libc::WIFEXITED(status) {
+            Exit::Status(libc::WEXITSTATUS(status))
+        } else {
+            Exit::Signal(libc::WTERMSIG(status))
+        };
+        true
+    }
+
+    /// Sends `signal` unless it has been reaped.
+    pub fn signal(&self, signal: i32) {
+        if self.exit == Exit::Running {
+            // SAFETY: the pid is our unreaped child, so it cannot have been reused.
+            unsafe { libc::kill(self.pid as i32, signal) };
+        }
+    }
+}
+
+/// One line of a child's output, or its end.
+#[derive(Debug)]
+pub enum Line {
+    Event(ChildEvent),
+    /// A line that is not an event.
+    Unreadable {
+        line: String,
+        error: String,
+    },
+    /// Its output ended: it is exiting.
+    Closed,
+}
+
+/// What a child said, and which start of which process said it.
+#[derive(Debug)]
+pub struct ChildLine {
+    pub role: Role,
+    pub incarnation: u32,
+    pub line: Line,
+}
+
+/// What a loop process is started with (see `contract::protocol::ProcessArgs`).
+pub struct ChildArgs<'a> {
+    pub launch_file: &'a Path,
+    pub run_id: &'a str,
+    pub run_dir: &'a Path,
+    pub incarnation: u32,
+}
+
+/// A started child: its start, its stdin (the plant's only), and the thread that reads it.
+pub struct Spawned {
+    pub start: Start,
+    pub stdin: Option<ChildStdin>,
+    pub reader: std::thread::JoinHandle<()>,
+}
+
+/// Starts `role` from `binary` with its stderr appended to `logs/<role>.log`; every line of its
+/// stdout goes to `lines`, as `into` makes it, then `Closed`.
+pub fn spawn<E: Send + 'static>(
+    role: Role,
+    binary: &Path,
+    args: &ChildArgs,
+    lines: Sender<E>,
+    into: fn(ChildLine) -> E,
+) -> Result<Spawned> {
+    let log_path = args.run_dir.join("logs").join(format!("{role}.log"));
+    // A restarted process appends to its log.
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log_path)
+        .with_context(|| format!("create {}", log_path.display()))?;
+    let mut command = std::process::Command::new(binary);
+    command
+        .arg("--launch")
+        .arg(args.launch_file)
+        .arg("--run-id")
+        .arg(args.run_id)
+        .arg("--run-dir")
+        .arg(args.run_dir)
+        .arg("--incarnation")
+        .arg(args.incarnation.to_string())
+        .stdin(if role == Role::Plant { Stdio::piped() } else { Stdio::null() })
+        .stdout(Stdio::piped())
+        .stderr(log);
+    supervised(&mut command);
+    let mut child = command.spawn().with_context(|| format!("cannot start {}", binary.display()))?;
+    let stdout = child.stdout.take().expect("stdout is piped");
+    let incarnation = args.incarnation;
+    let reader = std::thread::spawn(move || {
+        let send = |line| lines.send(into(ChildLine { role, incarnation, line }));
+        for text in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = send(match serde_json::from_str::<ChildEvent>(&text) {
+                Ok(event) => Line::Event(event),
+                Err(e) => Line::Unreadable { line: text, error: e.to_string() },
+            });
+        }
+        let _ = send(Line::Closed);
+    });
+    Ok(Spawned { start: Start { pid: child.id(), exit: Exit::Running, cpu_s: 0.0 }, stdin: child.stdin.take(), reader })
+}

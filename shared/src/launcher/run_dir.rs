@@ -1,0 +1,61 @@
+//! The run folder: creating it, naming the run, and writing its files whole or not at all.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, Result, bail};
+
+/// Creates the run folder with its `logs/`: `out` if given (new or empty), else a new
+/// `runs/<time>-<scenario>`.
+pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
+    let dir = match out {
+        Some(dir) => {
+            if dir.exists() && !dir.is_dir() {
+                bail!("--out {}: is a file, not a folder; give a new or empty folder", dir.display());
+            }
+            if dir.exists() && std::fs::read_dir(dir).map(|mut d| d.next().is_some()).unwrap_or(true) {
+                bail!("--out {}: the folder exists and is not empty; give a new or empty folder", dir.display());
+            }
+            dir.to_path_buf()
+        }
+        None => {
+            let stamp = chrono::Local::now().format("%Y%m%d-%H%M%S");
+            let base = PathBuf::from("runs").join(format!("{stamp}-{scenario}"));
+            std::fs::create_dir_all("runs").context("cannot create the runs folder")?;
+            // Claim a new folder atomically: two runs started in the same second get two.
+            let mut n = 1;
+            loop {
+                let dir = if n == 1 { base.clone() } else { PathBuf::from(format!("{}-{n}", base.display())) };
+                match std::fs::create_dir(&dir) {
+                    Ok(()) => break dir,
+                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => n += 1,
+                    Err(e) => return Err(e).with_context(|| format!("cannot create the run folder {}", dir.display())),
+                }
+            }
+        }
+    };
+    std::fs::create_dir_all(dir.join("logs"))
+        .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
+    Ok(dir)
+}
+
+/// A new run id: 64 random bits from the kernel, so that no one can guess the names of a run's
+/// files before it creates them.
+pub fn new_run_id() -> String {
+    let mut bytes = [0u8; 8];
+    // SAFETY: getrandom writes at most `bytes.len()` bytes into the buffer.
+    let n = unsafe { libc::getrandom(bytes.as_mut_ptr().cast(), bytes.len(), 0) };
+    assert_eq!(n, bytes.len() as isize, "the kernel's random source failed");
+    format!("{:016x}", u64::from_ne_bytes(bytes))
+}
+
+/// Writes a file whole or not at all: a failed write (a full disk) leaves no truncated file
+/// behind that a script could take for the real one, and says which file it was.
+pub fn write_atomically(path: &Path, contents: &str) -> Result<()> {
+    let partial = path.with_extension("partial");
+    let written = std::fs::write(&partial, contents).and_then(|()| std::fs::rename(&partial, path));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&partial);
+        bail!("cannot write {}: {e}", path.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,563 @@
+//! `summary.json`: its types, and the builder that makes one from explicit inputs (the
+//! processes' reports, their starts and what the supervisor saw), so that a run without child
+//! processes can build it from its own reports.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::Result;
+use serde::{Deserialize, Serialize, Serializer};
+
+use crate::config::faults::FaultKind;
+use crate::config::launch::{LaunchConfig, Mode};
+use crate::contract::protocol::{PlantReport, StageReport, WaitCounts};
+use crate::contract::role::Role;
+use crate::launcher::child::Start;
+use crate::launcher::inject::{DetectedBy, FaultSeen, target};
+use crate::launcher::outcome::{Exit, Outcome, StopReason};
+use crate::launcher::restart::RestartRecord;
+use crate::launcher::run_dir::write_atomically;
+use crate::contract::report::{FaultEffect, MissingLoops, MonitorReport, Stats};
+pub use crate::model::scenario::ErrorMeasureInfo;
+use crate::scenarios::Scenario;
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Summary {
+    pub scenario: String,
+    /// One line naming the system and its variant.
+    pub title: String,
+    pub mode: Mode,
+    pub rate_hz: f64,
+    pub duration_s: f64,
+    pub seed: u64,
+    pub run_id: String,
+    pub run_dir: String,
+    /// Wall-clock start of the run (UTC, RFC 3339).
+    pub started_at: String,
+    /// Loops (ticks) that ran: states published plus skipped ticks.
+    pub loops: u64,
+    pub loops_planned: u64,
+    /// Every planned loop ran and every process ended cleanly.
+    pub completed: bool,
+    /// Why the run ended early, when it did.
+    pub stopped_because: Option<StopReason>,
+    pub deadline_misses: u64,
+    pub rejected_commands: u64,
+    pub skipped_ticks: u64,
+    /// Ticks integrated with `supervision.on_stale` applied (real time: no fresh command).
+    pub stale_ticks: u64,
+    /// Commands that arrived marked lost (lockstep `drop` faults).
+    pub lost_commands: u64,
+    /// Loops whose state went out but whose command never reached the plant: a stage was held
+    /// up and a newer input replaced it (real-time mode; each is also a deadline miss).
+    pub loops_without_command: u64,
+    /// Wall-clock time from the first to the last state published.
+    pub wall_time_s: f64,
+    /// Loops per wall-clock second over that time.
+    pub loops_per_s: f64,
+    /// Restarts per process.
+    #[serde(serialize_with = "by_name")]
+    pub restarts: BTreeMap<Role, u32>,
+    /// One entry per start of each process.
+    pub processes: Vec<ProcessInfo>,
+    /// Per process with an adaptive wait (real time): inputs caught by polling, and waits that
+    /// gave up polling and blocked.
+    #[serde(default, serialize_with = "by_name")]
+    pub adaptive_waits: BTreeMap<Role, WaitCounts>,
+    pub latency_ns: Latency,
+    pub jitter_ns: Jitter,
+    /// Per sensor: how old the sample behind command k was when command k took effect.
+    pub data_age_ns: BTreeMap<String, Stats>,
+    pub monitor: MonitorCounts,
+    pub metrics: BTreeMap<String, f64>,
+    /// What the scenario's metrics mean, in words (for example a parameter that could not be
+    /// identified).
+    #[serde(default)]
+    pub notes: Vec<String>,
+    /// What the fault report's errors measure, the band a recovery must reach and the limit
+    /// the physical system must stay within.
+    pub error_measure: ErrorMeasureInfo,
+    pub faults: Vec<FaultReport>,
+    /// What the launcher saw, in order: injections, exits, restarts, stalls.
+    pub timeline: Vec<TimelineEntry>,
+    /// Each restart, step by step, so that a slow one shows where its time went.
+    #[serde(default)]
+    pub restart_steps: Vec<RestartSteps>,
+    pub shared_memory: SharedMemoryCheck,
+}
+
+/// A map by process written with its keys in alphabetical order, as `summary.json` always had.
+fn by_name<V: Serialize, S: Serializer>(map: &BTreeMap<Role, V>, serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.collect_map(map.iter().map(|(role, v)| (role.name(), v)).collect::<BTreeMap<_, _>>())
+}
+
+
+/// One injected fault: what the launcher saw (wall-clock, from the injection) and what it did
+/// to the loop and the physical system (simulation time, from the monitor).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct FaultReport {
+    /// In the `--fault` form.
+    pub fault: String,
+    pub kind: FaultKind,
+    pub process: Role,
+    /// Simulation time of the injection.
+    pub at_s: f64,
+    /// When the launcher injected it (kill, stop), ms after tick 0 in wall-clock time.
+    pub injected_at_ms: Option<f64>,
+    /// Kill: until the launcher saw the process exit. Stop: until the monitor's input deadline
+    /// (or, for the monitor itself, its silent heartbeat) flagged it.
+    pub detected_after_ms: Option<f64>,
+    pub detected_by: Option<DetectedBy>,
+    /// Kill: until the restarted process reported its ports up.
+    pub restarted_after_ms: Option<f64>,
+    /// Stop: until SIGCONT was sent, and until the monitor saw the process handle input again.
+    pub continued_after_ms: Option<f64>,
+    pub resumed_after_ms: Option<f64>,
+    /// None when the monitor has no record of the fault's loops.
+    pub effect: Option<FaultEffect>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TimelineEntry {
+    /// Wall-clock ms after tick 0.
+    pub at_ms: f64,
+    pub event: String,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ProcessInfo {
+    pub name: Role,
+    /// 0 for the first start, then one more per restart.
+    pub incarnation: u32,
+    pub pid: u32,
+    /// Exit status as text: "0", "1", "signal 9", or "running" if it never ended.
+    pub exit: Exit,
+    /// User + system CPU time, seconds.
+    pub cpu_s: f64,
+    /// Sensors, estimator, controller: inputs handled, and loops never seen (real-time mode: a
+    /// newer input replaced them, or the plant skipped the tick).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub processed: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skipped: Option<u64>,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct Latency {
+    pub end_to_end: Stats,
+    pub hops: BTreeMap<String, Stats>,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct Jitter {
+    /// |actual tick period − dt|, real-time mode only.
+    pub plant_tick: Stats,
+    /// Wake-up − scheduled tick time, real-time mode only.
+    pub plant_wake_latency: Stats,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MonitorCounts {
+    /// Loops with their loop record (the last monitor's, after restarts).
+    pub records: u64,
+    /// Loop records the plant published that never reached the monitor while it ran.
+    pub lost: u64,
+    /// Which loops have no record (`missing`, as inclusive ranges, the first 100 listed), how
+    /// many (`missing_loops`: `records` + `missing_loops` = `loops`), and why: not published
+    /// (skipped ticks, loops without command), lost, or before a restarted monitor's first
+    /// loop (`missing_before_restart`).
+    #[serde(flatten)]
+    pub missing: MissingLoops,
+    /// Samples the monitor received per topic.
+    pub received: BTreeMap<String, u64>,
+    /// Trajectory rows with some part missing.
+    pub partial_rows: u64,
+    /// Lockstep only: samples a stage had to hold back because the monitor's buffer was full
+    /// (lockstep keeps every record, so a slow monitor holds the loop instead of losing them),
+    /// and samples dropped for it after the 5 s limit.
+    pub loop_waits: u64,
+    pub dropped_for_monitor: u64,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct SharedMemoryCheck {
+    /// No file of the run is left in /dev/shm or /tmp/iceoryx2.
+    pub clean: bool,
+    /// Stale resources of dead processes the launcher removed.
+    pub removed_dead_nodes: u64,
+    /// Files still there.
+    pub leftover: Vec<String>,
+}
+
+/// One restart, in wall-clock ms after the launcher saw the process die (its output closed and
+/// it was reaped): its dead node's resources removed, the backoff, the new process started, its
+/// ports up. `null` for a step that never came (the run ended first).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct RestartSteps {
+    pub process: Role,
+    /// The incarnation that was started.
+    pub incarnation: u32,
+    /// When the death was seen, ms after tick 0.
+    pub died_at_ms: f64,
+    pub cleaned_after_ms: Option<f64>,
+    pub backoff_ms: f64,
+    pub spawned_after_ms: Option<f64>,
+    pub ready_after_ms: Option<f64>,
+}
+
+/// What the processes reported when they ended.
+#[derive(Debug, Clone, Default)]
+pub struct Reports {
+    /// The last plant's.
+    pub plant: Option<PlantReport>,
+    /// Per stage, the reports of every incarnation that ended cleanly.
+    pub stages: BTreeMap<Role, Vec<StageReport>>,
+    /// The last monitor's.
+    pub monitor: Option<MonitorReport>,
+}
+
+/// What the supervisor saw during a run, in CLOCK_MONOTONIC ns; empty for a run without child
+/// processes.
+#[derive(Debug, Clone, Default)]
+pub struct RunLog {
+    /// Tick 0 of the plant's schedule, once it started.
+    pub plant_start_ns: Option<u64>,
+    /// What was seen of each fault of the launch file, in its order (empty: nothing of any).
+    pub faults: Vec<FaultSeen>,
+    pub timeline: Vec<TimelineEntry>,
+    pub restarts: Vec<RestartRecord>,
+}
+
+impl RunLog {
+    /// Milliseconds since tick 0 (0 before the plant started).
+    pub fn since_start_ms(&self, ns: u64) -> f64 {
+        self.plant_start_ns.map_or(0.0, |start| (ns as f64 - start as f64) / 1e6)
+    }
+
+    /// Adds `event` to the timeline, at `ns`.
+    pub fn note(&mut self, ns: u64, event: String) {
+        self.timeline.push(TimelineEntry { at_ms: self.since_start_ms(ns), event });
+    }
+}
+
+/// Everything a summary is made of.
+pub struct SummaryInputs<'a> {
+    pub config: &'a LaunchConfig,
+    pub scenario: &'a dyn Scenario,
+    pub run_id: &'a str,
+    pub run_dir: &'a Path,
+    /// Wall-clock start of the run (UTC, RFC 3339).
+    pub started_at: String,
+    pub outcome: &'a Outcome,
+    pub reports: &'a Reports,
+    /// Every start of each process, per role (the `processes` list follows the start order).
+    pub starts: &'a BTreeMap<Role, Vec<Start>>,
+    pub log: &'a RunLog,
+    pub shared_memory: SharedMemoryCheck,
+}
+
+/// The summary of a finished run.
+pub fn build(inputs: SummaryInputs<'_>) -> Summary {
+    let SummaryInputs { config, scenario, run_id, run_dir, started_at, outcome, reports, starts, log, shared_memory } =
+        inputs;
+    let plant = reports.plant.clone().unwrap_or_default();
+    let monitor = reports.monitor.clone().unwrap_or_default();
+    let counters = plant.counters;
+    let wall_ns = plant.last_publish_ns.saturating_sub(plant.first_publish_ns);
+    let wall_time_s = wall_ns as f64 * 1e-9;
+    let missing = monitor.missing.clone().up_to(monitor.loops_seen, plant.loops);
+    let stage_total = |f: fn(&StageReport) -> u64| -> u64 { reports.stages.values().flatten().map(f).sum() };
+    Summary {
+        scenario: config.scenario.clone(),
+        title: scenario.title(),
+        mode: config.mode,
+        rate_hz: config.rate_hz,
+        duration_s: config.duration_s,
+        seed: config.seed,
+        run_id: run_id.into(),
+        run_dir: run_dir.display().to_string(),
+        started_at,
+        loops: plant.loops,
+        loops_planned: config.loops(),
+        completed: *outcome == Outcome::Completed && !plant.stopped_early && plant.loops == config.loops(),
+        stopped_because: StopReason::of(outcome, plant.stopped_early),
+        deadline_misses: counters.deadline_misses,
+        rejected_commands: counters.rejected_commands,
+        skipped_ticks: counters.skipped_ticks,
+        stale_ticks: counters.stale_ticks,
+        lost_commands: counters.lost_commands,
+        loops_without_command: plant.published.saturating_sub(plant.commands),
+        wall_time_s,
+        loops_per_s: if wall_ns > 0 { plant.loops.saturating_sub(1) as f64 / wall_time_s } else { 0.0 },
+        restarts: starts.iter().map(|(&role, runs)| (role, runs.len().saturating_sub(1) as u32)).collect(),
+        processes: processes(starts, reports),
+        adaptive_waits: adaptive_waits(&plant, reports),
+        latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
+        jitter_ns: Jitter {
+            plant_tick: monitor.plant_tick_jitter.clone(),
+            plant_wake_latency: monitor.plant_wake_latency.clone(),
+        },
+        data_age_ns: monitor.data_age.clone(),
+        monitor: MonitorCounts {
+            records: monitor.records,
+            lost: monitor.lost_records(plant.commands),
+            missing,
+            received: monitor.received.clone(),
+            partial_rows: monitor.partial_rows,
+            loop_waits: plant.waited + stage_total(|r| r.waited),
+            dropped_for_monitor: plant.dropped + stage_total(|r| r.dropped),
+        },
+        metrics: monitor.metrics.clone(),
+        notes: monitor.notes.clone(),
+        error_measure: scenario.error_measure().describe(),
+        faults: fault_reports(config, log, &monitor),
+        timeline: log.timeline.clone(),
+        restart_steps: log.restarts.iter().map(|r| restart_steps(r, log)).collect(),
+        shared_memory,
+    }
+}
+
+/// Writes `summary.json` into the run folder, whole or not at all.
+pub fn write(summary: &Summary, run_dir: &Path) -> Result<()> {
+    write_atomically(&run_dir.join("summary.json"), &(serde_json::to_string_pretty(summary)? + "\n"))
+}
+
+/// One entry per start, in start order, with the stages' counts over their incarnations.
+fn processes(starts: &BTreeMap<Role, Vec<Start>>, reports: &Reports) -> Vec<ProcessInfo> {
+    let mut processes = vec![];
+    for role in Role::START_ORDER {
+        let stage_reports = reports.stages.get(&role);
+        for (n, start) in starts.get(&role).into_iter().flatten().enumerate() {
+            processes.push(ProcessInfo {
+                name: role,
+                incarnation: n as u32,
+                pid: start.pid,
+                exit: start.exit,
+                cpu_s: start.cpu_s,
+                processed: stage_reports.map(|r| r.iter().map(|r| r.processed).sum()),
+                skipped: stage_reports.map(|r| r.iter().map(|r| r.skipped).sum()),
+            });
+        }
+    }
+    processes
+}
+
+/// Adaptive-wait counts per process, summed over its incarnations; processes that never waited
+/// adaptively are left out.
+fn adaptive_waits(plant: &PlantReport, reports: &Reports) -> BTreeMap<Role, WaitCounts> {
+    let mut all = BTreeMap::new();
+    let mut add = |role: Role, w: WaitCounts| {
+        if w.caught + w.blocked > 0 {
+            let entry: &mut WaitCounts = all.entry(role).or_default();
+            entry.caught += w.caught;
+            entry.blocked += w.blocked;
+        }
+    };
+    add(Role::Plant, plant.wait);
+    for (&role, stage_reports) in &reports.stages {
+        for r in stage_reports {
+            add(role, r.wait);
+        }
+    }
+    all
+}
+
+/// Each fault of the launch file with what the supervisor saw of it and what the monitor
+/// measured.
+fn fault_reports(config: &LaunchConfig, log: &RunLog, monitor: &MonitorReport) -> Vec<FaultReport> {
+    config
+        .faults
+        .iter()
+        .enumerate()
+        .map(|(i, spec)| {
+            let seen = log.faults.get(i).cloned().unwrap_or_default();
+            let after = |ns: Option<u64>| match (seen.injected_ns, ns) {
+                (Some(a), Some(b)) => Some((b as f64 - a as f64) / 1e6),
+                _ => None,
+            };
+            FaultReport {
+                fault: spec.describe(),
+                kind: spec.kind,
+                process: target(spec),
+                at_s: spec.at_s,
+                injected_at_ms: seen.injected_ns.map(|ns| log.since_start_ms(ns)),
+                detected_after_ms: after(seen.detected_ns),
+                detected_by: seen.detected_by,
+                restarted_after_ms: after(seen.restarted_ns),
+                continued_after_ms: after(seen.continued_ns),
+                resumed_after_ms: after(seen.resumed_ns),
+                effect: monitor.faults.get(i).cloned(),
+            }
+        })
+        .collect()
+}
+
+/// A restart's steps in ms after its death was seen.
+fn restart_steps(r: &RestartRecord, log: &RunLog) -> RestartSteps {
+    let after = |ns: Option<u64>| ns.map(|ns| (ns as f64 - r.died_ns as f64) / 1e6);
+    RestartSteps {
+        process: r.process,
+        incarnation: r.incarnation,
+        died_at_ms: log.since_start_ms(r.died_ns),
+        cleaned_after_ms: after(r.cleaned_ns),
+        backoff_ms: r.backoff.as_secs_f64() * 1e3,
+        spawned_after_ms: after(r.spawned_ns),
+        ready_after_ms: after(r.ready_ns),
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::config::launch::{Override, resolve};
+
+    /// A complete lockstep run's summary, for the tests of what reads one.
+    pub(crate) fn summary() -> Summary {
+        Summary {
+            scenario: "pendulum".into(),
+            title: "pendulum".into(),
+            mode: Mode::Lockstep,
+            rate_hz: 200.0,
+            duration_s: 5.0,
+            seed: 1,
+            run_id: "r".into(),
+            run_dir: "/tmp/r".into(),
+            started_at: "2024-01-01T00:00:00Z".into(),
+            loops: 1000,
+            loops_planned: 1000,
+            completed: true,
+            stopped_because: None,
+            deadline_misses: 0,
+            rejected_commands: 0,
+            skipped_ticks: 0,
+            stale_ticks: 0,
+            lost_commands: 0,
+            loops_without_command: 0,
+            wall_time_s: 1.0,
+            loops_per_s: 1000.0,
+            restarts: BTreeMap::new(),
+            processes: vec![],
+            adaptive_waits: BTreeMap::new(),
+            latency_ns: Latency::default(),
+            jitter_ns: Jitter::default(),
+            data_age_ns: BTreeMap::new(),
+            monitor: MonitorCounts::default(),
+            metrics: BTreeMap::new(),
+            notes: vec![],
+            error_measure: ErrorMeasureInfo { name: "angle".into(), recovery_band: 0.05, limit: 1.0 },
+            faults: vec![],
+            timeline: vec![],
+            restart_steps: vec![],
+            shared_memory: SharedMemoryCheck { clean: true, ..Default::default() },
+        }
+    }
+
+    /// What a run without child processes has: the reports, nothing the supervisor saw.
+    #[test]
+    fn a_summary_builds_from_the_reports_alone() {
+        let overrides = [Override::parse("mode=lockstep").unwrap(), Override::parse("duration_s=0.5").unwrap()];
+        let (config, scenario) = resolve("pendulum", &overrides).unwrap();
+        let plant = PlantReport {
+            loops: 500,
+            published: 500,
+            commands: 500,
+            first_publish_ns: 1_000_000_000,
+            last_publish_ns: 1_499_000_000,
+            waited: 2,
+            ..Default::default()
+        };
+        let stage =
+            StageReport { processed: 500, waited: 1, wait: WaitCounts { caught: 3, blocked: 4 }, ..Default::default() };
+        let monitor = MonitorReport { records: 500, loops_seen: 500, ..Default::default() };
+        let reports = Reports {
+            plant: Some(plant),
+            stages: Role::STAGES.into_iter().map(|r| (r, vec![stage.clone()])).collect(),
+            monitor: Some(monitor),
+        };
+        let starts: BTreeMap<Role, Vec<Start>> =
+            [(Role::Sensors, vec![Start { pid: 7, exit: Exit::Status(0), cpu_s: 0.5 }])].into();
+        let summary = build(SummaryInputs {
+            config: &config,
+            scenario: scenario.as_ref(),
+            run_id: "0123",
+            run_dir: Path::new("/tmp/run"),
+            started_at: "2024-01-01T00:00:00Z".into(),
+            outcome: &Outcome::Completed,
+            reports: &reports,
+            starts: &starts,
+            log: &RunLog::default(),
+            shared_memory: SharedMemoryCheck { clean: true, ..Default::default() },
+        });
+        assert!(summary.completed);
+        assert_eq!(summary.stopped_because, None);
+        assert_eq!((summary.loops, summary.loops_planned, summary.loops_without_command), (500, 500, 0));
+        assert_eq!(summary.mode, Mode::Lockstep);
+        let wall_time_s = 499_000_000f64 * 1e-9;
+        assert_eq!(summary.wall_time_s, wall_time_s);
+        assert_eq!(summary.loops_per_s, 499.0 / wall_time_s);
+        assert_eq!(summary.monitor.records, 500);
+        assert_eq!(summary.monitor.missing.missing_loops, 0);
+        assert_eq!(summary.monitor.loop_waits, 2 + 3);
+        assert_eq!(summary.restarts, [(Role::Sensors, 0)].into());
+        assert_eq!(summary.processes.len(), 1);
+        assert_eq!((summary.processes[0].name, summary.processes[0].processed), (Role::Sensors, Some(500)));
+        let waits: Vec<_> = summary.adaptive_waits.iter().map(|(r, w)| (*r, w.caught, w.blocked)).collect();
+        assert_eq!(waits, [(Role::Sensors, 3, 4), (Role::Estimator, 3, 4), (Role::Controller, 3, 4)]);
+        assert!(summary.faults.is_empty() && summary.timeline.is_empty() && summary.restart_steps.is_empty());
+
+        // The plant ran short: not completed, and said why.
+        let short = Reports {
+            plant: Some(PlantReport { loops: 400, stopped_early: true, ..Default::default() }),
+            monitor: Some(MonitorReport { records: 300, loops_seen: 300, ..Default::default() }),
+            ..reports
+        };
+        let summary = build(SummaryInputs {
+            config: &config,
+            scenario: scenario.as_ref(),
+            run_id: "0123",
+            run_dir: Path::new("/tmp/run"),
+            started_at: String::new(),
+            outcome: &Outcome::Completed,
+            reports: &short,
+            starts: &BTreeMap::new(),
+            log: &RunLog::default(),
+            shared_memory: SharedMemoryCheck::default(),
+        });
+        assert!(!summary.completed);
+        assert_eq!(summary.stopped_because, Some(StopReason::PlantStoppedEarly));
+        assert_eq!(summary.monitor.missing.ranges, [[300, 399]], "the loops after the last the monitor saw");
+    }
+
+    #[test]
+    fn maps_by_process_keep_their_alphabetical_keys_and_every_value_reads_back() {
+        let mut s = summary();
+        s.restarts = Role::ALL.into_iter().map(|r| (r, 0)).collect();
+        s.adaptive_waits =
+            [(Role::Plant, WaitCounts { caught: 1, blocked: 0 }), (Role::Controller, WaitCounts::default())].into();
+        s.stopped_because = Some(StopReason::Interrupted);
+        s.processes = vec![ProcessInfo {
+            name: Role::Monitor,
+            incarnation: 0,
+            pid: 9,
+            exit: Exit::Signal(9),
+            cpu_s: 0.0,
+            processed: None,
+            skipped: None,
+        }];
+        let json = serde_json::to_value(&s).unwrap();
+        let keys: Vec<&String> = json["restarts"].as_object().unwrap().keys().collect();
+        assert_eq!(keys, ["controller", "estimator", "monitor", "plant", "sensors"]);
+        let text = serde_json::to_string(&s).unwrap();
+        assert!(
+            text.contains(
+                r#""adaptive_waits":{"controller":{"caught":0,"blocked":0},"plant":{"caught":1,"blocked":0}}"#
+            ),
+            "{text}"
+        );
+        assert!(
+            text.contains(r#""mode":"lockstep""#) && text.contains(r#""stopped_because":"interrupted by a signal""#)
+        );
+        assert!(text.contains(r#""name":"monitor","incarnation":0,"pid":9,"exit":"signal 9""#), "{text}");
+        assert_eq!(serde_json::from_str::<Summary>(&text).unwrap(), s);
+    }
+}
