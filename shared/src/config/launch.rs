@@ -12,7 +12,10 @@ use std::path::Path;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use crate::config::faults::{FaultSpec, Supervision};
+use crate::config::faults::{
+    FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, PROCESSES, Supervision,
+};
+use crate::config::wait::MAX_WAIT_US;
 use crate::config::schema::{ScenarioSchema, SignalLayout};
 use crate::config::wait::WaitSettings;
 use crate::contract::msg::MAX_SENSORS;
@@ -26,35 +29,7 @@ pub const MAX_RATE_HZ: f64 = 100_000.0;
 /// derived from a run's loops within `u32` (delays in ticks).
 pub const MAX_LOOPS: u64 = 1_000_000_000;
 
-/// The top-level keys every launch file shares; the rest belong to the scenario.
-pub const COMMON_KEYS: [&str; 9] =
-    ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision", "wait"];
-
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct LaunchError {
-    /// The file (or `--set KEY=VALUE`) the bad value came from.
-    pub origin: String,
-    /// The dotted key, when one is to blame.
-    pub key: Option<String>,
-    pub message: String,
-}
-
-impl LaunchError {
-    pub fn new(origin: impl Into<String>, key: Option<&str>, message: impl Into<String>) -> Self {
-        Self { origin: origin.into(), key: key.map(str::to_owned), message: message.into() }
-    }
-}
-
-impl fmt::Display for LaunchError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match &self.key {
-            Some(key) => write!(f, "{}: key `{}`: {}", self.origin, key, self.message),
-            None => write!(f, "{}: {}", self.origin, self.message),
-        }
-    }
-}
-
-impl std::error::Error for LaunchError {}
+pub use crate::config::error::{COMMON_KEYS, LaunchError};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -453,10 +428,10 @@ fn from_document(
     };
     check_common(&config)?;
     check_sensors(&config)?;
-    config.supervision.check(&config)?;
-    config.wait.check(&config)?;
+    check_supervision(&config.supervision, &config)?;
+    check_wait(&config.wait, &config)?;
     for (i, fault) in config.faults.iter().enumerate() {
-        fault.check(&config, &format!("faults.{i}"))?;
+        check_fault(fault, &config, &format!("faults.{i}"))?;
     }
     Ok(config)
 }
@@ -681,6 +656,130 @@ fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<String, String
     let toml::Value::Table(table) = root else { unreachable!("the root stays a table") };
     *document = table;
     result
+}
+
+/// Checks the fault against the run; `key` is its dotted key (`faults.2`).
+fn check_fault(f: &FaultSpec, c: &LaunchConfig, key: &str) -> Result<(), LaunchError> {
+    let field = |f: &str| format!("{key}.{f}");
+    let targets = f.kind.targets();
+    if !targets.contains(&f.process.as_str()) {
+        return Err(c.error(
+            &field("process"),
+            format!(
+                "a {} fault cannot target \"{}\"; allowed: {}",
+                f.kind.name(),
+                f.process,
+                targets.join(", ")
+            ),
+        ));
+    }
+    if !(f.at_s.is_finite() && f.at_s >= 0.0 && f.at_s < c.duration_s) {
+        return Err(c.error(
+            &field("at_s"),
+            format!("must be a time within the run, 0 ≤ at_s < {} s, got {}", c.duration_s, f.at_s),
+        ));
+    }
+    if let Some(d) = f.duration_s {
+        // A stop lasts wall-clock seconds; the others simulation time, where anything past
+        // the run's end means "to the end".
+        let (most, what) = if f.kind == FaultKind::Stop {
+            (MAX_STOP_S, "wall-clock seconds, at most 3600 (an hour)")
+        } else {
+            (MAX_DURATION_S, "seconds, at most 604800 (a week; leave it out for \"to the end of the run\")")
+        };
+        if !(d.is_finite() && d > 0.0 && d <= most) {
+            return Err(c.error(&field("duration_s"), format!("must be a positive number of {what}, got {d}")));
+        }
+    }
+    let only = |name: &str, present: bool, kind: FaultKind| -> Result<(), LaunchError> {
+        if present && f.kind != kind {
+            return Err(c.error(&field(name), format!("applies to {} faults only", kind.name())));
+        }
+        Ok(())
+    };
+    only("delay_s", f.delay_s.is_some(), FaultKind::Delay)?;
+    only("delay_ticks", f.delay_ticks.is_some(), FaultKind::Delay)?;
+    only("probability", f.probability.is_some(), FaultKind::Drop)?;
+    only("value", f.value.is_some(), FaultKind::Corrupt)?;
+    match f.kind {
+        FaultKind::Kill if f.duration_s.is_some() => {
+            Err(c.error(&field("duration_s"), "a kill has no duration (the process is restarted, or not)"))
+        }
+        FaultKind::Stop if f.duration_s.is_none() => {
+            Err(c.error(&field("duration_s"), "a stop needs the seconds it lasts before SIGCONT"))
+        }
+        FaultKind::Delay => match (f.delay_s, f.delay_ticks) {
+            (Some(_), Some(_)) | (None, None) => {
+                Err(c.error(&field("delay_s"), "give exactly one of delay_s (seconds) and delay_ticks (loops)"))
+            }
+            (Some(d), None) if !(d.is_finite() && d >= 0.0 && d < c.duration_s) => Err(c.error(
+                &field("delay_s"),
+                format!("must be 0 or more seconds, less than the run's duration_s = {} s, got {d}", c.duration_s),
+            )),
+            (None, Some(t)) if u64::from(t) > c.loops() => Err(
+                c.error(&field("delay_ticks"), format!("must be at most the run's {} loops, got {t}", c.loops()))
+            ),
+            _ => Ok(()),
+        },
+        FaultKind::Drop => match f.probability {
+            Some(p) if (0.0..=1.0).contains(&p) => Ok(()),
+            Some(p) => Err(c.error(&field("probability"), format!("must be between 0 and 1, got {p}"))),
+            None => {
+                Err(c.error(&field("probability"), "a drop needs the chance, 0 to 1, that each output is lost"))
+            }
+        },
+        _ => Ok(()),
+    }
+}
+
+fn check_supervision(s: &Supervision, c: &LaunchConfig) -> Result<(), LaunchError> {
+    let timeout = |key: &str, v: f64| {
+        if v.is_finite() && v > 0.0 && v <= MAX_TIMEOUT_S {
+            Ok(())
+        } else {
+            Err(c.error(
+                &format!("supervision.{key}"),
+                format!("must be a positive number of seconds, at most {MAX_TIMEOUT_S} (an hour), got {v}"),
+            ))
+        }
+    };
+    timeout("stall_timeout_s", s.stall_timeout_s)?;
+    timeout("command_timeout_s", s.command_timeout_s)?;
+    timeout("lockstep_stall_s", s.lockstep_stall_s)?;
+    timeout("backoff_reset_s", s.backoff_reset_s)?;
+    for process in PROCESSES {
+        // The key to blame: the process's own, or the default it took.
+        let key = |field: &str| {
+            let own = match field {
+                "backoff_s" => s.policy_of(process).backoff_s.is_some(),
+                _ => s.policy_of(process).max_restarts.is_some(),
+            };
+            if own { format!("supervision.{process}.{field}") } else { format!("supervision.{field}") }
+        };
+        let policy = s.policy(process);
+        if !(policy.backoff_s.is_finite() && policy.backoff_s >= 0.0 && policy.backoff_s <= MAX_BACKOFF_S) {
+            return Err(c.error(
+                &key("backoff_s"),
+                format!("must be 0 to {MAX_BACKOFF_S} seconds, got {}", policy.backoff_s),
+            ));
+        }
+        if policy.max_restarts > MAX_RESTARTS {
+            return Err(c.error(
+                &key("max_restarts"),
+                format!("must be 0 to {MAX_RESTARTS} restarts per process and run, got {}", policy.max_restarts),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn check_wait(w: &WaitSettings, config: &LaunchConfig) -> Result<(), LaunchError> {
+    for (key, value) in [("wait.lead_us", w.lead_us), ("wait.spin_cap_us", w.spin_cap_us)] {
+        if !(value.is_finite() && (0.0..=MAX_WAIT_US).contains(&value)) {
+            return Err(config.error(key, format!("must be 0 to {MAX_WAIT_US} µs (a second), got {value}")));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -1,6 +1,7 @@
 //! Layer 1, configuration: launch files, fault and supervision settings, wait settings, and the
 //! plain-data view of a scenario a launch file is checked against. Depends only on the contract.
 
+pub mod error;
 pub mod faults;
 pub mod launch;
 pub mod schema;

@@ -5,7 +5,7 @@
 
 use std::fmt;
 
-use crate::config::launch::LaunchError;
+use crate::config::error::{COMMON_KEYS, LaunchError};
 use crate::contract::msg::{MAX_ESTIMATE, MAX_INPUT, MAX_SENSOR_DIM, MAX_STATE};
 
 /// One component of a vector: its name (a column of `trajectory.csv`) and its unit.
@@ -72,7 +72,7 @@ impl ScenarioSchema {
     /// The scenario's own top-level sections: those of its defaults that every launch file does
     /// not share.
     pub fn sections(&self) -> Vec<String> {
-        let common = crate::config::launch::COMMON_KEYS;
+        let common = COMMON_KEYS;
         self.defaults().keys().filter(|k| !common.contains(&k.as_str())).cloned().collect()
     }
 

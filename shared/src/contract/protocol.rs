@@ -6,14 +6,11 @@
 //!   sample is sent before every reader, the monitor included, is connected.
 //! - Everything for humans goes to stderr, which the launcher saves in the run folder.
 
-use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
 use clap::Parser;
 use serde::{Deserialize, Serialize};
 
-use crate::runtime::signals::StopFlag;
 
 /// Arguments every loop process takes; the launcher fills them in.
 #[derive(Debug, Parser)]
@@ -121,41 +118,6 @@ pub struct StageReport {
     pub wait: WaitCounts,
 }
 
-/// Writes one event line on stdout for the launcher.
-pub fn emit(event: &ChildEvent) -> Result<()> {
-    let line = serde_json::to_string(event).context("encode event")?;
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "{line}").and_then(|_| out.flush()).context("write event to the launcher")
-}
-
-/// Blocks until the launcher writes `expected` as a line on stdin. Returns false if a stop was
-/// requested or the launcher went away first.
-pub fn wait_for_line(stop: &StopFlag, expected: &str) -> Result<bool> {
-    let mut line = Vec::new();
-    while !stop.requested() {
-        let mut pfd = libc::pollfd { fd: 0, events: libc::POLLIN, revents: 0 };
-        // SAFETY: one valid pollfd; a signal makes poll return early, which the loop handles.
-        let ready = unsafe { libc::poll(&mut pfd, 1, 100) };
-        if ready <= 0 {
-            continue;
-        }
-        let mut byte = [0u8; 1];
-        // SAFETY: reads one byte from stdin into a buffer we own.
-        let n = unsafe { libc::read(0, byte.as_mut_ptr().cast(), 1) };
-        if n <= 0 {
-            return Ok(false);
-        }
-        if byte[0] == b'\n' {
-            if line == expected.as_bytes() {
-                return Ok(true);
-            }
-            line.clear();
-        } else {
-            line.push(byte[0]);
-        }
-    }
-    Ok(false)
-}
 
 /// What an adaptive wait did, for the process's report.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -10,7 +10,7 @@ use crate::contract::report::MonitorReport;
 use crate::monitor::Recording;
 use crate::runtime::in_process::{self, InProcessReports};
 use crate::runtime::signals::StopFlag;
-use crate::scenarios::Scenario;
+use crate::model::scenario::Scenario;
 
 /// Runs the loop in this process and records it in `run_dir`.
 pub fn run(

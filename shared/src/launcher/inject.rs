@@ -83,7 +83,8 @@ pub fn injection(spec: &FaultSpec, now: Instant) -> Option<(i32, Option<Instant>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::launch::{Override, resolve};
+    use crate::config::launch::Override;
+    use crate::scenarios::resolve;
 
     fn faults(texts: &[&str]) -> Vec<FaultSpec> {
         let overrides: Vec<Override> = texts.iter().map(|t| Override::fault(t).unwrap()).collect();

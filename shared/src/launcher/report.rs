@@ -260,7 +260,7 @@ mod tests {
     use crate::launcher::outcome::StopReason;
     use crate::launcher::summary::tests::summary;
     use crate::launcher::summary::{FaultReport, RestartSteps};
-    use crate::monitor::FaultEffect;
+    use crate::contract::report::FaultEffect;
 
     fn summary_with_fault() -> Summary {
         Summary {

@@ -19,7 +19,7 @@ use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
 use crate::contract::report::{FaultEffect, MissingLoops, MonitorReport, Stats};
 pub use crate::model::scenario::ErrorMeasureInfo;
-use crate::scenarios::Scenario;
+use crate::model::scenario::Scenario;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Summary {
@@ -409,7 +409,8 @@ fn restart_steps(r: &RestartRecord, log: &RunLog) -> RestartSteps {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::config::launch::{Override, resolve};
+    use crate::config::launch::Override;
+    use crate::scenarios::resolve;
 
     /// A complete lockstep run's summary, for the tests of what reads one.
     pub(crate) fn summary() -> Summary {

@@ -26,7 +26,7 @@ use crate::launcher::run_dir::{new_run_id, write_atomically};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::runtime::ipc;
 use crate::runtime::signals::StopFlag;
-use crate::scenarios::Scenario;
+use crate::model::scenario::Scenario;
 
 /// Longest start-up: every process must report ready within it.
 const READY_TIMEOUT: Duration = Duration::from_secs(20);

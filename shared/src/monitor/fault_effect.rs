@@ -6,7 +6,7 @@ use crate::config::launch::LaunchConfig;
 use crate::contract::report::FaultEffect;
 use crate::contract::role::Role;
 use crate::monitor::join::LoopParts;
-use crate::scenarios::ErrorMeasure;
+use crate::model::scenario::ErrorMeasure;
 
 /// Follows one fault through the loops the monitor writes.
 pub struct FaultTracker {
@@ -134,7 +134,8 @@ impl FaultTracker {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::launch::{Override, resolve};
+    use crate::config::launch::Override;
+    use crate::scenarios::resolve;
     use crate::contract::msg::{LoopRecord, PlantState};
 
     /// A pendulum run of 20 loops at 1 kHz with these faults.

@@ -3,7 +3,7 @@
 
 use crate::config::launch::LaunchConfig;
 use crate::config::schema::Component;
-use crate::scenarios::Scenario;
+use crate::model::scenario::Scenario;
 
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Layout {

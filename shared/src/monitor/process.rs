@@ -15,7 +15,8 @@ use iceoryx2::prelude::ZeroCopySend;
 
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
-use crate::contract::protocol::{ChildEvent, emit};
+use crate::contract::protocol::ChildEvent;
+use crate::runtime::child::emit;
 use crate::contract::report::MonitorReport;
 use crate::monitor::join::Sample;
 use crate::monitor::recording::{Recording, StatusCallback};

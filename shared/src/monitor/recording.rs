@@ -18,7 +18,7 @@ use crate::monitor::layout::Layout;
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
 use crate::monitor::stats::LoopStats;
 use crate::runtime::ipc::MONITOR_BUFFER;
-use crate::scenarios::{ErrorMeasure, Metrics, Row, Scenario};
+use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 
 /// A loop still missing parts once this many newer loops have arrived is written as it is: by
 /// then the monitor's buffer of that topic has overflowed past it.
@@ -196,7 +196,8 @@ impl Recording {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::launch::{Override, resolve};
+    use crate::config::launch::Override;
+    use crate::scenarios::resolve;
     use crate::monitor::join::tests::{command, estimate, measurements, record, state, whole};
 
     /// A lockstep pendulum run of 6 loops, recorded into a fresh folder.

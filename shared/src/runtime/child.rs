@@ -1,19 +1,21 @@
 //! What every loop process shares: its arguments, its context, its `main`, and how it waits on
 //! its iceoryx2 WaitSet. Each binary in `services/` is one call into here.
 
+use std::io::Write;
 use std::path::Path;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use anyhow::{Result, anyhow};
+use anyhow::{Context as _, Result, anyhow};
 use iceoryx2::prelude::*;
 
 use crate::config::launch::LaunchConfig;
-use crate::contract::protocol::{ChildEvent, ProcessArgs, emit};
+use crate::contract::protocol::{ChildEvent, ProcessArgs};
 use crate::contract::role::Role;
 use crate::runtime::ipc::Ipc;
 use crate::runtime::signals::StopFlag;
-use crate::scenarios::{Scenario, load_resolved};
+use crate::model::scenario::Scenario;
+use crate::scenarios::load_resolved;
 
 /// Longest a wait blocks before it looks at the stop flag again (a signal also ends it early).
 pub const WAIT_SLICE: Duration = Duration::from_millis(100);
@@ -61,7 +63,7 @@ pub fn process_main(role: Role, body: fn(&Context) -> Result<ChildEvent>) -> Exi
     // SAFETY: as above.
     if unsafe { libc::getppid() } != launcher {
         let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
-        while crate::ipc::clean_up_run(&args.run_id).is_ok_and(|c| !c.leftover.is_empty())
+        while crate::runtime::ipc::clean_up_run(&args.run_id).is_ok_and(|c| !c.leftover.is_empty())
             && std::time::Instant::now() < until
         {
             std::thread::sleep(std::time::Duration::from_millis(20));
@@ -90,3 +92,38 @@ pub fn wait(ws: &WaitSet<ipc::Service>) -> Result<()> {
         .map_err(|e| anyhow!("WaitSet wait failed: {e:?}"))
 }
 
+/// Writes one event line on stdout for the launcher.
+pub fn emit(event: &ChildEvent) -> Result<()> {
+    let line = serde_json::to_string(event).context("encode event")?;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}").and_then(|_| out.flush()).context("write event to the launcher")
+}
+
+/// Blocks until the launcher writes `expected` as a line on stdin. Returns false if a stop was
+/// requested or the launcher went away first.
+pub fn wait_for_line(stop: &StopFlag, expected: &str) -> Result<bool> {
+    let mut line = Vec::new();
+    while !stop.requested() {
+        let mut pfd = libc::pollfd { fd: 0, events: libc::POLLIN, revents: 0 };
+        // SAFETY: one valid pollfd; a signal makes poll return early, which the loop handles.
+        let ready = unsafe { libc::poll(&mut pfd, 1, 100) };
+        if ready <= 0 {
+            continue;
+        }
+        let mut byte = [0u8; 1];
+        // SAFETY: reads one byte from stdin into a buffer we own.
+        let n = unsafe { libc::read(0, byte.as_mut_ptr().cast(), 1) };
+        if n <= 0 {
+            return Ok(false);
+        }
+        if byte[0] == b'\n' {
+            if line == expected.as_bytes() {
+                return Ok(true);
+            }
+            line.clear();
+        } else {
+            line.push(byte[0]);
+        }
+    }
+    Ok(false)
+}

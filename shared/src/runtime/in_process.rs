@@ -14,7 +14,7 @@ use crate::contract::role::Role;
 use crate::runtime::plant::PlantCore;
 use crate::runtime::signals::StopFlag;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
-use crate::scenarios::Scenario;
+use crate::model::scenario::Scenario;
 
 /// What the in-process run's "processes" report at its end.
 #[derive(Debug, Clone)]

@@ -24,13 +24,13 @@ use crate::config::faults::OnStale;
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::clock::{TickTimer, now_ns};
 use crate::contract::msg::*;
-use crate::contract::protocol::{ChildEvent, PlantReport, emit, wait_for_line};
+use crate::contract::protocol::{ChildEvent, PlantReport};
 use crate::contract::role::{Role, Topic};
-use crate::runtime::child::{Context, wait, waitset};
+use crate::runtime::child::{Context, emit, wait, wait_for_line, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::wait::{ArrivalModel, Waiter};
-use crate::scenarios::Scenario;
+use crate::model::scenario::Scenario;
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.
@@ -39,7 +39,7 @@ const LATE_COMMAND_GRACE: Duration = Duration::from_millis(50);
 /// The plant's state between ticks: the truth, the commands, and the counters. Pure: the
 /// caller passes the times and sends the messages (the process below, or the in-process twin).
 pub struct PlantCore {
-    plant: Box<dyn crate::scenarios::Plant>,
+    plant: Box<dyn crate::model::scenario::Plant>,
     limits: Vec<(f64, f64)>,
     dt: f64,
     incarnation: u32,

@@ -15,7 +15,7 @@ use crate::contract::protocol::StageReport;
 use crate::contract::role::Role;
 use crate::model::sensors::SensorEmulator;
 use crate::runtime::faults::{AddedDelay, StageFaults};
-use crate::scenarios::{Calibration, Controller, Estimator, Scenario};
+use crate::model::scenario::{Calibration, Controller, Estimator, Scenario};
 
 /// One stage's computation.
 pub trait Task {

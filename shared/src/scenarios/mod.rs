@@ -8,6 +8,8 @@ pub mod pendulum;
 pub mod quadcopter;
 
 #[cfg(test)]
+mod fault_tests;
+#[cfg(test)]
 mod launch_tests;
 
 use std::path::Path;
@@ -15,12 +17,7 @@ use std::path::Path;
 use crate::config::launch::{self, LaunchConfig, LaunchError, Override};
 use crate::config::schema::ScenarioSchema;
 
-// The paths of before the model layer, kept only while issue 11 moves code (removed at its end,
-// with lib.rs's aliases): other branches still name the traits `crate::scenarios::...`.
-pub use crate::model::scenario::{
-    Calibration, Controller, ErrorMeasure, Estimator, MAX_SUBSTEPS, Metrics, Plant, Row, Scenario, ScenarioEntry,
-    TheoreticalMargin, check_substeps,
-};
+use crate::model::scenario::{Scenario, ScenarioEntry};
 
 pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY];
 

@@ -17,7 +17,7 @@ use crate::contract::role::Role;
 use crate::launcher::inject::target;
 use crate::launcher::{Binaries, EXIT_BAD_INPUT, EXIT_INTERRUPTED, Outcome, StopReason, Summary, run_once};
 use crate::runtime::signals::StopFlag;
-use crate::scenarios::{Scenario, TheoreticalMargin};
+use crate::model::scenario::{Scenario, TheoreticalMargin};
 
 /// The error's peak in the last second over its peak in the first second of the fault above
 /// which the loop counts as unstable: the disturbance the fault caused grew instead of dying

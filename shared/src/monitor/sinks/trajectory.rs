@@ -116,7 +116,7 @@ mod tests {
     fn rows_hold_each_vector_and_leave_missing_parts_empty() {
         let dir = std::env::temp_dir().join(format!("looplab-trajectory-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let config = crate::config::launch::resolve("pendulum", &[]).unwrap().0;
+        let config = crate::scenarios::resolve("pendulum", &[]).unwrap().0;
         let layout = layout();
         let setup = |restarted| SinkSetup { run_dir: &dir, restarted, config: &config, layout: &layout };
 
