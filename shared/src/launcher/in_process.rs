@@ -1,25 +1,51 @@
-//! `looplab run --in-process`: the run's loop in one process (`runtime::in_process`) recorded by
-//! the monitor's own recorder into the same run folder, with no children and no shared memory.
+//! `looplab run --in-process`: the run's loop in this one process (`runtime::in_process`),
+//! recorded by the monitor's own recorder into the same run folder and summarised by the same
+//! summary, with no children and no shared memory.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::Result;
 
 use crate::config::launch::LaunchConfig;
-use crate::contract::report::MonitorReport;
-use crate::monitor::Recording;
-use crate::runtime::in_process::{self, InProcessReports};
-use crate::runtime::signals::StopFlag;
+use crate::contract::role::Role;
+use crate::launcher::outcome::Outcome;
+use crate::launcher::run_dir::{new_run_id, write_atomically};
+use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
+use crate::monitor::Recording;
+use crate::runtime::in_process;
+use crate::runtime::signals::StopFlag;
 
-/// Runs the loop in this process and records it in `run_dir`.
-pub fn run(
-    config: &LaunchConfig,
-    scenario: &dyn Scenario,
-    run_dir: &Path,
-    stop: &StopFlag,
-) -> Result<(InProcessReports, MonitorReport)> {
+/// Runs the loop of `config` in this process and writes the run folder.
+pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &Path) -> Result<(Summary, Outcome)> {
+    write_atomically(&run_dir.join("launch.toml"), &config.to_toml())?;
+    let stop = StopFlag::install()?;
+    let started_at = chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true);
     let mut recording = Recording::new(config, scenario, run_dir, 0, None)?;
-    let reports = in_process::run(config, scenario, stop, |message| recording.take(message))?;
-    Ok((reports, recording.finish()?))
+    let ran = in_process::run(config, scenario, &stop, |message| recording.take(message))?;
+    let outcome = if stop.requested() { Outcome::Interrupted } else { Outcome::Completed };
+    let reports = Reports {
+        plant: Some(ran.plant),
+        stages: BTreeMap::from([
+            (Role::Sensors, vec![ran.sensors]),
+            (Role::Estimator, vec![ran.estimator]),
+            (Role::Controller, vec![ran.controller]),
+        ]),
+        monitor: Some(recording.finish()?),
+    };
+    let summary = summary::build(SummaryInputs {
+        config,
+        scenario,
+        run_id: &new_run_id(),
+        run_dir,
+        started_at,
+        outcome: &outcome,
+        reports: &reports,
+        starts: &BTreeMap::new(),
+        log: &RunLog::default(),
+        shared_memory: SharedMemoryCheck { clean: true, removed_dead_nodes: 0, leftover: vec![] },
+    });
+    summary::write(&summary, run_dir)?;
+    Ok((summary, outcome))
 }

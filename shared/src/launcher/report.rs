@@ -121,18 +121,16 @@ pub fn render(s: &Summary) -> String {
     for note in &s.notes {
         let _ = writeln!(out, "    note: {note}");
     }
-    let _ = writeln!(
-        out,
-        "\n  processes: {}",
-        s.processes
-            .iter()
-            .map(|p| {
-                let again = if p.incarnation > 0 { format!(" restart {}", p.incarnation) } else { String::new() };
-                format!("{}{again} (pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s)
-            })
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
+    let processes: Vec<String> = s
+        .processes
+        .iter()
+        .map(|p| {
+            let again = if p.incarnation > 0 { format!(" restart {}", p.incarnation) } else { String::new() };
+            format!("{}{again} (pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s)
+        })
+        .collect();
+    let processes = if processes.is_empty() { "none: the loop ran in-process".to_string() } else { processes.join(", ") };
+    let _ = writeln!(out, "\n  processes: {processes}");
     let _ = if s.shared_memory.clean {
         writeln!(out, "  shared memory: clean, no file of the run is left")
     } else {
