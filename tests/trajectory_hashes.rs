@@ -7,6 +7,10 @@
 //! On a mismatch the test prints every row that differs with the hash it got, so a deliberate
 //! change can copy them all at once.
 //!
+//! Every case runs twice: through the five processes, and with `--in-process` (the same tasks
+//! in loop order in one process). Both must give the recorded bytes, which proves the in-process
+//! twin byte-identical to the real pipeline, faults included, for every scenario.
+//!
 //! Lockstep with a fixed seed is deterministic (the README promises byte-identical
 //! `trajectory.csv`); every row was run twice when recorded and gave the same bytes. The runs
 //! are short (2 s of simulated time, 2000–2400 loops, about half a second each).
@@ -116,14 +120,15 @@ const CASES: &[(&str, &[&str], &str)] = &[
 ];
 
 /// Runs one case and returns the sha256 (hex) of its trajectory.csv, or why there is none.
-fn trajectory_sha256(index: usize, args: &[&str]) -> Result<String, String> {
-    let dir = fresh_dir(&format!("golden-{index}"));
+fn trajectory_sha256(index: usize, args: &[&str], in_process: bool) -> Result<String, String> {
+    let dir = fresh_dir(&format!("golden-{index}{}", if in_process { "-in-process" } else { "" }));
     let output = looplab()
         // The launch files' paths are relative to the repository.
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .arg("run")
         .args(args)
         .args(COMMON)
+        .args(in_process.then_some("--in-process"))
         .arg("--out")
         .arg(&dir)
         .arg("-q")
@@ -145,8 +150,16 @@ fn trajectory_sha256(index: usize, args: &[&str]) -> Result<String, String> {
     result
 }
 
-#[test]
-fn lockstep_trajectories_are_byte_identical_to_the_recorded_ones() {
+/// Runs every case of `scenario` (its name starts the case's target) and fails listing each
+/// hash that differs.
+fn check(scenario: &str, in_process: bool) {
+    let cases: Vec<usize> = (0..CASES.len())
+        .filter(|&i| {
+            let target = CASES[i].1[0];
+            target.starts_with(scenario) || target.starts_with(&format!("launch/{scenario}"))
+        })
+        .collect();
+    assert!(!cases.is_empty(), "no case for {scenario}");
     // Concurrent runs never see each other (each has its own run id); a few at a time.
     let workers = std::thread::available_parallelism().map_or(2, |n| n.get()).clamp(2, 4);
     let next = AtomicUsize::new(0);
@@ -155,9 +168,8 @@ fn lockstep_trajectories_are_byte_identical_to_the_recorded_ones() {
         for _ in 0..workers {
             scope.spawn(|| {
                 loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some((_, args, _)) = CASES.get(i) else { break };
-                    let got = trajectory_sha256(i, args);
+                    let Some(&i) = cases.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
+                    let got = trajectory_sha256(i, CASES[i].1, in_process);
                     results.lock().unwrap()[i] = Some(got);
                 }
             });
@@ -166,7 +178,8 @@ fn lockstep_trajectories_are_byte_identical_to_the_recorded_ones() {
 
     let results = results.into_inner().unwrap();
     let mut failures = Vec::new();
-    for ((name, args, expected), got) in CASES.iter().zip(results) {
+    for (&i, got) in cases.iter().zip(cases.iter().map(|&i| results[i].clone())) {
+        let (name, args, expected) = CASES[i];
         // A failed run reports why in place of the hash.
         let got = got.expect("every case ran").unwrap_or_else(|why| why);
         if got != *expected {
@@ -175,9 +188,30 @@ fn lockstep_trajectories_are_byte_identical_to_the_recorded_ones() {
     }
     assert!(
         failures.is_empty(),
-        "{} of {} trajectory.csv hashes differ from those recorded on 817977e:\n{}",
+        "{} of {} trajectory.csv hashes ({scenario}, {}) differ from those recorded on 817977e:\n{}",
         failures.len(),
-        CASES.len(),
+        cases.len(),
+        if in_process { "in-process" } else { "five processes" },
         failures.join("\n")
     );
+}
+
+#[test]
+fn pendulum_five_processes_give_the_recorded_bytes() {
+    check("pendulum", false);
+}
+
+#[test]
+fn pendulum_in_process_gives_the_same_bytes() {
+    check("pendulum", true);
+}
+
+#[test]
+fn quadcopter_five_processes_give_the_recorded_bytes() {
+    check("quadcopter", false);
+}
+
+#[test]
+fn quadcopter_in_process_gives_the_same_bytes() {
+    check("quadcopter", true);
 }
