@@ -1,10 +1,11 @@
-//! The reaction-wheel pendulum (paper 003) through the real five-process loop, in lockstep mode,
-//! against the paper's analytic results. Each case sets δ and K from the command line, so the
-//! launch-file path is what is tested.
+//! The reaction-wheel pendulum (paper 003) in lockstep mode against the paper's analytic
+//! results. Each case sets δ and K from the command line, so the launch-file path is what is
+//! tested. The models' numbers run in-process (byte-identical to the five processes, see
+//! tests/trajectory_hashes.rs); the sensors' zero-order hold runs through the real processes.
 
 mod common;
 
-use common::run;
+use common::{run, run_in_process};
 
 /// The paper's K and two other stabilising gains.
 const GAINS: [[f64; 3]; 3] = [[-378.0, -55.0, -1.0], [-300.0, -45.0, -0.8], [-420.0, -60.0, -1.2]];
@@ -21,7 +22,7 @@ fn no_bias_estimator_stands_upright_with_the_wheel_at_minus_k1_delta_over_k3() {
     for (delta, k) in [(0.05, GAINS[0]), (-0.04, GAINS[1]), (0.03, GAINS[2]), (-0.06, GAINS[0])] {
         let bias = format!("sensors.encoder.bias={delta:?}");
         let gains = gains_arg(k);
-        let r = run(
+        let r = run_in_process(
             "no-bias",
             &[
                 "pendulum",
@@ -55,7 +56,7 @@ fn bias_observer_finds_the_bias_and_stops_the_wheel() {
         let bias = format!("sensors.encoder.bias={delta:?}");
         let gains = gains_arg(k);
         let r =
-            run("observer", &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", &bias, "--set", &gains]);
+            run_in_process("observer", &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", &bias, "--set", &gains]);
         let estimate = r.metric("bias_estimate_final_rad");
         assert!((estimate - delta).abs() < 0.02 * delta.abs(), "δ = {delta}, K = {k:?}: δ̂ = {estimate}");
         assert_eq!(r.metric("bias_true_rad"), delta);

@@ -1,10 +1,11 @@
-//! The quadcopter (paper 001) through the real five-process loop, in lockstep mode: each case is
-//! a launch file in `launch/quadcopter/`, checked against the paper's numbers or an analytic
-//! result.
+//! The quadcopter (paper 001) in lockstep mode: each case is a launch file in
+//! `launch/quadcopter/`, checked against the paper's numbers or an analytic result. The cases run
+//! in-process (byte-identical to the five processes, see tests/trajectory_hashes.rs); the
+//! restarted estimator runs through the real processes.
 
 mod common;
 
-use common::{looplab, run};
+use common::{looplab, run, run_in_process};
 
 const CASES: &str = "launch/quadcopter";
 
@@ -16,7 +17,7 @@ fn case(name: &str) -> String {
 /// only along z, p₃(t) = 0.05 − 0.15e^{−2t} + 0.1e^{−3t} and v₃(t) = 0.3(e^{−2t} − e^{−3t}).
 #[test]
 fn analytic_altitude_response() {
-    let r = run("quad-analytic", &[&case("1-analytic")]);
+    let r = run_in_process("quad-analytic", &[&case("1-analytic")]);
     let t = r.trajectory();
     let time = t.col("t");
     assert_eq!(time.len(), 10_000);
@@ -43,7 +44,7 @@ fn analytic_altitude_response() {
 /// estimates never move, and the summary says they are unobservable.
 #[test]
 fn not_rich_hover_leaves_xi3_and_xi4_unidentified() {
-    let r = run("quad-not-rich", &[&case("2-not-rich")]);
+    let r = run_in_process("quad-not-rich", &[&case("2-not-rich")]);
     let z1 = r.metric("z1_final_m");
     assert!((z1 - 0.05).abs() < 0.01 * 0.05, "‖z₁‖ settles at {z1} m, not 0.05");
     assert_eq!(r.metric("xi3_change_max_rel"), 0.0);
@@ -59,7 +60,7 @@ fn not_rich_hover_leaves_xi3_and_xi4_unidentified() {
 /// is within 1% of the truth (and so are m̂, ĵ through the cascaded filters).
 #[test]
 fn rich_excitation_identifies_every_parameter() {
-    let r = run("quad-rich", &[&case("3-rich")]);
+    let r = run_in_process("quad-rich", &[&case("3-rich")]);
     let error = r.metric("param_rel_error_max_final");
     assert!(error < 0.01, "largest relative error of ξ̂ at 30 s: {error}");
     let mass = r.metric("mass_estimate_final_kg");
@@ -72,7 +73,7 @@ fn rich_excitation_identifies_every_parameter() {
 /// "about 0.08 m after about 5 seconds").
 #[test]
 fn closed_loop_tracking_stays_within_the_papers_ball() {
-    let r = run("quad-closed", &[&case("4-closed-loop")]);
+    let r = run_in_process("quad-closed", &[&case("4-closed-loop")]);
     let worst = r.metric("z1_max_after_5s_m");
     assert!(worst <= 0.09, "‖z₁‖ reaches {worst} m after 5 s");
     assert!(r.metric("param_rel_error_max_final") < 0.01);
@@ -103,7 +104,7 @@ fn stochastic_snr_matches_table_2() {
                 scope.spawn(move || {
                     let r = format!("estimator.r_scale={r_scale:?}");
                     let q = format!("estimator.q_scale={q_scale:?}");
-                    run("quad-snr", &[&case("5-stochastic-snr"), "--set", &r, "--set", &q]).metric("snr_mean")
+                    run_in_process("quad-snr", &[&case("5-stochastic-snr"), "--set", &r, "--set", &q]).metric("snr_mean")
                 })
             })
             .collect();
@@ -127,7 +128,7 @@ fn stochastic_snr_matches_table_2() {
 /// is reported, and the disturbance estimate b̂ = ξ̂₂/ξ̂₁ converges to b.
 #[test]
 fn lemniscate_with_a_disturbance_finds_the_disturbance() {
-    let r = run("quad-lemniscate", &[&case("6-lemniscate")]);
+    let r = run_in_process("quad-lemniscate", &[&case("6-lemniscate")]);
     let rms = r.metric("z1_rms_m");
     assert!(rms > 0.0 && rms < 0.08, "steady-state RMS ‖z₁‖ {rms} m");
     let b = [-0.3, 0.2, -0.1];
@@ -150,7 +151,7 @@ fn lemniscate_with_a_disturbance_finds_the_disturbance() {
 /// error stays bounded.
 #[test]
 fn hover_mass_step_in_the_lab_profile() {
-    let r = run("quad-mass-step", &[&case("7-hover-mass-step")]);
+    let r = run_in_process("quad-mass-step", &[&case("7-hover-mass-step")]);
     assert_eq!(r.metric("mass_true_kg"), 0.262);
     let rise = r.metric("mass_estimate_rise_kg");
     assert!((rise - 0.045).abs() <= 0.01, "m̂ rose by {rise} kg");

@@ -86,6 +86,16 @@ pub fn run(name: &str, args: &[&str]) -> Run {
     Run { dir, output, summary, typed }
 }
 
+/// `run` with `--in-process`: the same plant, sensors, estimator and controller in loop order in
+/// one process, byte-identical to the five-process lockstep run (tests/trajectory_hashes.rs
+/// proves it); for tests of the models' numbers, which need no transport.
+#[allow(dead_code)]
+pub fn run_in_process(name: &str, args: &[&str]) -> Run {
+    let mut args = args.to_vec();
+    args.push("--in-process");
+    run(name, &args)
+}
+
 pub fn read_summary(dir: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
     serde_json::from_str(&text).expect("summary.json is JSON")
