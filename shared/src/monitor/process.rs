@@ -72,19 +72,24 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     let recording =
         Recording::new(config, context.scenario.as_ref(), &context.run_dir, context.incarnation, Some(status))?;
     // The mode's one say in the monitor process. In real time the monitor must never slow the
-    // loop: it runs at the lowest priority (its threads inherit it), and its buffers hold a
-    // second of samples to catch up with. The plant ticks on a clock there, so silence is a stall.
-    let plant_period_ns = match config.mode {
-        Mode::Realtime => {
-            crate::runtime::wait::run_in_background();
-            Some((config.dt() * 1e9) as u64)
-        }
-        Mode::Lockstep => None,
+    // loop: its writer (histograms, metrics, files: nearly all its work) runs at the lowest
+    // priority, and the buffers hold a second of samples to catch up with. The receive loop
+    // below stays at normal priority: it only copies samples out and watches for stalls, a few
+    // microseconds per poll, and a starved one would see a stall too late (or lose samples).
+    // The plant ticks on a clock there, so silence is a stall.
+    let (plant_period_ns, background) = match config.mode {
+        Mode::Realtime => (Some((config.dt() * 1e9) as u64), true),
+        Mode::Lockstep => (None, false),
     };
     emit(&ChildEvent::Ready)?;
 
     let (tx, rx) = crossbeam_channel::unbounded();
-    let writer = std::thread::Builder::new().name("monitor-writer".into()).spawn(move || write(recording, rx))?;
+    let writer = std::thread::Builder::new().name("monitor-writer".into()).spawn(move || {
+        if background {
+            crate::runtime::wait::run_in_background();
+        }
+        write(recording, rx)
+    })?;
 
     let timeout_ns = (config.supervision.stall_timeout_s * 1e9) as u64;
     let mut watch = StallWatch::new(timeout_ns, config.loops(), plant_period_ns, Box::new(now_ns));

@@ -8,7 +8,6 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use crate::contract::msg::LoopTrace;
-use crate::contract::report::MonitorReport;
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 
 pub struct LoopsCsv {
@@ -54,9 +53,5 @@ impl RunSink for LoopsCsv {
 
     fn flush(&mut self) -> Result<()> {
         flush(&mut self.file, &self.run_dir)
-    }
-
-    fn finish(&mut self, _report: &MonitorReport) -> Result<()> {
-        self.flush()
     }
 }

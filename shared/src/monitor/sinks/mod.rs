@@ -52,7 +52,9 @@ pub trait RunSink: Send {
     fn flush(&mut self) -> Result<()>;
     /// The run is over (every loop has been passed): writes what is left. `report` holds the
     /// run's numbers, what each fault did included.
-    fn finish(&mut self, report: &MonitorReport) -> Result<()>;
+    fn finish(&mut self, _report: &MonitorReport) -> Result<()> {
+        self.flush()
+    }
 }
 
 /// Opens every output of a run, in this order.

@@ -8,7 +8,6 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use crate::contract::report::MonitorReport;
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 
 pub struct TrajectoryCsv {
@@ -70,16 +69,13 @@ impl RunSink for TrajectoryCsv {
     fn flush(&mut self) -> Result<()> {
         flush(&mut self.file, &self.run_dir)
     }
-
-    fn finish(&mut self, _report: &MonitorReport) -> Result<()> {
-        self.flush()
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::contract::msg::{Command, Estimate, Measurements, PlantState};
+    use crate::contract::report::MonitorReport;
     use crate::monitor::join::LoopParts;
     use crate::monitor::layout::Layout;
 
