@@ -167,8 +167,7 @@ fn check(scenario: &str, in_process: bool) {
     std::thread::scope(|scope| {
         for _ in 0..workers {
             scope.spawn(|| {
-                loop {
-                    let Some(&i) = cases.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
+                while let Some(&i) = cases.get(next.fetch_add(1, Ordering::Relaxed)) {
                     let got = trajectory_sha256(i, CASES[i].1, in_process);
                     results.lock().unwrap()[i] = Some(got);
                 }
