@@ -236,3 +236,19 @@ fn a_sweep_over_too_many_values_is_refused_before_any_run() {
     assert_eq!(output.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("at most 1000 are allowed"), "{stderr}");
 }
+
+#[test]
+fn a_sweep_with_a_fault_done_from_outside_needs_processes() {
+    let out_dir = fresh_dir("sweep-refused");
+    let output = looplab()
+        .args(["sweep", "pendulum", "--param", "duration_s", "--from", "3", "--to", "4"])
+        .args(["--fault", "kill estimator at 1s", "--out"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("`kill estimator at 1s`") && stderr.contains("add --processes"), "{stderr}");
+    assert!(!out_dir.exists(), "a refused sweep leaves no folder");
+}

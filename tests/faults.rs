@@ -372,3 +372,40 @@ fn the_measured_delay_margin_agrees_with_the_linearised_loop() {
     assert!(stdout.contains("agree within one tick"), "{stdout}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A sweep's report without what differs from one sweep to the next: the run folders.
+fn sweep_report(dir: &std::path::Path) -> serde_json::Value {
+    let mut report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("sweep.json")).unwrap()).unwrap();
+    for point in report["points"].as_array_mut().unwrap() {
+        point.as_object_mut().unwrap().remove("run_dir");
+    }
+    report
+}
+
+#[test]
+fn a_sweep_as_five_processes_reports_what_the_in_process_sweep_reports() {
+    let sweep = |name: &str, extra: &[&str]| {
+        let dir = fresh_dir(name);
+        let output = looplab()
+            .args(["sweep", "pendulum", "--duration", "20", "--param", "faults.0.delay_ticks", "--from", "30"])
+            .args(["--to", "31", "--set", "sensors.encoder.quantum=0", "--set", "sensors.wheel_speed.noise_std=0"])
+            .args(["--fault", "delay controller by 0 ticks at 2s"])
+            .args(extra)
+            .arg("--out")
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let report = sweep_report(&dir);
+        std::fs::remove_dir_all(&dir).unwrap();
+        (report, String::from_utf8(output.stdout).unwrap())
+    };
+    let (processes, processes_table) = sweep("sweep-processes", &["--processes"]);
+    let (in_process, in_process_table) = sweep("sweep-in-process", &[]);
+    let verdicts: Vec<&str> =
+        processes["points"].as_array().unwrap().iter().map(|p| p["verdict"].as_str().unwrap()).collect();
+    assert_eq!(verdicts, ["stable", "unstable"]);
+    assert_eq!(processes, in_process);
+    assert_eq!(processes_table, in_process_table);
+}

@@ -90,6 +90,10 @@ struct SweepCli {
     /// Runs at a time
     #[arg(long, default_value_t = 2)]
     jobs: usize,
+    /// Run each value as the five processes over shared memory, as `looplab run` does, instead of
+    /// in this process (same trajectories, many times slower); needed for kill and stop faults
+    #[arg(long)]
+    processes: bool,
 }
 
 /// The options `run` and `sweep` share: each becomes a launch-file override.
@@ -251,6 +255,7 @@ fn sweep(args: SweepCli) -> ExitCode {
         overrides,
         out: args.out,
         jobs: args.jobs,
+        processes: args.processes,
     })
 }
 

@@ -1,7 +1,9 @@
 //! `looplab sweep`: runs a scenario again and again in lockstep mode while one launch-file key
 //! varies, and reports the scenario's metrics and what the swept fault did at each value. For a
 //! controller delay it finds the smallest delay at which the loop goes unstable and prints it
-//! next to the delay margin the scenario's linearised model predicts.
+//! next to the delay margin the scenario's linearised model predicts. Each value runs in this
+//! process (`launcher::in_process`, byte-identical to the five processes in lockstep) unless
+//! `--processes` asks for the five-process pipeline.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -15,9 +17,11 @@ use crate::config::faults::FaultKind;
 use crate::config::launch::{LaunchConfig, Override};
 use crate::contract::role::Role;
 use crate::launcher::inject::target;
+use crate::launcher::in_process::run_in_process;
 use crate::launcher::{Binaries, EXIT_BAD_INPUT, EXIT_INTERRUPTED, Outcome, StopReason, Summary, run_once};
-use crate::runtime::signals::StopFlag;
 use crate::model::scenario::{Scenario, TheoreticalMargin};
+use crate::runtime::in_process::refusal;
+use crate::runtime::signals::StopFlag;
 
 /// The error's peak in the last second over its peak in the first second of the fault above
 /// which the loop counts as unstable: the disturbance the fault caused grew instead of dying
@@ -36,6 +40,8 @@ pub struct SweepArgs {
     pub overrides: Vec<Override>,
     pub out: Option<PathBuf>,
     pub jobs: usize,
+    /// Run each value as the five processes instead of in this process.
+    pub processes: bool,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -131,9 +137,17 @@ pub fn run(args: SweepArgs) -> ExitCode {
         }
     }
     let fault_index = swept_fault(&args.param).or((!configs[0].1.faults.is_empty()).then_some(0));
-    let binaries = match crate::launcher::locate_binaries() {
-        Ok(b) => b,
-        Err(e) => return bad(format!("{e:#}")),
+    let binaries = if args.processes {
+        match crate::launcher::locate_binaries() {
+            Ok(b) => Some(b),
+            Err(e) => return bad(format!("{e:#}")),
+        }
+    } else {
+        // No silent fall-back to processes: the user asks for them.
+        if let Some(why) = configs.iter().find_map(|(_, config, _)| refusal(config)) {
+            return bad(format!("cannot sweep in one process: {why}; add --processes to run each value as five processes"));
+        }
+        None
     };
     let out = args.out.clone().unwrap_or_else(|| {
         let stamp = chrono::Local::now().format("%Y%m%d-%H%M%S");
@@ -151,7 +165,7 @@ pub fn run(args: SweepArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let results = run_all(&configs, &binaries, &out, &args.param, args.jobs.max(1), &stop);
+    let results = run_all(&configs, binaries.as_ref(), &out, &args.param, args.jobs.max(1), &stop);
     if stop.requested() {
         let done = results.iter().filter(|r| r.is_some()).count();
         eprintln!(
@@ -192,11 +206,12 @@ pub fn run(args: SweepArgs) -> ExitCode {
     if report.points.iter().any(|p| p.verdict == Verdict::Failed) { ExitCode::FAILURE } else { ExitCode::SUCCESS }
 }
 
-/// Runs every value, `jobs` at a time, until a stop request; results in the order of `configs`
-/// (None: not run, or interrupted).
+/// Runs every value, `jobs` at a time (each job a thread running one value at a time, as five
+/// processes with `binaries`, else in the thread itself), until a stop request; results in the
+/// order of `configs` (None: not run, or interrupted).
 fn run_all(
     configs: &[(f64, LaunchConfig, Box<dyn Scenario>)],
-    binaries: &Binaries,
+    binaries: Option<&Binaries>,
     out: &Path,
     param: &str,
     jobs: usize,
@@ -215,8 +230,12 @@ fn run_all(
                         break;
                     }
                     let dir = out.join(format!("{param}={}", value_text(*value)));
-                    let result = crate::launcher::create_run_dir(Some(&dir), &config.scenario)
-                        .and_then(|dir| run_once(config, scenario.as_ref(), binaries, &dir, true));
+                    let result = crate::launcher::create_run_dir(Some(&dir), &config.scenario).and_then(|dir| {
+                        match binaries {
+                            Some(binaries) => run_once(config, scenario.as_ref(), binaries, &dir, true),
+                            None => run_in_process(config, scenario.as_ref(), &dir),
+                        }
+                    });
                     if matches!(result, Ok((_, Outcome::Interrupted))) {
                         break;
                     }
