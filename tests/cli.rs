@@ -252,3 +252,21 @@ fn a_sweep_with_a_fault_done_from_outside_needs_processes() {
     assert!(stderr.contains("`kill estimator at 1s`") && stderr.contains("add --processes"), "{stderr}");
     assert!(!out_dir.exists(), "a refused sweep leaves no folder");
 }
+
+/// `--in-process` runs lockstep without kill or stop faults; anything else is one line naming
+/// the option and why, exit 2, and no run folder.
+#[test]
+fn in_process_refuses_real_time_and_faults_done_from_outside() {
+    for (args, why) in [
+        (&["pendulum"][..], "only lockstep runs in one process"),
+        (&["pendulum", "--mode", "lockstep", "--fault", "stop controller at 1s for 100ms"][..], "`stop controller"),
+    ] {
+        let out_dir = fresh_dir("in-process-refused");
+        let output = looplab().arg("run").args(args).arg("--in-process").arg("--out").arg(&out_dir).output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(stderr.starts_with("error: --in-process: ") && stderr.contains(why), "{stderr}");
+        assert!(!out_dir.exists(), "a refused run leaves no folder");
+    }
+}

@@ -289,7 +289,7 @@ fn run(args: RunArgs) -> ExitCode {
     if args.in_process
         && let Some(why) = crate::runtime::in_process::refusal(&config)
     {
-        return bad_input(why);
+        return bad_input(format!("--in-process: {why}; leave out --in-process to run the five processes"));
     }
     let binaries = match args.in_process {
         true => None,

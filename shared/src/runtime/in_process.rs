@@ -28,11 +28,13 @@ pub struct InProcessReports {
 /// Why `config` cannot run in one process, if it cannot.
 pub fn refusal(config: &LaunchConfig) -> Option<String> {
     if config.mode != Mode::Lockstep {
-        return Some("--in-process runs lockstep only (real time needs the processes to measure): add --mode lockstep".into());
+        return Some("only lockstep runs in one process (real time needs the processes it measures)".into());
     }
-    config.faults.iter().find(|f| f.kind.from_outside()).map(|f| {
-        format!("--in-process cannot inject `{}`: a {} fault needs a process to act on", f.describe(), f.kind.name())
-    })
+    config
+        .faults
+        .iter()
+        .find(|f| f.kind.from_outside())
+        .map(|f| format!("`{}` needs a process to {} (kill and stop faults do)", f.describe(), f.kind.name()))
 }
 
 /// Handles the input of one stage and stamps its output, as the stage's process would.
@@ -52,7 +54,7 @@ pub fn run(
     mut observe: impl FnMut(LoopMessage) -> Result<()>,
 ) -> Result<InProcessReports> {
     if let Some(why) = refusal(config) {
-        bail!(why);
+        bail!("cannot run in one process: {why}");
     }
     let mut plant = PlantCore::new(config, scenario, 0);
     let mut sensors = StageRunner::new(SensorsTask::new(config, scenario), Role::Sensors, config, 0);
