@@ -26,8 +26,9 @@ pub const PROCESSES: [&str; 5] = ["plant", "sensors", "estimator", "controller",
 /// The stages between the plant and the plant, which handle one input per loop.
 pub const STAGES: [&str; 3] = ["sensors", "estimator", "controller"];
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr)]
 #[serde(rename_all = "lowercase")]
+#[strum(serialize_all = "lowercase")]
 pub enum FaultKind {
     /// SIGKILL the process.
     Kill,
@@ -43,13 +44,7 @@ pub enum FaultKind {
 
 impl FaultKind {
     pub fn name(self) -> &'static str {
-        match self {
-            FaultKind::Kill => "kill",
-            FaultKind::Stop => "stop",
-            FaultKind::Delay => "delay",
-            FaultKind::Drop => "drop",
-            FaultKind::Corrupt => "corrupt",
-        }
+        self.into()
     }
 
     /// The processes this kind of fault can be injected into.

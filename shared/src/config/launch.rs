@@ -31,8 +31,9 @@ pub const MAX_LOOPS: u64 = 1_000_000_000;
 
 pub use crate::config::error::{COMMON_KEYS, LaunchError};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr)]
 #[serde(rename_all = "lowercase")]
+#[strum(serialize_all = "lowercase")]
 pub enum Mode {
     /// The plant ticks on an absolute-deadline timer and applies the newest command it has.
     Realtime,
@@ -43,10 +44,7 @@ pub enum Mode {
 
 impl Mode {
     pub fn name(self) -> &'static str {
-        match self {
-            Mode::Realtime => "realtime",
-            Mode::Lockstep => "lockstep",
-        }
+        self.into()
     }
 }
 
@@ -785,6 +783,26 @@ fn check_wait(w: &WaitSettings, config: &LaunchConfig) -> Result<(), LaunchError
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The text of each enum comes from its derives, the same in a launch file, summary.json
+    /// and every message.
+    #[test]
+    fn enum_text_is_derived_and_the_same_everywhere() {
+        use crate::config::wait::Strategy;
+        fn same<T: Serialize>(value: T, name: &str) {
+            assert_eq!(serde_json::to_value(value).unwrap().as_str(), Some(name));
+        }
+        for kind in [FaultKind::Kill, FaultKind::Stop, FaultKind::Delay, FaultKind::Drop, FaultKind::Corrupt] {
+            same(kind, kind.name());
+        }
+        for mode in [Mode::Realtime, Mode::Lockstep] {
+            same(mode, mode.name());
+        }
+        for strategy in [Strategy::Block, Strategy::Spin, Strategy::Adaptive] {
+            same(strategy, strategy.name());
+        }
+        assert_eq!((FaultKind::Corrupt.name(), Mode::Lockstep.name()), ("corrupt", "lockstep"));
+    }
 
     /// A scenario whose estimate is larger than a message carries cannot be resolved: the error
     /// names the scenario and the vector (and no child process ever starts).

@@ -16,8 +16,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::contract::role::Role;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum, strum::IntoStaticStr)]
 #[serde(rename_all = "lowercase")]
+#[strum(serialize_all = "lowercase")]
 pub enum Strategy {
     Block,
     Spin,
@@ -26,11 +27,7 @@ pub enum Strategy {
 
 impl Strategy {
     pub fn name(self) -> &'static str {
-        match self {
-            Strategy::Block => "block",
-            Strategy::Spin => "spin",
-            Strategy::Adaptive => "adaptive",
-        }
+        self.into()
     }
 }
 
