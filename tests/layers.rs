@@ -8,7 +8,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// Bottom to top.
-const LAYERS: [&str; 9] = ["contract", "config", "model", "scenarios", "runtime", "monitor", "launcher", "tools", "cli"];
+const LAYERS: [&str; 9] =
+    ["contract", "config", "model", "scenarios", "runtime", "monitor", "launcher", "tools", "cli"];
 
 fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
     for entry in std::fs::read_dir(dir).unwrap() {
@@ -35,11 +36,7 @@ fn module_of(root: &Path, file: &Path) -> Vec<String> {
 /// Every `crate::a::b` path a source names, as its first two segments, with `use crate::{a::b,
 /// c}` groups expanded. Comments are skipped.
 fn crate_paths(text: &str) -> Vec<Vec<String>> {
-    let code: String = text
-        .lines()
-        .map(|line| line.split("//").next().unwrap_or(""))
-        .collect::<Vec<_>>()
-        .join("\n");
+    let code: String = text.lines().map(|line| line.split("//").next().unwrap_or("")).collect::<Vec<_>>().join("\n");
     let mut out = Vec::new();
     let mut rest = code.as_str();
     while let Some(at) = rest.find("crate::") {

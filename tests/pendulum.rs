@@ -55,8 +55,10 @@ fn bias_observer_finds_the_bias_and_stops_the_wheel() {
     for (delta, k) in [(0.1, GAINS[0]), (-0.07, GAINS[0]), (0.06, GAINS[1]), (-0.05, GAINS[2])] {
         let bias = format!("sensors.encoder.bias={delta:?}");
         let gains = gains_arg(k);
-        let r =
-            run_in_process("observer", &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", &bias, "--set", &gains]);
+        let r = run_in_process(
+            "observer",
+            &["pendulum", "--mode", "lockstep", "--duration", "12", "--set", &bias, "--set", &gains],
+        );
         let estimate = r.metric("bias_estimate_final_rad");
         assert!((estimate - delta).abs() < 0.02 * delta.abs(), "δ = {delta}, K = {k:?}: δ̂ = {estimate}");
         assert_eq!(r.metric("bias_true_rad"), delta);

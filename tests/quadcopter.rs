@@ -104,7 +104,8 @@ fn stochastic_snr_matches_table_2() {
                 scope.spawn(move || {
                     let r = format!("estimator.r_scale={r_scale:?}");
                     let q = format!("estimator.q_scale={q_scale:?}");
-                    run_in_process("quad-snr", &[&case("5-stochastic-snr"), "--set", &r, "--set", &q]).metric("snr_mean")
+                    run_in_process("quad-snr", &[&case("5-stochastic-snr"), "--set", &r, "--set", &q])
+                        .metric("snr_mean")
                 })
             })
             .collect();

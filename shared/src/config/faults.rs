@@ -8,7 +8,6 @@
 
 use serde::{Deserialize, Serialize};
 
-
 /// The longest a `stop` may last, wall-clock s (an hour). It is wall-clock time, which in
 /// lockstep has nothing to do with the run's simulated duration_s (a short lockstep run may
 /// want a stop longer than itself to trip `lockstep_stall_s`), and anything longer only hangs
@@ -134,7 +133,6 @@ impl FaultSpec {
         }
         s
     }
-
 }
 
 fn seconds_text(s: f64) -> String {

@@ -15,8 +15,8 @@ use serde::{Deserialize, Serialize};
 use crate::config::faults::{
     FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, PROCESSES, Supervision,
 };
-use crate::config::wait::MAX_WAIT_US;
 use crate::config::schema::{ScenarioSchema, SignalLayout};
+use crate::config::wait::MAX_WAIT_US;
 use crate::config::wait::WaitSettings;
 use crate::contract::msg::MAX_SENSORS;
 
@@ -663,12 +663,7 @@ fn check_fault(f: &FaultSpec, c: &LaunchConfig, key: &str) -> Result<(), LaunchE
     if !targets.contains(&f.process.as_str()) {
         return Err(c.error(
             &field("process"),
-            format!(
-                "a {} fault cannot target \"{}\"; allowed: {}",
-                f.kind.name(),
-                f.process,
-                targets.join(", ")
-            ),
+            format!("a {} fault cannot target \"{}\"; allowed: {}", f.kind.name(), f.process, targets.join(", ")),
         ));
     }
     if !(f.at_s.is_finite() && f.at_s >= 0.0 && f.at_s < c.duration_s) {
@@ -714,17 +709,15 @@ fn check_fault(f: &FaultSpec, c: &LaunchConfig, key: &str) -> Result<(), LaunchE
                 &field("delay_s"),
                 format!("must be 0 or more seconds, less than the run's duration_s = {} s, got {d}", c.duration_s),
             )),
-            (None, Some(t)) if u64::from(t) > c.loops() => Err(
-                c.error(&field("delay_ticks"), format!("must be at most the run's {} loops, got {t}", c.loops()))
-            ),
+            (None, Some(t)) if u64::from(t) > c.loops() => {
+                Err(c.error(&field("delay_ticks"), format!("must be at most the run's {} loops, got {t}", c.loops())))
+            }
             _ => Ok(()),
         },
         FaultKind::Drop => match f.probability {
             Some(p) if (0.0..=1.0).contains(&p) => Ok(()),
             Some(p) => Err(c.error(&field("probability"), format!("must be between 0 and 1, got {p}"))),
-            None => {
-                Err(c.error(&field("probability"), "a drop needs the chance, 0 to 1, that each output is lost"))
-            }
+            None => Err(c.error(&field("probability"), "a drop needs the chance, 0 to 1, that each output is lost")),
         },
         _ => Ok(()),
     }
@@ -756,10 +749,9 @@ fn check_supervision(s: &Supervision, c: &LaunchConfig) -> Result<(), LaunchErro
         };
         let policy = s.policy(process);
         if !(policy.backoff_s.is_finite() && policy.backoff_s >= 0.0 && policy.backoff_s <= MAX_BACKOFF_S) {
-            return Err(c.error(
-                &key("backoff_s"),
-                format!("must be 0 to {MAX_BACKOFF_S} seconds, got {}", policy.backoff_s),
-            ));
+            return Err(
+                c.error(&key("backoff_s"), format!("must be 0 to {MAX_BACKOFF_S} seconds, got {}", policy.backoff_s))
+            );
         }
         if policy.max_restarts > MAX_RESTARTS {
             return Err(c.error(

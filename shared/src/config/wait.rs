@@ -81,7 +81,6 @@ impl WaitSettings {
         };
         own.unwrap_or(self.strategy)
     }
-
 }
 
 #[cfg(test)]

@@ -11,7 +11,6 @@ use std::path::PathBuf;
 use clap::Parser;
 use serde::{Deserialize, Serialize};
 
-
 /// Arguments every loop process takes; the launcher fills them in.
 #[derive(Debug, Parser)]
 #[command(about = "A LoopLab loop process; started by `looplab run`, not by hand.")]
@@ -117,7 +116,6 @@ pub struct StageReport {
     #[serde(default)]
     pub wait: WaitCounts,
 }
-
 
 /// What an adaptive wait did, for the process's report.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
     clap::ValueEnum,
     strum::IntoStaticStr,
     strum::Display,
-    strum::EnumString
+    strum::EnumString,
 )]
 #[serde(rename_all = "lowercase")]
 #[strum(serialize_all = "lowercase")]

@@ -4,10 +4,10 @@
 use std::fmt::Write as _;
 
 // The scenarios' old path to this type, until issue 11 moves it below them.
+use crate::contract::report::{HOPS, MissingLoops, Stats};
 use crate::launcher::outcome::{EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Outcome};
 pub use crate::launcher::summary::ErrorMeasureInfo;
 use crate::launcher::summary::Summary;
-use crate::contract::report::{HOPS, MissingLoops, Stats};
 
 /// The launcher's exit code for a finished run, and the error line it prints, if any.
 pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
@@ -129,7 +129,8 @@ pub fn render(s: &Summary) -> String {
             format!("{}{again} (pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s)
         })
         .collect();
-    let processes = if processes.is_empty() { "none: the loop ran in-process".to_string() } else { processes.join(", ") };
+    let processes =
+        if processes.is_empty() { "none: the loop ran in-process".to_string() } else { processes.join(", ") };
     let _ = writeln!(out, "\n  processes: {processes}");
     let _ = if s.shared_memory.clean {
         writeln!(out, "  shared memory: clean, no file of the run is left")
@@ -254,11 +255,11 @@ mod tests {
     use super::*;
     use crate::config::faults::FaultKind;
     use crate::contract::protocol::WaitCounts;
+    use crate::contract::report::FaultEffect;
     use crate::contract::role::Role;
     use crate::launcher::outcome::StopReason;
     use crate::launcher::summary::tests::summary;
     use crate::launcher::summary::{FaultReport, RestartSteps};
-    use crate::contract::report::FaultEffect;
 
     fn summary_with_fault() -> Summary {
         Summary {

@@ -11,13 +11,13 @@ use serde::{Deserialize, Serialize, Serializer};
 use crate::config::faults::FaultKind;
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::protocol::{PlantReport, StageReport, WaitCounts};
+use crate::contract::report::{FaultEffect, MissingLoops, MonitorReport, Stats};
 use crate::contract::role::Role;
 use crate::launcher::child::Start;
 use crate::launcher::inject::{DetectedBy, FaultSeen, target};
 use crate::launcher::outcome::{Exit, Outcome, StopReason};
 use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
-use crate::contract::report::{FaultEffect, MissingLoops, MonitorReport, Stats};
 pub use crate::model::scenario::ErrorMeasureInfo;
 use crate::model::scenario::Scenario;
 
@@ -90,7 +90,6 @@ pub struct Summary {
 fn by_name<V: Serialize, S: Serializer>(map: &BTreeMap<Role, V>, serializer: S) -> Result<S::Ok, S::Error> {
     serializer.collect_map(map.iter().map(|(role, v)| (role.name(), v)).collect::<BTreeMap<_, _>>())
 }
-
 
 /// One injected fault: what the launcher saw (wall-clock, from the injection) and what it did
 /// to the loop and the physical system (simulation time, from the monitor).

@@ -24,9 +24,9 @@ use crate::launcher::outcome::{Exit, Outcome};
 use crate::launcher::restart::{self, Death, Decision, RestartRecord};
 use crate::launcher::run_dir::{new_run_id, write_atomically};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
+use crate::model::scenario::Scenario;
 use crate::runtime::ipc;
 use crate::runtime::signals::StopFlag;
-use crate::model::scenario::Scenario;
 
 /// Longest start-up: every process must report ready within it.
 const READY_TIMEOUT: Duration = Duration::from_secs(20);

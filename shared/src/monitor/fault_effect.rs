@@ -5,8 +5,8 @@ use crate::config::faults::FaultKind;
 use crate::config::launch::LaunchConfig;
 use crate::contract::report::FaultEffect;
 use crate::contract::role::Role;
-use crate::monitor::join::LoopParts;
 use crate::model::scenario::ErrorMeasure;
+use crate::monitor::join::LoopParts;
 
 /// Follows one fault through the loops the monitor writes.
 pub struct FaultTracker {
@@ -135,8 +135,8 @@ impl FaultTracker {
 mod tests {
     use super::*;
     use crate::config::launch::Override;
-    use crate::scenarios::resolve;
     use crate::contract::msg::{LoopRecord, PlantState};
+    use crate::scenarios::resolve;
 
     /// A pendulum run of 20 loops at 1 kHz with these faults.
     fn config(faults: &[&str]) -> LaunchConfig {

@@ -12,13 +12,13 @@ use crate::contract::msg::PlantCounters;
 use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::role::Topic;
+use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::join::{Joiner, LoopParts, Sample};
 use crate::monitor::layout::Layout;
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
 use crate::monitor::stats::LoopStats;
 use crate::runtime::ipc::MONITOR_BUFFER;
-use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 
 /// A loop still missing parts once this many newer loops have arrived is written as it is: by
 /// then the monitor's buffer of that topic has overflowed past it.
@@ -197,8 +197,8 @@ impl Recording {
 mod tests {
     use super::*;
     use crate::config::launch::Override;
-    use crate::scenarios::resolve;
     use crate::monitor::join::tests::{command, estimate, measurements, record, state, whole};
+    use crate::scenarios::resolve;
 
     /// A lockstep pendulum run of 6 loops, recorded into a fresh folder.
     fn setup(name: &str) -> (LaunchConfig, Box<dyn Scenario>, std::path::PathBuf) {

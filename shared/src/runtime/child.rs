@@ -12,9 +12,9 @@ use iceoryx2::prelude::*;
 use crate::config::launch::LaunchConfig;
 use crate::contract::protocol::{ChildEvent, ProcessArgs};
 use crate::contract::role::Role;
+use crate::model::scenario::Scenario;
 use crate::runtime::ipc::Ipc;
 use crate::runtime::signals::StopFlag;
-use crate::model::scenario::Scenario;
 use crate::scenarios::load_resolved;
 
 /// Longest a wait blocks before it looks at the stop flag again (a signal also ends it early).

@@ -96,4 +96,3 @@ impl StageFaults {
         self.active(FaultKind::Corrupt, k).map(|s| s.value.unwrap_or_default())
     }
 }
-

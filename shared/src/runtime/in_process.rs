@@ -11,10 +11,10 @@ use crate::contract::clock::now_ns;
 use crate::contract::msg::{LoopMessage, Message, TickTiming};
 use crate::contract::protocol::{PlantReport, StageReport};
 use crate::contract::role::Role;
+use crate::model::scenario::Scenario;
 use crate::runtime::plant::PlantCore;
 use crate::runtime::signals::StopFlag;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
-use crate::model::scenario::Scenario;
 
 /// What the in-process run's "processes" report at its end.
 #[derive(Debug, Clone)]

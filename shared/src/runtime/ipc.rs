@@ -21,13 +21,13 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow};
+use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
-use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 
 use crate::config::launch::Mode;
@@ -399,7 +399,11 @@ pub fn check_private(folder: &std::path::Path) -> Result<()> {
         return Err(anyhow!("{} is not a folder (a symbolic link or a file); refusing it", folder.display()));
     }
     if meta.uid() != me {
-        return Err(anyhow!("{} belongs to user {}, not to this user ({me}); refusing it", folder.display(), meta.uid()));
+        return Err(anyhow!(
+            "{} belongs to user {}, not to this user ({me}); refusing it",
+            folder.display(),
+            meta.uid()
+        ));
     }
     if meta.permissions().mode() & 0o077 != 0 {
         return Err(anyhow!(

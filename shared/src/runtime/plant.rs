@@ -26,11 +26,11 @@ use crate::contract::clock::{TickTimer, now_ns};
 use crate::contract::msg::*;
 use crate::contract::protocol::{ChildEvent, PlantReport};
 use crate::contract::role::{Role, Topic};
+use crate::model::scenario::Scenario;
 use crate::runtime::child::{Context, emit, wait, wait_for_line, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::wait::{ArrivalModel, Waiter};
-use crate::model::scenario::Scenario;
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.

@@ -8,14 +8,14 @@ use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::msg::Message;
 use crate::contract::protocol::ChildEvent;
-use crate::runtime::child::emit;
 use crate::contract::role::Role;
+use crate::model::scenario::Calibration;
+use crate::runtime::child::emit;
 use crate::runtime::child::{Context, WAIT_SLICE, wait, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
 use crate::runtime::wait::{ArrivalModel, Waiter};
-use crate::model::scenario::Calibration;
 
 /// Runs `task` as the process of `role` until a stop is requested.
 fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {

@@ -3,8 +3,8 @@
 //! shared memory removed. The flag counts them: a second one asks to hurry (the launcher then
 //! kills what is left instead of waiting for it, and still cleans up).
 
-use std::sync::{Arc, Mutex};
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 #[derive(Clone, Debug)]
 pub struct StopFlag(Arc<AtomicUsize>);

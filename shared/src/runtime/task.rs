@@ -13,9 +13,9 @@ use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState};
 use crate::contract::protocol::StageReport;
 use crate::contract::role::Role;
+use crate::model::scenario::{Calibration, Controller, Estimator, Scenario};
 use crate::model::sensors::SensorEmulator;
 use crate::runtime::faults::{AddedDelay, StageFaults};
-use crate::model::scenario::{Calibration, Controller, Estimator, Scenario};
 
 /// One stage's computation.
 pub trait Task {

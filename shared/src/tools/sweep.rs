@@ -16,8 +16,8 @@ use serde::Serialize;
 use crate::config::faults::FaultKind;
 use crate::config::launch::{LaunchConfig, Override};
 use crate::contract::role::Role;
-use crate::launcher::inject::target;
 use crate::launcher::in_process::run_in_process;
+use crate::launcher::inject::target;
 use crate::launcher::{Binaries, EXIT_BAD_INPUT, EXIT_INTERRUPTED, Outcome, StopReason, Summary, run_once};
 use crate::model::scenario::{Scenario, TheoreticalMargin};
 use crate::runtime::in_process::refusal;
@@ -145,7 +145,9 @@ pub fn run(args: SweepArgs) -> ExitCode {
     } else {
         // No silent fall-back to processes: the user asks for them.
         if let Some(why) = configs.iter().find_map(|(_, config, _)| refusal(config)) {
-            return bad(format!("cannot sweep in one process: {why}; add --processes to run each value as five processes"));
+            return bad(format!(
+                "cannot sweep in one process: {why}; add --processes to run each value as five processes"
+            ));
         }
         None
     };
@@ -230,12 +232,11 @@ fn run_all(
                         break;
                     }
                     let dir = out.join(format!("{param}={}", value_text(*value)));
-                    let result = crate::launcher::create_run_dir(Some(&dir), &config.scenario).and_then(|dir| {
-                        match binaries {
+                    let result =
+                        crate::launcher::create_run_dir(Some(&dir), &config.scenario).and_then(|dir| match binaries {
                             Some(binaries) => run_once(config, scenario.as_ref(), binaries, &dir, true),
                             None => run_in_process(config, scenario.as_ref(), &dir),
-                        }
-                    });
+                        });
                     if matches!(result, Ok((_, Outcome::Interrupted))) {
                         break;
                     }
