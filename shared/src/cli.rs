@@ -291,12 +291,14 @@ fn run(args: RunArgs) -> ExitCode {
     {
         return bad_input(format!("--in-process: {why}; leave out --in-process to run the five processes"));
     }
-    let binaries = match args.in_process {
-        true => None,
-        false => match launcher::locate_binaries() {
+    // The in-process run needs no loop binaries.
+    let binaries = if args.in_process {
+        None
+    } else {
+        match launcher::locate_binaries() {
             Ok(b) => Some(b),
             Err(e) => return bad_input(format!("{e:#}")),
-        },
+        }
     };
     let run_dir = match launcher::create_run_dir(args.out.as_deref(), &config.scenario) {
         Ok(d) => d,

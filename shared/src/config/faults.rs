@@ -8,6 +8,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::contract::role::Role;
+
 /// The longest a `stop` may last, wall-clock s (an hour). It is wall-clock time, which in
 /// lockstep has nothing to do with the run's simulated duration_s (a short lockstep run may
 /// want a stop longer than itself to trip `lockstep_stall_s`), and anything longer only hangs
@@ -19,11 +21,6 @@ pub const MAX_TIMEOUT_S: f64 = 3600.0;
 pub const MAX_BACKOFF_S: f64 = 60.0;
 /// The most restarts per process and run.
 pub const MAX_RESTARTS: u32 = 1000;
-
-/// Every process the launcher starts, in the order data flows.
-pub const PROCESSES: [&str; 5] = ["plant", "sensors", "estimator", "controller", "monitor"];
-/// The stages between the plant and the plant, which handle one input per loop.
-pub const STAGES: [&str; 3] = ["sensors", "estimator", "controller"];
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr)]
 #[serde(rename_all = "lowercase")]
@@ -47,11 +44,11 @@ impl FaultKind {
     }
 
     /// The processes this kind of fault can be injected into.
-    pub fn targets(self) -> &'static [&'static str] {
+    pub fn targets(self) -> &'static [Role] {
         match self {
-            FaultKind::Kill | FaultKind::Stop => &PROCESSES,
-            FaultKind::Delay | FaultKind::Drop => &STAGES,
-            FaultKind::Corrupt => &["controller"],
+            FaultKind::Kill | FaultKind::Stop => &Role::ALL,
+            FaultKind::Delay | FaultKind::Drop => &Role::STAGES,
+            FaultKind::Corrupt => &[Role::Controller],
         }
     }
 
@@ -305,8 +302,8 @@ pub struct Policy {
 }
 
 impl Supervision {
-    pub fn policy(&self, process: &str) -> Policy {
-        let own = self.policy_of(process);
+    pub fn policy(&self, role: Role) -> Policy {
+        let own = self.policy_of(role);
         Policy {
             restart: own.restart.unwrap_or(self.restart),
             max_restarts: own.max_restarts.unwrap_or(self.max_restarts),
@@ -314,13 +311,14 @@ impl Supervision {
         }
     }
 
-    pub fn policy_of(&self, process: &str) -> &ProcessPolicy {
-        match process {
-            "plant" => &self.plant,
-            "sensors" => &self.sensors,
-            "estimator" => &self.estimator,
-            "controller" => &self.controller,
-            _ => &self.monitor,
+    /// The role's own `[supervision.<role>]` settings.
+    pub fn policy_of(&self, role: Role) -> &ProcessPolicy {
+        match role {
+            Role::Plant => &self.plant,
+            Role::Sensors => &self.sensors,
+            Role::Estimator => &self.estimator,
+            Role::Controller => &self.controller,
+            Role::Monitor => &self.monitor,
         }
     }
 }

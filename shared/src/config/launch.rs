@@ -13,12 +13,13 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::config::faults::{
-    FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, PROCESSES, Supervision,
+    FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, Supervision,
 };
 use crate::config::schema::{ScenarioSchema, SignalLayout};
 use crate::config::wait::MAX_WAIT_US;
 use crate::config::wait::WaitSettings;
 use crate::contract::msg::MAX_SENSORS;
+use crate::contract::role::Role;
 
 /// The longest run allowed, s (one week): it keeps every time and tick count of a run far
 /// from the limits of `Duration` and `u64` arithmetic.
@@ -660,10 +661,11 @@ fn set_dotted(document: &mut toml::Table, o: &Override) -> Result<String, String
 fn check_fault(f: &FaultSpec, c: &LaunchConfig, key: &str) -> Result<(), LaunchError> {
     let field = |f: &str| format!("{key}.{f}");
     let targets = f.kind.targets();
-    if !targets.contains(&f.process.as_str()) {
+    if !f.process.parse::<Role>().is_ok_and(|role| targets.contains(&role)) {
+        let allowed: Vec<&str> = targets.iter().map(|r| r.name()).collect();
         return Err(c.error(
             &field("process"),
-            format!("a {} fault cannot target \"{}\"; allowed: {}", f.kind.name(), f.process, targets.join(", ")),
+            format!("a {} fault cannot target \"{}\"; allowed: {}", f.kind.name(), f.process, allowed.join(", ")),
         ));
     }
     if !(f.at_s.is_finite() && f.at_s >= 0.0 && f.at_s < c.duration_s) {
@@ -738,16 +740,16 @@ fn check_supervision(s: &Supervision, c: &LaunchConfig) -> Result<(), LaunchErro
     timeout("command_timeout_s", s.command_timeout_s)?;
     timeout("lockstep_stall_s", s.lockstep_stall_s)?;
     timeout("backoff_reset_s", s.backoff_reset_s)?;
-    for process in PROCESSES {
+    for role in Role::ALL {
         // The key to blame: the process's own, or the default it took.
         let key = |field: &str| {
             let own = match field {
-                "backoff_s" => s.policy_of(process).backoff_s.is_some(),
-                _ => s.policy_of(process).max_restarts.is_some(),
+                "backoff_s" => s.policy_of(role).backoff_s.is_some(),
+                _ => s.policy_of(role).max_restarts.is_some(),
             };
-            if own { format!("supervision.{process}.{field}") } else { format!("supervision.{field}") }
+            if own { format!("supervision.{role}.{field}") } else { format!("supervision.{field}") }
         };
-        let policy = s.policy(process);
+        let policy = s.policy(role);
         if !(policy.backoff_s.is_finite() && policy.backoff_s >= 0.0 && policy.backoff_s <= MAX_BACKOFF_S) {
             return Err(
                 c.error(&key("backoff_s"), format!("must be 0 to {MAX_BACKOFF_S} seconds, got {}", policy.backoff_s))

@@ -38,6 +38,8 @@ impl Role {
     /// Every process, in the order data flows (the monitor last). Also the stop order: the
     /// source of the data goes first, so that nothing downstream waits for input in vain.
     pub const ALL: [Role; 5] = [Role::Plant, Role::Sensors, Role::Estimator, Role::Controller, Role::Monitor];
+    /// The processes of the loop itself, which stamp the trace and carry an incarnation.
+    pub const LOOP: [Role; 4] = [Role::Plant, Role::Sensors, Role::Estimator, Role::Controller];
     /// The stages between the plant and the plant, which handle one input per loop.
     pub const STAGES: [Role; 3] = [Role::Sensors, Role::Estimator, Role::Controller];
     /// Readers before writers, so that no sample is sent before its reader exists.

@@ -10,7 +10,7 @@ use anyhow::Result;
 use crate::config::launch::LaunchConfig;
 use crate::contract::role::Role;
 use crate::launcher::outcome::Outcome;
-use crate::launcher::run_dir::{new_run_id, write_atomically};
+use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
 use crate::monitor::Recording;
@@ -19,9 +19,8 @@ use crate::runtime::signals::StopFlag;
 
 /// Runs the loop of `config` in this process and writes the run folder.
 pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &Path) -> Result<(Summary, Outcome)> {
-    write_atomically(&run_dir.join("launch.toml"), &config.to_toml())?;
+    let (_, started_at) = begin_run(run_dir, config)?;
     let stop = StopFlag::install()?;
-    let started_at = chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true);
     let mut recording = Recording::new(config, scenario, run_dir, 0, None)?;
     let ran = in_process::run(config, scenario, &stop, |message| recording.take(message))?;
     let outcome = if stop.requested() { Outcome::Interrupted } else { Outcome::Completed };

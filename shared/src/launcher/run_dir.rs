@@ -4,6 +4,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
 
+use crate::config::launch::LaunchConfig;
+
+/// Begins a run in its folder: writes the resolved `launch.toml` (the file the processes load)
+/// and returns its path and the wall-clock start (UTC, RFC 3339) for the summary.
+pub fn begin_run(run_dir: &Path, config: &LaunchConfig) -> Result<(PathBuf, String)> {
+    let launch_file = run_dir.join("launch.toml");
+    write_atomically(&launch_file, &config.to_toml())?;
+    Ok((launch_file, chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true)))
+}
+
 /// Creates the run folder with its `logs/`: `out` if given (new or empty), else a new
 /// `runs/<time>-<scenario>`.
 pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {

@@ -22,7 +22,7 @@ use crate::launcher::child::{self, Binaries, ChildArgs, ChildLine, Line, Start};
 use crate::launcher::inject::{self, DetectedBy};
 use crate::launcher::outcome::{Exit, Outcome};
 use crate::launcher::restart::{self, Death, Decision, RestartRecord};
-use crate::launcher::run_dir::{new_run_id, write_atomically};
+use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
 use crate::runtime::ipc;
@@ -182,10 +182,8 @@ impl<'a> Supervisor<'a> {
         run_dir: &Path,
         quiet: bool,
     ) -> Result<(Summary, Outcome)> {
-        let launch_file = run_dir.join("launch.toml");
-        write_atomically(&launch_file, &config.to_toml())?;
+        let (launch_file, started_at) = begin_run(run_dir, config)?;
         let stop = StopFlag::install()?;
-        let started_at = chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true);
 
         let progress = if quiet {
             ProgressBar::hidden()
@@ -200,7 +198,7 @@ impl<'a> Supervisor<'a> {
             .iter()
             .map(|&role| Process {
                 role,
-                policy: config.supervision.policy(role.name()),
+                policy: config.supervision.policy(role),
                 runs: vec![],
                 stdin: None,
                 ready: false,

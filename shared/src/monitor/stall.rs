@@ -9,9 +9,6 @@ use crate::contract::protocol::ChildEvent;
 use crate::contract::role::{Role, Topic};
 use crate::monitor::join::PerTopic;
 
-/// The loop processes, which have an input and an output.
-const WATCHED: [Role; 4] = [Role::Plant, Role::Sensors, Role::Estimator, Role::Controller];
-
 pub struct StallWatch {
     timeout_ns: u64,
     /// The plant's period when it ticks on a clock (real time); None when it waits for each
@@ -23,9 +20,9 @@ pub struct StallWatch {
     newest: PerTopic<Option<u64>>,
     /// When the monitor last saw a new state.
     state_seen_ns: u64,
-    /// Per process of [`WATCHED`]: since when its input has waited, and whether it was reported.
-    waiting: [Option<u64>; WATCHED.len()],
-    stalled: [bool; WATCHED.len()],
+    /// Per process of [`Role::LOOP`]: since when its input has waited, and whether it was reported.
+    waiting: [Option<u64>; Role::LOOP.len()],
+    stalled: [bool; Role::LOOP.len()],
     /// CLOCK_MONOTONIC in ns (a fake clock in the tests).
     clock: Box<dyn Fn() -> u64>,
 }
@@ -38,8 +35,8 @@ impl StallWatch {
             last_tick: loops.saturating_sub(1),
             newest: PerTopic::default(),
             state_seen_ns: clock(),
-            waiting: [None; WATCHED.len()],
-            stalled: [false; WATCHED.len()],
+            waiting: [None; Role::LOOP.len()],
+            stalled: [false; Role::LOOP.len()],
             clock,
         }
     }
@@ -78,7 +75,7 @@ impl StallWatch {
     pub fn check(&mut self) -> Vec<ChildEvent> {
         let now = (self.clock)();
         let mut events = vec![];
-        for (i, role) in WATCHED.into_iter().enumerate() {
+        for (i, role) in Role::LOOP.into_iter().enumerate() {
             let (waiting, since) = self.waiting(role, now);
             if !waiting {
                 self.waiting[i] = None;

@@ -24,8 +24,6 @@ use crate::runtime::signals::{Interrupted, StopFlag};
 use crate::runtime::wait::sleep_until;
 
 const END: u64 = u64::MAX;
-/// The processes of the loop, each with its socket; the plant is the bench process itself.
-const LOOP: [Role; 4] = [Role::Plant, Role::Sensors, Role::Estimator, Role::Controller];
 
 #[derive(Serialize, Deserialize)]
 struct LoopMessage {
@@ -44,7 +42,7 @@ pub struct StageArgs {
 
 /// The loop process that reads what `role` sends.
 fn next_of(role: Role) -> Role {
-    LOOP.into_iter().find(|next| next.input() == role.output()).expect("every loop topic has a reader")
+    Role::LOOP.into_iter().find(|next| next.input() == role.output()).expect("every loop topic has a reader")
 }
 
 /// Floats in the message a role sends: LoopLab's message of that hop, in bytes, over 8.
@@ -116,7 +114,7 @@ fn reap(child: Child) -> Result<f64> {
 /// Runs the baseline loop for `loops` ticks at `rate_hz`.
 pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResult> {
     std::fs::create_dir_all(dir)?;
-    for role in LOOP {
+    for role in Role::LOOP {
         let _ = std::fs::remove_file(dir.join(format!("{role}.sock")));
     }
     let plant_socket = UnixDatagram::bind(dir.join("plant.sock"))?;
@@ -182,7 +180,7 @@ pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResul
     for (i, child) in children.into_iter().enumerate() {
         cpu_s[1 + i] = reap(child)?;
     }
-    for role in LOOP {
+    for role in Role::LOOP {
         let _ = std::fs::remove_file(dir.join(format!("{role}.sock")));
     }
     if stop.requested() {
