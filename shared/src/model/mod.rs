@@ -1,6 +1,7 @@
 //! Layer 2, the model: the scenario interface and pure maths with no IPC and no mode (the
 //! sensor emulator, the integrator). Depends on the contract and the configuration.
 
+pub mod autodiff;
 pub mod integrate;
 pub mod reference;
 pub mod scenario;

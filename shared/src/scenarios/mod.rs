@@ -6,6 +6,7 @@
 
 pub mod pendulum;
 pub mod quadcopter;
+pub mod tiltrotor;
 
 #[cfg(test)]
 mod fault_tests;
