@@ -11,6 +11,7 @@
 //! - `reference`, `disturbance`: the stand-ins for what the paper does not publish;
 //! - `metrics`: the paper's RMSE and IAVU, the filter's error percentiles.
 
+pub mod control_model;
 pub mod controller;
 pub mod disturbance;
 pub mod dynamics;
