@@ -225,6 +225,28 @@ fn out_of_range_and_non_finite_inputs_are_one_clear_error() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The tilt-rotor's own keys get the same one-line errors.
+#[test]
+fn bad_tiltrotor_keys_are_one_clear_error() {
+    rejects(
+        &["tiltrotor", "--set", "model.uncertainty_fraction=1.5"],
+        &["key `model.uncertainty_fraction`", "below 1"],
+    );
+    rejects(&["tiltrotor", "--set", "controller.kind=nlls-3l"], &["key `controller.kind`", "nlls-2l", "nlpt-2l"]);
+    rejects(
+        &["tiltrotor", "--set", "metrics.d_hat_window_s=[10.0, 20.0]"],
+        &["key `metrics.d_hat_window_s`", "disturbance is constant"],
+    );
+    rejects(
+        &["tiltrotor", "--set", "sensors.velocity.period_s=0.2"],
+        &["key `sensors.velocity.period_s`", "position sensor's period"],
+    );
+    rejects(&["tiltrotor", "--set", "reference.x_moves=[[1.0, 0.0, 2.0]]"], &["key `reference.x_moves.0.1`"]);
+    rejects(&["tiltrotor", "--set", "plant.initial.load_rad=[2.0, 0.0]"], &["key `plant.initial.load_rad.0`"]);
+    rejects(&["tiltrotor", "--set", "disturbance.pulses=[[1.0, -2.0, 0.0, 0.0, 1.0]]"], &["key `disturbance.pulses.0.1`"]);
+    rejects(&["tiltrotor", "--set", "estimator.r_position_m=0"], &["key `estimator.r_position_m`", "positive"]);
+}
+
 #[test]
 fn a_sweep_over_too_many_values_is_refused_before_any_run() {
     let output = looplab()
