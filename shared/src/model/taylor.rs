@@ -146,8 +146,10 @@ mod tests {
         let (s, c) = T5::line(a, b).sin_cos();
         let fact = [1.0, 1.0, 2.0, 6.0, 24.0];
         let half_pi = std::f64::consts::FRAC_PI_2;
-        let sin_expected: Vec<f64> = (0..5).map(|k| (a + k as f64 * half_pi).sin() * b.powi(k) / fact[k as usize]).collect();
-        let cos_expected: Vec<f64> = (0..5).map(|k| (a + k as f64 * half_pi).cos() * b.powi(k) / fact[k as usize]).collect();
+        let sin_expected: Vec<f64> =
+            (0..5).map(|k| (a + k as f64 * half_pi).sin() * b.powi(k) / fact[k as usize]).collect();
+        let cos_expected: Vec<f64> =
+            (0..5).map(|k| (a + k as f64 * half_pi).cos() * b.powi(k) / fact[k as usize]).collect();
         close(&s.c, &sin_expected, 1e-15);
         close(&c.c, &cos_expected, 1e-15);
     }

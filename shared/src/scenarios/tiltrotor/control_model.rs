@@ -53,11 +53,7 @@ pub fn rotation<S: Scalar>(eta: [S; 3]) -> Mat3<S> {
 /// W_η of (12): ω = W_η η̇.
 pub fn body_rate<S: Scalar>(eta: [S; 3], eta_dot: [S; 3]) -> Vec3<S> {
     let (sp, cp, st, ct) = (eta[0].sin(), eta[0].cos(), eta[1].sin(), eta[1].cos());
-    [
-        eta_dot[0] - st * eta_dot[2],
-        cp * eta_dot[1] + sp * ct * eta_dot[2],
-        -sp * eta_dot[1] + cp * ct * eta_dot[2],
-    ]
+    [eta_dot[0] - st * eta_dot[2], cp * eta_dot[1] + sp * ct * eta_dot[2], -sp * eta_dot[1] + cp * ct * eta_dot[2]]
 }
 
 /// d₄^B = R_E4^B(−l k).
@@ -147,7 +143,11 @@ impl InnerModel {
     pub fn body_force<S: Scalar>(&self, alpha: [S; 2], thrust: [S; 2]) -> Vec3<S> {
         let (sr, cr, sl, cl) = (alpha[0].sin(), alpha[0].cos(), alpha[1].sin(), alpha[1].cos());
         let (sb, cb) = self.beta.sin_cos();
-        [sr * thrust[0] + sl * thrust[1], (cr * thrust[0] - cl * thrust[1]).scale(sb), (cr * thrust[0] + cl * thrust[1]).scale(cb)]
+        [
+            sr * thrust[0] + sl * thrust[1],
+            (cr * thrust[0] - cl * thrust[1]).scale(sb),
+            (cr * thrust[0] + cl * thrust[1]).scale(cb),
+        ]
     }
 
     /// τ^B = τ_R f_R + τ_L f_L of (22), verbatim.
@@ -155,8 +155,10 @@ impl InnerModel {
         let (sr, cr, sl, cl) = (alpha[0].sin(), alpha[0].cos(), alpha[1].sin(), alpha[1].cos());
         let (sb, cb) = self.beta.sin_cos();
         let (dy, dz, k) = (self.arm_y, self.arm_z, self.drag_ratio);
-        let tau_r = [-cr.scale(cb * dy) - sr.scale(k), sr.scale(dz) + cr.scale(k * sb), sr.scale(dy) + cr.scale(k * cb)];
-        let tau_l = [cl.scale(cb * dy) + sl.scale(k), sl.scale(dz) + cl.scale(k * sb), -sl.scale(dy) - cl.scale(k * cb)];
+        let tau_r =
+            [-cr.scale(cb * dy) - sr.scale(k), sr.scale(dz) + cr.scale(k * sb), sr.scale(dy) + cr.scale(k * cb)];
+        let tau_l =
+            [cl.scale(cb * dy) + sl.scale(k), sl.scale(dz) + cl.scale(k * sb), -sl.scale(dy) - cl.scale(k * cb)];
         [0, 1, 2].map(|i| tau_r[i] * thrust[0] + tau_l[i] * thrust[1])
     }
 
@@ -177,7 +179,11 @@ impl InnerModel {
         // Ẇ_η η̇, by hand.
         let (sp, cp, st, ct) = (eta[0].sin(), eta[0].cos(), eta[1].sin(), eta[1].cos());
         let [pd, td, yd] = eta_dot;
-        let w_dot_eta_dot = [-ct * td * yd, -sp * pd * td + (cp * ct * pd - sp * st * td) * yd, -cp * pd * td - (sp * ct * pd + cp * st * td) * yd];
+        let w_dot_eta_dot = [
+            -ct * td * yd,
+            -sp * pd * td + (cp * ct * pd - sp * st * td) * yd,
+            -cp * pd * td - (sp * ct * pd + cp * st * td) * yd,
+        ];
         let a = [0, 1, 2].map(|i| omega_dot[i] - w_dot_eta_dot[i]);
         // W_η⁻¹.
         let tt = st / ct;
@@ -326,7 +332,14 @@ impl OuterModel {
     }
 
     /// A, b and the x, y velocity terms at q₂, q̇₂ (x, y velocities `xy_dot`) and η, η̇.
-    pub fn terms(&self, eta: [f64; 3], eta_dot: [f64; 3], gamma: [f64; 2], gamma_dot: [f64; 2], xy_dot: [f64; 2]) -> OuterTerms {
+    pub fn terms(
+        &self,
+        eta: [f64; 3],
+        eta_dot: [f64; 3],
+        gamma: [f64; 2],
+        gamma_dot: [f64; 2],
+        xy_dot: [f64; 2],
+    ) -> OuterTerms {
         let m = Matrix4::from_fn(|i, j| self.mass_matrix(eta, gamma)[i][j]);
         let q_dot = [xy_dot[0], xy_dot[1], gamma_dot[0], gamma_dot[1]];
         // ∂M/∂c for c = φ, θ, ψ, γ₁, γ₂, by forward mode.
@@ -353,7 +366,8 @@ impl OuterModel {
             *v = (0..4).map(|j| m_dot[i][j] * q_dot[j]).sum();
         }
         for (k, dm) in d_gamma.iter().enumerate() {
-            let quad: f64 = (0..4).flat_map(|i| (0..4).map(move |j| (i, j))).map(|(i, j)| q_dot[i] * dm[i][j] * q_dot[j]).sum();
+            let quad: f64 =
+                (0..4).flat_map(|i| (0..4).map(move |j| (i, j))).map(|(i, j)| q_dot[i] * dm[i][j] * q_dot[j]).sum();
             velocity[2 + k] -= 0.5 * quad;
         }
         // G_γ = m₄ g L_γᵀ Rᵀ k and the drag μ_γ γ̇.
@@ -436,11 +450,11 @@ mod tests {
         let lin = model.linearise(&x0);
         let u = [2.5, -1.0, 0.3, -0.7];
         let direct = model.expand(&x0, u);
-        for i in 0..OUTPUTS {
+        for (i, series) in direct.iter().take(OUTPUTS).enumerate() {
             let predicted = lin.b[i] + (0..4).map(|j| lin.delta[i][j] * u[j]).sum::<f64>();
-            assert!((direct[i].derivative(4) - predicted).abs() < 1e-9 * (1.0 + predicted.abs()));
+            assert!((series.derivative(4) - predicted).abs() < 1e-9 * (1.0 + predicted.abs()));
             for n in 0..4 {
-                assert_eq!(direct[i].derivative(n), lin.derivatives[i][n], "output {i} order {n} moved with Γ̄");
+                assert_eq!(series.derivative(n), lin.derivatives[i][n], "output {i} order {n} moved with Γ̄");
             }
         }
         let solved = lin.solve([1.0, -2.0, 0.5, 3.0]).expect("Δ invertible");

@@ -16,6 +16,7 @@ pub mod controller;
 pub mod disturbance;
 pub mod dynamics;
 pub mod estimator;
+pub mod gains;
 pub mod metrics;
 pub mod params;
 pub mod plant;
