@@ -6,4 +6,5 @@ pub mod integrate;
 pub mod reference;
 pub mod scenario;
 pub mod sensors;
+pub mod taylor;
 pub mod vectors;

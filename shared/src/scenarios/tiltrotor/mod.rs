@@ -11,10 +11,12 @@
 //! - `reference`, `disturbance`: the stand-ins for what the paper does not publish;
 //! - `metrics`: the paper's RMSE and IAVU, the filter's error percentiles.
 
+pub mod control_model;
 pub mod controller;
 pub mod disturbance;
 pub mod dynamics;
 pub mod estimator;
+pub mod gains;
 pub mod metrics;
 pub mod params;
 pub mod plant;
