@@ -243,7 +243,10 @@ fn bad_tiltrotor_keys_are_one_clear_error() {
     );
     rejects(&["tiltrotor", "--set", "reference.x_moves=[[1.0, 0.0, 2.0]]"], &["key `reference.x_moves.0.1`"]);
     rejects(&["tiltrotor", "--set", "plant.initial.load_rad=[2.0, 0.0]"], &["key `plant.initial.load_rad.0`"]);
-    rejects(&["tiltrotor", "--set", "disturbance.pulses=[[1.0, -2.0, 0.0, 0.0, 1.0]]"], &["key `disturbance.pulses.0.1`"]);
+    rejects(
+        &["tiltrotor", "--set", "disturbance.pulses=[[1.0, -2.0, 0.0, 0.0, 1.0]]"],
+        &["key `disturbance.pulses.0.1`"],
+    );
     rejects(&["tiltrotor", "--set", "estimator.r_position_m=0"], &["key `estimator.r_position_m`", "positive"]);
 }
 

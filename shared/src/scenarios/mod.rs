@@ -20,7 +20,7 @@ use crate::config::schema::ScenarioSchema;
 
 use crate::model::scenario::{Scenario, ScenarioEntry};
 
-pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY];
+pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY, tiltrotor::ENTRY];
 
 /// The built-in scenario of this name, with its default launch file compiled in.
 pub fn builtin(name: &str) -> Option<&'static ScenarioEntry> {

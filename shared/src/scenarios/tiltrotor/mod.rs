@@ -23,7 +23,30 @@ pub mod plant;
 pub mod reference;
 pub mod sensors;
 
+use serde::Deserialize;
+
+use self::controller::{ControllerSection, TwoLoop};
+use self::disturbance::DisturbanceSection;
+use self::estimator::{EstimatorSection, Inputs, Lkfui};
+use self::metrics::{MetricsSection, TiltrotorMetrics};
+use self::params::Params;
+use self::plant::{PlantSection, TiltrotorPlant};
+use self::reference::{ReferenceSection, TiltReference};
+use crate::config::launch::{LaunchConfig, LaunchError};
+use crate::config::validate::{in_range, not_negative, positive, within};
+use crate::model::scenario::{
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, Scenario, ScenarioEntry, check_substeps,
+};
 use crate::model::vectors::{Component, Vectors};
+
+pub const ENTRY: ScenarioEntry = ScenarioEntry {
+    name: "tiltrotor",
+    description: "tilt-rotor UAV with a suspended load, LKFUI and NLLS-2L / NLPT-2L (paper 004)",
+    file: "launch/tiltrotor.toml",
+    text: include_str!("../../../../launch/tiltrotor.toml"),
+    vectors: &VECTORS,
+    build,
+};
 
 /// q = (x, y, z, φ, θ, ψ, α_R, α_L, γ₁, γ₂) and q̇.
 pub const DOF: usize = 10;
@@ -125,3 +148,243 @@ const ESTIMATE: [Component; layout::LEN] = concat(&[
 
 pub static VECTORS: Vectors = Vectors { state: &STATE, input: &INPUT, estimate: &ESTIMATE, signals: sensors::SIGNALS };
 
+/// `[model]`: what is not Table 1 (which is built in, `params.rs`).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+struct ModelSection {
+    /// The plant's masses and inertia tensors are each scaled by a factor drawn from
+    /// U[1 − this, 1 + this].
+    uncertainty_fraction: f64,
+    uncertainty_seed: u64,
+    thrust_max_n: f64,
+    tilt_torque_max_nm: f64,
+}
+
+/// How fault reports judge the flight: ‖ξ − ξ_ref‖.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+struct LimitsSection {
+    position_error_limit_m: f64,
+    recovery_band_m: f64,
+}
+
+pub struct Tiltrotor {
+    model: ModelSection,
+    plant: PlantSection,
+    disturbance: DisturbanceSection,
+    estimator: EstimatorSection,
+    controller: ControllerSection,
+    reference: ReferenceSection,
+    limits: LimitsSection,
+    metrics: MetricsSection,
+    inputs: Inputs,
+    tick_s: f64,
+    fix_period_ticks: u32,
+}
+
+fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+    Ok(Box::new(Tiltrotor::from_config(c)?))
+}
+
+/// Positions, forces and times beyond this (SI units) are no flight of this vehicle.
+const MAX_MAGNITUDE: f64 = 1e4;
+
+fn bounded(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
+    within(c, key, value, MAX_MAGNITUDE, "SI units")
+}
+
+impl Tiltrotor {
+    pub fn from_config(c: &LaunchConfig) -> Result<Self, LaunchError> {
+        let model: ModelSection = c.section("model")?;
+        if !(0.0..1.0).contains(&model.uncertainty_fraction) {
+            return Err(c.error(
+                "model.uncertainty_fraction",
+                format!("must be 0 or more and below 1 (a fraction of each mass), got {}", model.uncertainty_fraction),
+            ));
+        }
+        positive(c, "model.thrust_max_n", model.thrust_max_n)?;
+        bounded(c, "model.thrust_max_n", model.thrust_max_n)?;
+        positive(c, "model.tilt_torque_max_nm", model.tilt_torque_max_nm)?;
+        bounded(c, "model.tilt_torque_max_nm", model.tilt_torque_max_nm)?;
+
+        let plant: PlantSection = c.section("plant")?;
+        check_substeps(c, "plant.substeps", plant.substeps)?;
+        for (i, v) in plant.initial.position_m.iter().enumerate() {
+            bounded(c, &format!("plant.initial.position_m.{i}"), *v)?;
+        }
+        within(c, "plant.initial.yaw_rad", plant.initial.yaw_rad, std::f64::consts::PI, "rad")?;
+        for (i, v) in plant.initial.load_rad.iter().enumerate() {
+            // The rod must hang below the body: beyond ±π/2 the load is above it.
+            within(c, &format!("plant.initial.load_rad.{i}"), *v, 1.5, "rad")?;
+        }
+
+        let disturbance: DisturbanceSection = c.section("disturbance")?;
+        for (i, step) in disturbance.steps.iter().enumerate() {
+            not_negative(c, &format!("disturbance.steps.{i}.0"), step[0])?;
+            for (j, v) in step.iter().enumerate() {
+                bounded(c, &format!("disturbance.steps.{i}.{j}"), *v)?;
+            }
+        }
+        for (i, pulse) in disturbance.pulses.iter().enumerate() {
+            not_negative(c, &format!("disturbance.pulses.{i}.0"), pulse[0])?;
+            positive(c, &format!("disturbance.pulses.{i}.1"), pulse[1])?;
+            for (j, v) in pulse.iter().enumerate() {
+                bounded(c, &format!("disturbance.pulses.{i}.{j}"), *v)?;
+            }
+        }
+
+        let reference: ReferenceSection = c.section("reference")?;
+        for (i, v) in reference.start.iter().enumerate() {
+            bounded(c, &format!("reference.start.{i}"), *v)?;
+        }
+        for (name, moves) in reference.moves() {
+            for (i, [at, duration, by]) in moves.iter().enumerate() {
+                not_negative(c, &format!("reference.{name}.{i}.0"), *at)?;
+                bounded(c, &format!("reference.{name}.{i}.0"), *at)?;
+                // A C⁴ step's fourth derivative grows as 1/duration⁴.
+                in_range(c, &format!("reference.{name}.{i}.1"), *duration, 0.5..=MAX_MAGNITUDE, "s")?;
+                bounded(c, &format!("reference.{name}.{i}.2"), *by)?;
+            }
+        }
+
+        let estimator: EstimatorSection = c.section("estimator")?;
+        // R must be positive definite; P₀ and Q may be singular.
+        positive(c, "estimator.r_position_m", estimator.r_position_m)?;
+        positive(c, "estimator.r_velocity_m_s", estimator.r_velocity_m_s)?;
+        for (key, value) in [
+            ("estimator.q_scale", estimator.q_scale),
+            ("estimator.p0_position_m", estimator.p0_position_m),
+            ("estimator.p0_velocity_m_s", estimator.p0_velocity_m_s),
+        ] {
+            not_negative(c, key, value)?;
+            bounded(c, key, value)?;
+        }
+        for (key, value) in
+            [("estimator.r_position_m", estimator.r_position_m), ("estimator.r_velocity_m_s", estimator.r_velocity_m_s)]
+        {
+            bounded(c, key, value)?;
+        }
+        let controller: ControllerSection = c.section("controller")?;
+        controller::check(c, &controller)?;
+
+        let limits: LimitsSection = c.section("limits")?;
+        positive(c, "limits.position_error_limit_m", limits.position_error_limit_m)?;
+        positive(c, "limits.recovery_band_m", limits.recovery_band_m)?;
+
+        let metrics: MetricsSection = c.section("metrics")?;
+        let [from, to] = metrics.d_hat_window_s;
+        if !(from.is_finite() && to.is_finite() && 0.0 <= from && from < to) {
+            return Err(
+                c.error("metrics.d_hat_window_s", format!("must be [from, to] with 0 ≤ from < to, got {from}, {to}"))
+            );
+        }
+        if !disturbance.is_constant_over(from, to) {
+            return Err(c.error(
+                "metrics.d_hat_window_s",
+                format!(
+                    "must be a window where the disturbance is constant; a step or pulse falls in [{from}, {to}] s"
+                ),
+            ));
+        }
+
+        // The LKFUI needs the fix (position and velocity together, every h ticks), the
+        // angles, and the known force.
+        let (position, _, position_spec) = c.sensor_for("position")?;
+        let (velocity, velocity_name, velocity_spec) = c.sensor_for("velocity")?;
+        let (attitude, _, _) = c.sensor_for("attitude")?;
+        let (force, _, _) = c.sensor_for("thrust_force")?;
+        let fix_period_ticks = c.period_ticks(position_spec);
+        if c.period_ticks(velocity_spec) != fix_period_ticks {
+            return Err(c.error(
+                &format!("sensors.{velocity_name}.period_s"),
+                format!(
+                    "must equal the position sensor's period ({} s): the LKFUI corrects with both at once",
+                    position_spec.period_s
+                ),
+            ));
+        }
+        let fix_period_ticks = u32::try_from(fix_period_ticks.max(1)).unwrap_or(u32::MAX);
+        Ok(Self {
+            model,
+            plant,
+            disturbance,
+            estimator,
+            controller,
+            reference,
+            limits,
+            metrics,
+            inputs: Inputs { position, velocity, attitude, force },
+            tick_s: c.dt(),
+            fix_period_ticks,
+        })
+    }
+
+    /// The vehicle as flown: Table 1 with the seeded draw.
+    pub fn true_params(&self) -> Params {
+        Params::table1().perturbed(self.model.uncertainty_fraction, self.model.uncertainty_seed)
+    }
+
+    fn reference(&self) -> TiltReference {
+        TiltReference::new(&self.reference)
+    }
+}
+
+impl Scenario for Tiltrotor {
+    fn title(&self) -> String {
+        format!("tilt-rotor with a suspended load, {}, LKFUI", self.controller.kind)
+    }
+
+    fn vectors(&self) -> &'static Vectors {
+        &VECTORS
+    }
+
+    fn input_limits(&self) -> Vec<(f64, f64)> {
+        let (f, tau) = (self.model.thrust_max_n, self.model.tilt_torque_max_nm);
+        vec![(0.0, f), (0.0, f), (-tau, tau), (-tau, tau)]
+    }
+
+    fn plant(&self) -> Box<dyn Plant> {
+        Box::new(TiltrotorPlant::new(self.true_params(), &self.plant, self.disturbance.clone()))
+    }
+
+    fn estimator(&self) -> Box<dyn Estimator> {
+        let nominal = Params::table1();
+        Box::new(Lkfui::new(
+            &self.estimator,
+            nominal.total_mass(),
+            nominal.g,
+            self.tick_s,
+            self.fix_period_ticks,
+            self.inputs,
+        ))
+    }
+
+    fn controller(&self) -> Box<dyn Controller> {
+        Box::new(TwoLoop::new(
+            &self.controller,
+            &Params::table1(),
+            self.reference(),
+            self.tick_s,
+            self.model.thrust_max_n,
+            self.model.tilt_torque_max_nm,
+        ))
+    }
+
+    fn metrics(&self) -> Box<dyn Metrics> {
+        Box::new(TiltrotorMetrics::new(
+            &self.metrics,
+            self.reference(),
+            Params::table1().rod_length,
+            self.model.thrust_max_n,
+        ))
+    }
+
+    fn error_measure(&self) -> ErrorMeasure {
+        ErrorMeasure::of_reference(
+            "|xi - xi_ref| m",
+            self.reference(),
+            self.limits.recovery_band_m,
+            self.limits.position_error_limit_m,
+        )
+    }
+}
