@@ -276,7 +276,14 @@ pub fn acceleration(p: &Params, q: &[f64; DOF], qdot: &[f64; DOF], input: &[f64;
         rhs[k] = forcing + external - c_qdot - drag - parts.gravity[k];
     }
     let m = SMatrix::<f64, DOF, DOF>::from_fn(|i, j| parts.m[i][j]);
-    let qdd = m.cholesky().expect("the inertia matrix is positive definite").solve(&rhs);
+    // M is positive definite except where the Euler angles are singular (θ = ±90°, W_η loses
+    // rank): the paper's model cannot describe a vehicle that has flipped over.
+    let qdd = m
+        .cholesky()
+        .unwrap_or_else(|| {
+            panic!("tiltrotor plant: the vehicle reached θ = {:.3} rad (Euler-angle singularity at ±π/2)", q[4])
+        })
+        .solve(&rhs);
     qdd.into()
 }
 

@@ -1,11 +1,12 @@
 //! The tilt-rotor plant: the full model of `dynamics` with the drawn (perturbed) parameters,
 //! integrated by RK4 on `substeps` equal steps per loop period with the input held (zero-order
-//! hold) and the external force of each sub-step's start held over it.
+//! hold) and the external force taken at each stage's time.
 //!
 //! The default sub-step is 1 ms (10 per 10 ms tick): the fastest motion is the thrusters' tilt
 //! (4e-5 kg·m², driven by up to 1 N·m) and the load's pendulum (√(g/l) = 4.4 rad/s); at 1 ms
 //! RK4 keeps the energy of a free tumbling motion within 1e-5 of its kinetic energy over 3 s,
-//! and halving the step changes a closed-loop run by less than the filter's noise (tests).
+//! and over 4 s of the closed loop it is within 1e-8 of a 0.25 ms step, 2 ms being 16× further
+//! (tests/tiltrotor.rs).
 
 use nalgebra::SVector;
 use serde::Deserialize;
@@ -14,7 +15,6 @@ use super::disturbance::DisturbanceSection;
 use super::dynamics::acceleration;
 use super::params::Params;
 use super::{DOF, STATE_LEN};
-use crate::model::integrate::rk4_step;
 use crate::model::scenario::Plant;
 
 /// `[plant]`.
@@ -83,8 +83,17 @@ impl Plant for TiltrotorPlant {
         let h = dt / f64::from(self.substeps);
         let mut x = SVector::<f64, STATE_LEN>::from_column_slice(&self.x);
         for i in 0..self.substeps {
-            let f_ext = self.disturbance.force(t + f64::from(i) * h);
-            x = rk4_step(&|x: &SVector<f64, STATE_LEN>| derivative(&self.params, x, &input, &f_ext), &x, h);
+            let start = t + f64::from(i) * h;
+            // RK4 with the external force at each stage's time: holding it over the sub-step
+            // would make the smooth pulses first-order accurate.
+            let f = |s: f64, x: &SVector<f64, STATE_LEN>| {
+                derivative(&self.params, x, &input, &self.disturbance.force(start + s))
+            };
+            let k1 = f(0.0, &x);
+            let k2 = f(h / 2.0, &(x + k1 * (h / 2.0)));
+            let k3 = f(h / 2.0, &(x + k2 * (h / 2.0)));
+            let k4 = f(h, &(x + k3 * h));
+            x += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (h / 6.0);
         }
         self.x.copy_from_slice(x.as_slice());
     }
