@@ -75,7 +75,7 @@ fn the_filter_corrects_exactly_when_a_new_fix_arrives() {
     assert_eq!(k.len(), 500);
     for i in 0..k.len() {
         let new_sample = i == 0 || fix[i] != fix[i - 1];
-        assert_eq!(new_sample, k[i] as u64 % 10 == 0, "the fix changes only every 10th tick (k = {})", k[i]);
+        assert_eq!(new_sample, (k[i] as u64).is_multiple_of(10), "the fix changes only every 10th tick (k = {})", k[i]);
         assert_eq!(corrected[i] == 1.0, new_sample, "corrects exactly at a new fix (k = {})", k[i]);
         if !new_sample {
             assert_eq!(x_hat[i], prior[i], "between fixes the estimate is the prediction (k = {})", k[i]);

@@ -156,8 +156,7 @@ mod tests {
         let mut state = PlantState::default();
         state.x[0] = error;
         let record = record.map(|(lost, estimator)| {
-            let mut r = LoopRecord::default();
-            r.lost = u32::from(lost);
+            let mut r = LoopRecord { lost: u32::from(lost), ..Default::default() };
             r.header.incarnations[Role::Estimator.slot().unwrap()] = estimator;
             r
         });

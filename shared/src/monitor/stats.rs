@@ -142,8 +142,7 @@ mod tests {
     }
 
     fn loop_at(k: u64, sample_time: f64, timing: TickTiming) -> LoopParts {
-        let mut state = PlantState::default();
-        state.timing = timing;
+        let state = PlantState { timing, ..Default::default() };
         let mut record = LoopRecord::default();
         record.header.k = k;
         record.header.trace.plant_publish = 1_000;

@@ -364,10 +364,6 @@ mod tests {
         toml::from_str(include_str!("../../../../launch/tiltrotor.toml")).expect("launch/tiltrotor.toml parses")
     }
 
-    fn stand_in_reference() -> ReferenceSection {
-        launch_file()["reference"].clone().try_into().expect("[reference]")
-    }
-
     fn hover_reference() -> ReferenceSection {
         ReferenceSection {
             start: [0.0, 0.0, 1.0, 0.0],
