@@ -37,3 +37,19 @@ impl Vectors {
         self.signals.iter().find(|s| s.name == name)
     }
 }
+
+/// Concatenates component tables at compile time (a scenario's state and estimate share parts).
+pub const fn concat<const N: usize>(parts: &[&[Component]]) -> [Component; N] {
+    let mut out = [Component::new("", ""); N];
+    let (mut i, mut n) = (0, 0);
+    while i < parts.len() {
+        let mut j = 0;
+        while j < parts[i].len() {
+            out[n] = parts[i][j];
+            (j, n) = (j + 1, n + 1);
+        }
+        i += 1;
+    }
+    assert!(n == N, "the parts do not add up to the vector's length");
+    out
+}

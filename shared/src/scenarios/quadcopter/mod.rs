@@ -30,7 +30,7 @@ use crate::model::reference::Reference as _;
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry, check_substeps,
 };
-use crate::model::vectors::{Component, Vectors};
+use crate::model::vectors::{Component, Vectors, concat};
 
 pub const ENTRY: ScenarioEntry = ScenarioEntry {
     name: "quadcopter",
@@ -86,22 +86,6 @@ const POSE: [Component; 12] = [
 const VELOCITY: [Component; 3] = [c("v_x", "m/s"), c("v_y", "m/s"), c("v_z", "m/s")];
 /// Body angular velocity.
 const RATE: [Component; 3] = [c("w_x", "rad/s"), c("w_y", "rad/s"), c("w_z", "rad/s")];
-
-/// Concatenates component tables at compile time (the state and the estimate share the pose).
-const fn concat<const N: usize>(parts: &[&[Component]]) -> [Component; N] {
-    let mut out = [c("", ""); N];
-    let (mut i, mut n) = (0, 0);
-    while i < parts.len() {
-        let mut j = 0;
-        while j < parts[i].len() {
-            out[n] = parts[i][j];
-            (j, n) = (j + 1, n + 1);
-        }
-        i += 1;
-    }
-    assert!(n == N, "the parts do not add up to the vector's length");
-    out
-}
 
 const STATE: [Component; STATE_LEN] = concat(&[&POSE, &VELOCITY, &RATE, &[c("mass", "kg")]]);
 

@@ -37,7 +37,7 @@ use crate::config::validate::{in_range, not_negative, positive, within};
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, Scenario, ScenarioEntry, check_substeps,
 };
-use crate::model::vectors::{Component, Vectors};
+use crate::model::vectors::{Component, Vectors, concat};
 
 pub const ENTRY: ScenarioEntry = ScenarioEntry {
     name: "tiltrotor",
@@ -93,22 +93,6 @@ pub mod layout {
 
 const fn c(name: &'static str, unit: &'static str) -> Component {
     Component::new(name, unit)
-}
-
-/// Concatenates component tables at compile time.
-const fn concat<const N: usize>(parts: &[&[Component]]) -> [Component; N] {
-    let mut out = [c("", ""); N];
-    let (mut i, mut n) = (0, 0);
-    while i < parts.len() {
-        let mut j = 0;
-        while j < parts[i].len() {
-            out[n] = parts[i][j];
-            (j, n) = (j + 1, n + 1);
-        }
-        i += 1;
-    }
-    assert!(n == N, "the parts do not add up to the vector's length");
-    out
 }
 
 const POSITION: [Component; 3] = [c("x", "m"), c("y", "m"), c("z", "m")];
