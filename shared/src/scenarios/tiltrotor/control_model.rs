@@ -19,9 +19,10 @@
 
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
+use super::dynamics::{body_rate, l_gamma, load_offset, load_velocity, rotation};
 use super::params::Params;
 use crate::model::autodiff::{
-    Dual, Mat3, Scalar, Vec3, add, cross, identity, mat_add, mat_mul, mat_vec, rot_x, rot_y, rot_z, skew, transpose,
+    Dual, Mat3, Scalar, Vec3, add, cross, identity, mat_add, mat_mul, mat_vec, rot_x, rot_y, skew, transpose,
 };
 use crate::model::taylor::Taylor;
 
@@ -45,28 +46,6 @@ pub mod ext {
 
 /// Outputs z, φ, θ, ψ.
 pub const OUTPUTS: usize = 4;
-
-pub fn rotation<S: Scalar>(eta: [S; 3]) -> Mat3<S> {
-    mat_mul(&rot_z(eta[2]), &mat_mul(&rot_y(eta[1]), &rot_x(eta[0])))
-}
-
-/// W_η of (12): ω = W_η η̇.
-pub fn body_rate<S: Scalar>(eta: [S; 3], eta_dot: [S; 3]) -> Vec3<S> {
-    let (sp, cp, st, ct) = (eta[0].sin(), eta[0].cos(), eta[1].sin(), eta[1].cos());
-    [eta_dot[0] - st * eta_dot[2], cp * eta_dot[1] + sp * ct * eta_dot[2], -sp * eta_dot[1] + cp * ct * eta_dot[2]]
-}
-
-/// d₄^B = R_E4^B(−l k).
-pub fn load_offset<S: Scalar>(l: f64, gamma: [S; 2]) -> Vec3<S> {
-    let (s1, c1, s2, c2) = (gamma[0].sin(), gamma[0].cos(), gamma[1].sin(), gamma[1].cos());
-    [-(c1 * s2).scale(l), s1.scale(l), -(c1 * c2).scale(l)]
-}
-
-/// L_γ of (14): ḋ₄^B = L_γ γ̇ (3×2, rows).
-pub fn load_jacobian<S: Scalar>(l: f64, gamma: [S; 2]) -> [[S; 2]; 3] {
-    let (s1, c1, s2, c2) = (gamma[0].sin(), gamma[0].cos(), gamma[1].sin(), gamma[1].cos());
-    [[(s1 * s2).scale(l), -(c1 * c2).scale(l)], [c1.scale(l), S::zero()], [(s1 * c2).scale(l), (c1 * s2).scale(l)]]
-}
 
 pub fn inverse3(m: &Mat3<f64>) -> Mat3<f64> {
     let cof = |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
@@ -305,7 +284,7 @@ impl OuterModel {
 
     /// M_q2(η, γ).
     pub fn mass_matrix<S: Scalar>(&self, eta: [S; 3], gamma: [S; 2]) -> [[S; 4]; 4] {
-        let l_gamma = load_jacobian(self.rod_length, gamma);
+        let l_gamma = l_gamma(self.rod_length, gamma);
         let r = rotation(eta);
         let (s1, c1) = (gamma[0].sin(), gamma[0].cos());
         let w_gamma = [[S::one(), S::zero()], [S::zero(), c1], [S::zero(), -s1]];
@@ -371,7 +350,7 @@ impl OuterModel {
             velocity[2 + k] -= 0.5 * quad;
         }
         // G_γ = m₄ g L_γᵀ Rᵀ k and the drag μ_γ γ̇.
-        let l_gamma = load_jacobian(self.rod_length, gamma);
+        let l_gamma = l_gamma(self.rod_length, gamma);
         let r = rotation(eta);
         let up_in_body = [r[2][0], r[2][1], r[2][2]];
         let mut n_bar = Vector4::zeros();
@@ -387,11 +366,7 @@ impl OuterModel {
 
     /// ḋ^F = R_B^F (S(ω) d₄^B + L_γ γ̇): the load's velocity relative to the aircraft (note §9.25).
     pub fn swing_velocity(&self, eta: [f64; 3], eta_dot: [f64; 3], gamma: [f64; 2], gamma_dot: [f64; 2]) -> [f64; 3] {
-        let omega = body_rate(eta, eta_dot);
-        let d4 = load_offset(self.rod_length, gamma);
-        let l_gamma = load_jacobian(self.rod_length, gamma);
-        let rel = [0, 1, 2].map(|i| l_gamma[i][0] * gamma_dot[0] + l_gamma[i][1] * gamma_dot[1]);
-        mat_vec(&rotation(eta), add(cross(omega, d4), rel))
+        load_velocity(self.rod_length, eta, eta_dot, gamma, gamma_dot)
     }
 }
 

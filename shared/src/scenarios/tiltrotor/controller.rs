@@ -34,7 +34,8 @@
 use nalgebra::Vector2;
 use serde::Deserialize;
 
-use super::control_model::{InnerModel, OUTPUTS, OuterModel, ext, rotation};
+use super::control_model::{InnerModel, OUTPUTS, OuterModel, ext};
+use super::dynamics::rotation;
 use super::gains::{chain_gains, swing_gains};
 use super::layout;
 use super::params::Params;

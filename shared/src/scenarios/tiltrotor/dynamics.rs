@@ -12,15 +12,16 @@ use nalgebra::{SMatrix, SVector};
 use super::DOF;
 use super::params::Params;
 use crate::model::autodiff::{
-    Dual, Mat3, Scalar, Vec3, add, mat_add, mat_mul, mat_vec, mat3, rot_x, rot_y, rot_z, scale, skew, transpose, vec3,
+    Dual, Mat3, Scalar, Vec3, add, cross, mat_add, mat_mul, mat_vec, mat3, rot_x, rot_y, rot_z, scale, skew, transpose,
+    vec3,
 };
 
 /// The coordinates M and P depend on: η, α, γ (not ξ).
 const CONFIGURATION: std::ops::Range<usize> = 3..DOF;
 
 /// R_B^F = R_z(ψ) R_y(θ) R_x(φ) (note §1: forced by (12), (44), (46)).
-pub fn rotation<S: Scalar>(phi: S, theta: S, psi: S) -> Mat3<S> {
-    mat_mul(&rot_z(psi), &mat_mul(&rot_y(theta), &rot_x(phi)))
+pub fn rotation<S: Scalar>(eta: [S; 3]) -> Mat3<S> {
+    mat_mul(&rot_z(eta[2]), &mat_mul(&rot_y(eta[1]), &rot_x(eta[0])))
 }
 
 /// W_η of (12): ω = W_η η̇ (body rates).
@@ -31,15 +32,29 @@ pub fn w_eta<S: Scalar>(phi: S, theta: S) -> Mat3<S> {
 }
 
 /// d₄ᴮ = R_y(γ₂) R_x(γ₁)(−l k): where the load hangs in B.
-pub fn load_offset<S: Scalar>(l: f64, g1: S, g2: S) -> Vec3<S> {
-    let (s1, c1, s2, c2) = (g1.sin(), g1.cos(), g2.sin(), g2.cos());
+pub fn load_offset<S: Scalar>(l: f64, gamma: [S; 2]) -> Vec3<S> {
+    let (s1, c1, s2, c2) = (gamma[0].sin(), gamma[0].cos(), gamma[1].sin(), gamma[1].cos());
     [-(c1 * s2).scale(l), s1.scale(l), -(c1 * c2).scale(l)]
 }
 
 /// L_γ of (14): ḋ₄ᴮ = L_γ γ̇ (columns γ₁, γ₂).
-pub fn l_gamma<S: Scalar>(l: f64, g1: S, g2: S) -> [[S; 2]; 3] {
-    let (s1, c1, s2, c2) = (g1.sin(), g1.cos(), g2.sin(), g2.cos());
+pub fn l_gamma<S: Scalar>(l: f64, gamma: [S; 2]) -> [[S; 2]; 3] {
+    let (s1, c1, s2, c2) = (gamma[0].sin(), gamma[0].cos(), gamma[1].sin(), gamma[1].cos());
     [[(s1 * s2).scale(l), -(c1 * c2).scale(l)], [c1.scale(l), S::zero()], [(s1 * c2).scale(l), (c1 * s2).scale(l)]]
+}
+
+/// ω = W_η η̇ (12), the body rates.
+pub fn body_rate<S: Scalar>(eta: [S; 3], eta_dot: [S; 3]) -> Vec3<S> {
+    mat_vec(&w_eta(eta[0], eta[1]), eta_dot)
+}
+
+/// ḋ^F = R_B^F (S(ω) d₄ᴮ + L_γ γ̇): the load's velocity relative to the aircraft, in F (note
+/// §9.25, inferred: the paper says only "the load's translational velocity with respect to the
+/// aircraft").
+pub fn load_velocity(l: f64, eta: [f64; 3], eta_dot: [f64; 3], gamma: [f64; 2], gamma_dot: [f64; 2]) -> [f64; 3] {
+    let lg = l_gamma(l, gamma);
+    let relative = [0, 1, 2].map(|i| lg[i][0] * gamma_dot[0] + lg[i][1] * gamma_dot[1]);
+    mat_vec(&rotation(eta), add(cross(body_rate(eta, eta_dot), load_offset(l, gamma)), relative))
 }
 
 /// W_γ of (13): the load's angular velocity relative to B, in E₄.
@@ -72,13 +87,13 @@ pub fn mass_and_potential<S: Scalar>(p: &Params, q: &[S; DOF]) -> ([[S; DOF]; DO
     let (phi, theta, psi) = (q[3], q[4], q[5]);
     let (g1, g2) = (q[8], q[9]);
     let l = p.rod_length;
-    let r = rotation(phi, theta, psi);
+    let r = rotation([phi, theta, psi]);
     let w = w_eta(phi, theta);
     let wt = transpose(&w);
     let frames = body_frames(p, q);
-    let d4 = load_offset(l, g1, g2);
+    let d4 = load_offset(l, [g1, g2]);
     let offsets = [vec3(p.offset[0]), vec3(p.offset[1]), vec3(p.offset[2]), d4];
-    let lg = l_gamma(l, g1, g2);
+    let lg = l_gamma(l, [g1, g2]);
     let wg = w_gamma(g1);
     let m4 = p.mass[3];
 
@@ -240,7 +255,7 @@ pub fn thrust_torques(p: &Params, alpha_r: f64, alpha_l: f64) -> [[f64; 3]; 2] {
 
 /// B(q) of (23): columns f_R, f_L, τ_αR, τ_αL.
 pub fn input_map(p: &Params, q: &[f64; DOF]) -> [[f64; 4]; DOF] {
-    let r = rotation(q[3], q[4], q[5]);
+    let r = rotation([q[3], q[4], q[5]]);
     let wt = transpose(&w_eta(q[3], q[4]));
     let directions = thrust_directions(p.beta, q[6], q[7]);
     let torques = thrust_torques(p, q[6], q[7]);

@@ -6,9 +6,10 @@ use std::collections::BTreeMap;
 
 use serde::Deserialize;
 
+use super::dynamics::{self, rotation};
 use super::reference::TiltReference;
 use super::{INPUTS, STATE_LEN, layout, state};
-use crate::model::autodiff::{mat_mul, mat_vec, rot_x, rot_y, rot_z, skew};
+use crate::model::autodiff::mat_vec;
 use crate::model::scenario::{Metrics, Row};
 
 /// `[metrics]`.
@@ -21,41 +22,23 @@ pub struct MetricsSection {
     pub d_hat_window_s: [f64; 2],
 }
 
-/// R_B^F = R_z(ψ) R_y(θ) R_x(φ) (note §1, inferred from (12), (44), (46)).
-fn body_to_frame(phi: f64, theta: f64, psi: f64) -> [[f64; 3]; 3] {
-    mat_mul(&rot_z(psi), &mat_mul(&rot_y(theta), &rot_x(phi)))
+/// η, η̇, γ, γ̇ of the 20-vector state.
+fn angles(x: &[f64]) -> ([f64; 3], [f64; 3], [f64; 2], [f64; 2]) {
+    let (q, rates) = (&x[state::ANGLES], &x[state::ANGLE_RATES]);
+    ([q[0], q[1], q[2]], [rates[0], rates[1], rates[2]], [q[5], q[6]], [rates[5], rates[6]])
 }
 
-/// d^F = R_B^F d₄^B: the load relative to B's origin, in F, from the 20-vector state, with
-/// d₄^B = [−l cγ₁ sγ₂, l sγ₁, −l cγ₁ cγ₂] (note §1).
+/// d^F = R_B^F d₄^B: the load relative to B's origin, in F, from the 20-vector state.
 pub fn load_offset(x: &[f64], rod_length: f64) -> [f64; 3] {
-    let (phi, theta, psi) = (x[state::ATTITUDE.start], x[state::ATTITUDE.start + 1], x[state::ATTITUDE.start + 2]);
-    let (g1, g2) = (x[state::LOAD.start], x[state::LOAD.start + 1]);
-    mat_vec(&body_to_frame(phi, theta, psi), load_offset_body(g1, g2, rod_length))
+    let (eta, _, gamma, _) = angles(x);
+    mat_vec(&rotation(eta), dynamics::load_offset(rod_length, gamma))
 }
 
-fn load_offset_body(g1: f64, g2: f64, l: f64) -> [f64; 3] {
-    let ((s1, c1), (s2, c2)) = (g1.sin_cos(), g2.sin_cos());
-    [-l * c1 * s2, l * s1, -l * c1 * c2]
-}
-
-/// ḋ^F = R_B^F (S(ω) d₄^B + L_γ γ̇), ω = W_η η̇ (note (12), (14), §9.25 [inferred]): the load's
-/// velocity relative to the aircraft, in F, from the 20-vector state.
+/// ḋ^F, the load's velocity relative to the aircraft in F ([`dynamics::load_velocity`]), from
+/// the 20-vector state.
 pub fn load_velocity(x: &[f64], rod_length: f64) -> [f64; 3] {
-    let l = rod_length;
-    let (phi, theta, psi) = (x[state::ATTITUDE.start], x[state::ATTITUDE.start + 1], x[state::ATTITUDE.start + 2]);
-    let (g1, g2) = (x[state::LOAD.start], x[state::LOAD.start + 1]);
-    // φ̇, θ̇, ψ̇, α̇_R, α̇_L, γ̇₁, γ̇₂.
-    let rates = &x[state::ANGLE_RATES];
-    let (phi_dot, theta_dot, psi_dot, g1_dot, g2_dot) = (rates[0], rates[1], rates[2], rates[5], rates[6]);
-    let ((sp, cp), (st, ct)) = (phi.sin_cos(), theta.sin_cos());
-    let omega = [phi_dot - st * psi_dot, cp * theta_dot + sp * ct * psi_dot, -sp * theta_dot + cp * ct * psi_dot];
-    let ((s1, c1), (s2, c2)) = (g1.sin_cos(), g2.sin_cos());
-    let l_gamma_rate =
-        [l * s1 * s2 * g1_dot - l * c1 * c2 * g2_dot, l * c1 * g1_dot, l * s1 * c2 * g1_dot + l * c1 * s2 * g2_dot];
-    let rotating = mat_vec(&skew(omega), load_offset_body(g1, g2, l));
-    let body = [0, 1, 2].map(|i| rotating[i] + l_gamma_rate[i]);
-    mat_vec(&body_to_frame(phi, theta, psi), body)
+    let (eta, eta_dot, gamma, gamma_dot) = angles(x);
+    dynamics::load_velocity(rod_length, eta, eta_dot, gamma, gamma_dot)
 }
 
 /// The nearest-rank percentile of sorted values: the smallest value that at least `per_10k`

@@ -2,9 +2,10 @@
 //! file: the paper's position and velocity fix at 10 Hz (σ 0.05 m, 0.04 m/s), the angles and
 //! rates every tick without noise, and the known translational force every tick (σ 1/3 N).
 
+use super::dynamics::{rotation, thrust_directions};
 use super::params::BETA;
 use super::{ATTITUDE_SIGNAL, FORCE, POSITION, VELOCITY, state};
-use crate::model::autodiff::{mat_mul, mat_vec, rot_x, rot_y, rot_z};
+use crate::model::autodiff::mat_vec;
 use crate::model::vectors::Signal;
 
 /// The thrusters' force in F, R_B^F (r_R f_R + r_L f_L) of (21), from the attitude, the tilt
@@ -12,13 +13,9 @@ use crate::model::vectors::Signal;
 /// the estimator subtracts the nominal weight and leaves the load's pull, drag and the mass
 /// error to the unknown input d̂.
 pub fn thrust_force(angles: &[f64], thrust: [f64; 2]) -> [f64; 3] {
-    let (phi, theta, psi, alpha_r, alpha_l) = (angles[0], angles[1], angles[2], angles[3], angles[4]);
-    let (sb, cb) = BETA.sin_cos();
-    let r_r = [alpha_r.sin(), alpha_r.cos() * sb, alpha_r.cos() * cb];
-    let r_l = [alpha_l.sin(), -alpha_l.cos() * sb, alpha_l.cos() * cb];
+    let [r_r, r_l] = thrust_directions(BETA, angles[3], angles[4]);
     let body = [0, 1, 2].map(|i| r_r[i] * thrust[0] + r_l[i] * thrust[1]);
-    let rotation = mat_mul(&rot_z(psi), &mat_mul(&rot_y(theta), &rot_x(phi)));
-    mat_vec(&rotation, body)
+    mat_vec(&rotation([angles[0], angles[1], angles[2]]), body)
 }
 
 pub const SIGNALS: &[Signal] = &[
