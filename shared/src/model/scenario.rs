@@ -150,6 +150,32 @@ pub struct ErrorMeasureInfo {
     pub limit: f64,
 }
 
+/// `[limits]` of a vehicle's launch file: how fault reports judge its flight by the distance
+/// from the reference (see [`ErrorMeasure`]).
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PositionLimits {
+    /// The distance beyond which the vehicle counts as lost, m.
+    pub position_error_limit_m: f64,
+    /// The distance within which it counts as recovered, m.
+    pub recovery_band_m: f64,
+}
+
+impl PositionLimits {
+    /// The `[limits]` section, both distances positive.
+    pub fn load(c: &LaunchConfig) -> Result<Self, LaunchError> {
+        let limits: PositionLimits = c.section("limits")?;
+        validate::positive(c, "limits.position_error_limit_m", limits.position_error_limit_m)?;
+        validate::positive(c, "limits.recovery_band_m", limits.recovery_band_m)?;
+        Ok(limits)
+    }
+
+    /// The error measure of `reference`, named `name`, judged by these limits.
+    pub fn error_measure<R: Reference + 'static>(&self, name: &'static str, reference: R) -> ErrorMeasure {
+        ErrorMeasure::of_reference(name, reference, self.recovery_band_m, self.position_error_limit_m)
+    }
+}
+
 /// The physical model: the truth.
 pub trait Plant {
     fn state(&self) -> &[f64];

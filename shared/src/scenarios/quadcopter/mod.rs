@@ -28,7 +28,7 @@ use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{not_negative, positive, within};
 use crate::model::reference::Reference as _;
 use crate::model::scenario::{
-    Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry, check_substeps,
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Row, Scenario, ScenarioEntry, check_substeps,
 };
 use crate::model::vectors::{Component, Vectors, concat};
 
@@ -128,16 +128,6 @@ const ESTIMATE: [Component; layout::LEN] = concat(&[
 
 pub static VECTORS: Vectors = Vectors { state: &STATE, input: &INPUT, estimate: &ESTIMATE, signals: sensors::SIGNALS };
 
-/// How fault reports judge the flight: the distance from the reference.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct LimitsSection {
-    /// ‖z₁‖ beyond which the vehicle counts as lost, m.
-    position_error_limit_m: f64,
-    /// ‖z₁‖ within which it counts as recovered, m.
-    recovery_band_m: f64,
-}
-
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct MetricsSection {
@@ -151,7 +141,7 @@ pub struct Quadcopter {
     estimator: EstimatorSection,
     controller: ControllerSection,
     reference: ReferenceSection,
-    limits: LimitsSection,
+    limits: PositionLimits,
     metrics: MetricsSection,
     inputs: Inputs,
     seed: u64,
@@ -251,9 +241,7 @@ impl Quadcopter {
         let reference: ReferenceSection = c.section("reference")?;
         positive(c, "reference.lemniscate_size_m", reference.lemniscate_size_m)?;
         not_negative(c, "reference.lemniscate_speed_m_s", reference.lemniscate_speed_m_s)?;
-        let limits: LimitsSection = c.section("limits")?;
-        positive(c, "limits.position_error_limit_m", limits.position_error_limit_m)?;
-        positive(c, "limits.recovery_band_m", limits.recovery_band_m)?;
+        let limits = PositionLimits::load(c)?;
         let metrics: MetricsSection = c.section("metrics")?;
         not_negative(c, "metrics.steady_from_s", metrics.steady_from_s)?;
 
@@ -328,12 +316,7 @@ impl Scenario for Quadcopter {
     }
 
     fn error_measure(&self) -> ErrorMeasure {
-        ErrorMeasure::of_reference(
-            "|p - p_d| m",
-            self.reference(),
-            self.limits.recovery_band_m,
-            self.limits.position_error_limit_m,
-        )
+        self.limits.error_measure("|p - p_d| m", self.reference())
     }
 
     fn metrics(&self) -> Box<dyn Metrics> {

@@ -35,7 +35,7 @@ use self::reference::{ReferenceSection, TiltReference};
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{in_range, not_negative, positive, within};
 use crate::model::scenario::{
-    Controller, ErrorMeasure, Estimator, Metrics, Plant, Scenario, ScenarioEntry, check_substeps,
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Scenario, ScenarioEntry, check_substeps,
 };
 use crate::model::vectors::{Component, Vectors, concat};
 
@@ -144,14 +144,6 @@ struct ModelSection {
     tilt_torque_max_nm: f64,
 }
 
-/// How fault reports judge the flight: ‖ξ − ξ_ref‖.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-struct LimitsSection {
-    position_error_limit_m: f64,
-    recovery_band_m: f64,
-}
-
 pub struct Tiltrotor {
     model: ModelSection,
     plant: PlantSection,
@@ -159,7 +151,7 @@ pub struct Tiltrotor {
     estimator: EstimatorSection,
     controller: ControllerSection,
     reference: ReferenceSection,
-    limits: LimitsSection,
+    limits: PositionLimits,
     metrics: MetricsSection,
     inputs: Inputs,
     tick_s: f64,
@@ -251,9 +243,7 @@ impl Tiltrotor {
         let controller: ControllerSection = c.section("controller")?;
         controller::check(c, &controller)?;
 
-        let limits: LimitsSection = c.section("limits")?;
-        positive(c, "limits.position_error_limit_m", limits.position_error_limit_m)?;
-        positive(c, "limits.recovery_band_m", limits.recovery_band_m)?;
+        let limits = PositionLimits::load(c)?;
 
         let metrics: MetricsSection = c.section("metrics")?;
         let [from, to] = metrics.d_hat_window_s;
@@ -364,11 +354,6 @@ impl Scenario for Tiltrotor {
     }
 
     fn error_measure(&self) -> ErrorMeasure {
-        ErrorMeasure::of_reference(
-            "|xi - xi_ref| m",
-            self.reference(),
-            self.limits.recovery_band_m,
-            self.limits.position_error_limit_m,
-        )
+        self.limits.error_measure("|xi - xi_ref| m", self.reference())
     }
 }
