@@ -38,6 +38,15 @@ pub fn within(c: &LaunchConfig, key: &str, value: f64, bound: f64, units: &str) 
     }
 }
 
+/// The largest magnitude of a vehicle's positions, velocities, forces and times (SI units): far
+/// beyond any flight, and small enough that the models' products stay finite.
+pub const MAX_SI: f64 = 1e4;
+
+/// An error unless `value` is within ±[`MAX_SI`].
+pub fn within_si(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
+    within(c, key, value, MAX_SI, "SI units")
+}
+
 /// An error unless `value` is in `range`; `what` names the unit ("integration steps per loop").
 pub fn in_range<T: PartialOrd + Display>(
     c: &LaunchConfig,

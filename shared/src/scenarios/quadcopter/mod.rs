@@ -25,7 +25,7 @@ use self::estimator::{EstimatorSection, Inputs, ParameterEstimator};
 use self::plant::{Actuation, Model, PlantSection, QuadcopterPlant};
 use self::reference::{Reference, ReferenceSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
-use crate::config::validate::{not_negative, positive, within};
+use crate::config::validate::{not_negative, positive, within_si};
 use crate::model::reference::Reference as _;
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Row, Scenario, ScenarioEntry, check_substeps,
@@ -151,15 +151,6 @@ fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
     Ok(Box::new(Quadcopter::from_config(c)?))
 }
 
-/// The largest magnitude of an initial position, velocity or rate and of the process noise
-/// (SI units): far beyond any flight, and small enough that their products stay finite.
-const MAX_MOTION: f64 = 1e4;
-
-/// An error unless `value` is within ±[`MAX_MOTION`].
-fn at_most(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
-    within(c, key, value, MAX_MOTION, "SI units")
-}
-
 impl Quadcopter {
     pub fn from_config(c: &LaunchConfig) -> Result<Self, LaunchError> {
         let model: Model = c.section("model")?;
@@ -178,7 +169,7 @@ impl Quadcopter {
         check_substeps(c, "plant.substeps", plant.substeps)?;
         for (i, std) in plant.process_noise_std.iter().enumerate() {
             not_negative(c, &format!("plant.process_noise_std.{i}"), *std)?;
-            at_most(c, &format!("plant.process_noise_std.{i}"), *std)?;
+            within_si(c, &format!("plant.process_noise_std.{i}"), *std)?;
         }
         // Larger initial motion overflows the rigid body's products (ω × Jω) within a step.
         let initial = &plant.initial;
@@ -188,7 +179,7 @@ impl Quadcopter {
             ("rate_rad_s", initial.rate_rad_s),
         ] {
             for (i, value) in values.iter().enumerate() {
-                at_most(c, &format!("plant.initial.{name}.{i}"), *value)?;
+                within_si(c, &format!("plant.initial.{name}.{i}"), *value)?;
             }
         }
         if plant.mass_step_kg <= -model.mass_kg {

@@ -33,7 +33,7 @@ use self::params::Params;
 use self::plant::{PlantSection, TiltrotorPlant};
 use self::reference::{ReferenceSection, TiltReference};
 use crate::config::launch::{LaunchConfig, LaunchError};
-use crate::config::validate::{in_range, not_negative, positive, within};
+use crate::config::validate::{MAX_SI, in_range, not_negative, positive, within, within_si};
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Scenario, ScenarioEntry, check_substeps,
 };
@@ -162,13 +162,6 @@ fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
     Ok(Box::new(Tiltrotor::from_config(c)?))
 }
 
-/// Positions, forces and times beyond this (SI units) are no flight of this vehicle.
-const MAX_MAGNITUDE: f64 = 1e4;
-
-fn bounded(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchError> {
-    within(c, key, value, MAX_MAGNITUDE, "SI units")
-}
-
 impl Tiltrotor {
     pub fn from_config(c: &LaunchConfig) -> Result<Self, LaunchError> {
         let model: ModelSection = c.section("model")?;
@@ -179,14 +172,14 @@ impl Tiltrotor {
             ));
         }
         positive(c, "model.thrust_max_n", model.thrust_max_n)?;
-        bounded(c, "model.thrust_max_n", model.thrust_max_n)?;
+        within_si(c, "model.thrust_max_n", model.thrust_max_n)?;
         positive(c, "model.tilt_torque_max_nm", model.tilt_torque_max_nm)?;
-        bounded(c, "model.tilt_torque_max_nm", model.tilt_torque_max_nm)?;
+        within_si(c, "model.tilt_torque_max_nm", model.tilt_torque_max_nm)?;
 
         let plant: PlantSection = c.section("plant")?;
         check_substeps(c, "plant.substeps", plant.substeps)?;
         for (i, v) in plant.initial.position_m.iter().enumerate() {
-            bounded(c, &format!("plant.initial.position_m.{i}"), *v)?;
+            within_si(c, &format!("plant.initial.position_m.{i}"), *v)?;
         }
         within(c, "plant.initial.yaw_rad", plant.initial.yaw_rad, std::f64::consts::PI, "rad")?;
         for (i, v) in plant.initial.load_rad.iter().enumerate() {
@@ -198,28 +191,28 @@ impl Tiltrotor {
         for (i, step) in disturbance.steps.iter().enumerate() {
             not_negative(c, &format!("disturbance.steps.{i}.0"), step[0])?;
             for (j, v) in step.iter().enumerate() {
-                bounded(c, &format!("disturbance.steps.{i}.{j}"), *v)?;
+                within_si(c, &format!("disturbance.steps.{i}.{j}"), *v)?;
             }
         }
         for (i, pulse) in disturbance.pulses.iter().enumerate() {
             not_negative(c, &format!("disturbance.pulses.{i}.0"), pulse[0])?;
             positive(c, &format!("disturbance.pulses.{i}.1"), pulse[1])?;
             for (j, v) in pulse.iter().enumerate() {
-                bounded(c, &format!("disturbance.pulses.{i}.{j}"), *v)?;
+                within_si(c, &format!("disturbance.pulses.{i}.{j}"), *v)?;
             }
         }
 
         let reference: ReferenceSection = c.section("reference")?;
         for (i, v) in reference.start.iter().enumerate() {
-            bounded(c, &format!("reference.start.{i}"), *v)?;
+            within_si(c, &format!("reference.start.{i}"), *v)?;
         }
         for (name, moves) in reference.moves() {
             for (i, [at, duration, by]) in moves.iter().enumerate() {
                 not_negative(c, &format!("reference.{name}.{i}.0"), *at)?;
-                bounded(c, &format!("reference.{name}.{i}.0"), *at)?;
+                within_si(c, &format!("reference.{name}.{i}.0"), *at)?;
                 // A C⁴ step's fourth derivative grows as 1/duration⁴.
-                in_range(c, &format!("reference.{name}.{i}.1"), *duration, 0.5..=MAX_MAGNITUDE, "s")?;
-                bounded(c, &format!("reference.{name}.{i}.2"), *by)?;
+                in_range(c, &format!("reference.{name}.{i}.1"), *duration, 0.5..=MAX_SI, "s")?;
+                within_si(c, &format!("reference.{name}.{i}.2"), *by)?;
             }
         }
 
@@ -233,12 +226,12 @@ impl Tiltrotor {
             ("estimator.p0_velocity_m_s", estimator.p0_velocity_m_s),
         ] {
             not_negative(c, key, value)?;
-            bounded(c, key, value)?;
+            within_si(c, key, value)?;
         }
         for (key, value) in
             [("estimator.r_position_m", estimator.r_position_m), ("estimator.r_velocity_m_s", estimator.r_velocity_m_s)]
         {
-            bounded(c, key, value)?;
+            within_si(c, key, value)?;
         }
         let controller: ControllerSection = c.section("controller")?;
         controller::check(c, &controller)?;
