@@ -1,7 +1,8 @@
 //! Golden hashes: the exact bytes of `trajectory.csv` for short lockstep runs of every launch
 //! file, each scenario by name, a mass step and the in-loop faults (delay, drop, corrupt).
 //!
-//! These hashes were recorded on commit 817977e and must never change in a refactor: a refactor
+//! These hashes were recorded on commit 817977e (the tilt-rotor rows with issue 12, when the
+//! scenario was added) and must never change in a refactor: a refactor
 //! that changes one of them has changed what the loop computes (or how it writes it). Only a
 //! deliberate model change may re-record them, and its commit says which rows changed and why.
 //! On a mismatch the test prints every row that differs with the hash it got, so a deliberate
