@@ -250,6 +250,47 @@ fn bad_tiltrotor_keys_are_one_clear_error() {
     rejects(&["tiltrotor", "--set", "estimator.r_position_m=0"], &["key `estimator.r_position_m`", "positive"]);
 }
 
+/// A run with no --out goes to runs/<time>-<scenario>, and runs/latest points at the newest;
+/// `looplab report` prints a finished run's report again, the same text the run printed.
+#[test]
+fn runs_latest_names_the_newest_run_and_report_reprints_it() {
+    let dir = fresh_dir("latest");
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |seed: &str| {
+        let out = looplab()
+            .current_dir(&dir)
+            .args(["run", "pendulum", "--mode", "lockstep", "--duration", "0.2", "--in-process", "-q", "--seed", seed])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let report_of = |target: &std::path::Path| {
+        let out = looplab().current_dir(&dir).arg("report").arg(target).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let latest = std::path::Path::new("runs/latest");
+    for seed in ["1", "2"] {
+        let printed = run(seed);
+        let target = std::fs::read_link(dir.join(latest)).unwrap();
+        assert!(dir.join("runs").join(&target).join("summary.json").is_file(), "{target:?}");
+        assert!(printed.contains(&format!("seed {seed}")), "{printed}");
+        assert_eq!(report_of(latest), printed, "looplab report runs/latest after the run with seed {seed}");
+    }
+    let runs: Vec<_> = std::fs::read_dir(dir.join("runs")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(runs.len(), 3, "two run folders and the link: {runs:?}");
+
+    for (target, expected) in [("no-such-run", "no such run folder"), ("runs", "not a finished run folder")] {
+        let out = looplab().current_dir(&dir).args(["report", target]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(stderr.contains(target) && stderr.contains(expected), "{stderr}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn a_sweep_over_too_many_values_is_refused_before_any_run() {
     let output = looplab()

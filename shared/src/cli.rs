@@ -46,6 +46,11 @@ enum Command {
     /// Run a scenario repeatedly in lockstep while one key varies; report the metrics per value
     /// and, for a controller delay, the measured delay margin against theory
     Sweep(SweepCli),
+    /// Print a finished run's report again, from its summary.json
+    Report {
+        /// The run folder (for the newest run: runs/latest)
+        run_dir: PathBuf,
+    },
     /// Remove what runs killed with SIGKILL left in shared memory (their launcher is gone): kill
     /// their orphaned processes, remove their files. `looplab run` does this too before it starts.
     Clean,
@@ -183,6 +188,13 @@ pub fn main() -> ExitCode {
         },
         Some(Command::Run(args)) => run(args),
         Some(Command::Clean) => clean(),
+        Some(Command::Report { run_dir }) => match report::read_summary(&run_dir) {
+            Ok(summary) => {
+                print!("{}", report::render(&summary));
+                ExitCode::SUCCESS
+            }
+            Err(e) => bad_input(format!("{e:#}")),
+        },
         Some(Command::Sweep(args)) => sweep(args),
         Some(Command::Bench(args)) => report_failure(bench::run(&args)),
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),

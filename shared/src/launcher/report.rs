@@ -51,6 +51,18 @@ fn stats_row(out: &mut String, label: &str, s: &Stats) {
 }
 
 /// The human-readable report.
+/// A finished run's summary.json, read back for `looplab report`.
+pub fn read_summary(run_dir: &std::path::Path) -> anyhow::Result<Summary> {
+    use anyhow::Context as _;
+    let path = run_dir.join("summary.json");
+    if !run_dir.is_dir() {
+        anyhow::bail!("{}: no such run folder", run_dir.display());
+    }
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("{}: not a finished run folder (no summary.json)", run_dir.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: not a summary LoopLab wrote", path.display()))
+}
+
 pub fn render(s: &Summary) -> String {
     let mut out = String::new();
     let _ = writeln!(

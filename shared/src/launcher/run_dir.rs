@@ -15,7 +15,7 @@ pub fn begin_run(run_dir: &Path, config: &LaunchConfig) -> Result<(PathBuf, Stri
 }
 
 /// Creates the run folder with its `logs/`: `out` if given (new or empty), else a new
-/// `runs/<time>-<scenario>`.
+/// `runs/<time>-<scenario>`, which `runs/latest` then points at.
 pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     let dir = match out {
         Some(dir) => {
@@ -36,7 +36,10 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
             loop {
                 let dir = if n == 1 { base.clone() } else { PathBuf::from(format!("{}-{n}", base.display())) };
                 match std::fs::create_dir(&dir) {
-                    Ok(()) => break dir,
+                    Ok(()) => {
+                        point_latest_at(&dir)?;
+                        break dir;
+                    }
                     Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => n += 1,
                     Err(e) => return Err(e).with_context(|| format!("cannot create the run folder {}", dir.display())),
                 }
@@ -46,6 +49,19 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     std::fs::create_dir_all(dir.join("logs"))
         .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
     Ok(dir)
+}
+
+/// Points `runs/latest` at `dir`, a folder in `runs/`: a relative link, replaced atomically
+/// (a new link renamed over the old), so it always names a whole run folder.
+fn point_latest_at(dir: &Path) -> Result<()> {
+    let runs = dir.parent().context("a run folder in runs/")?;
+    let name = dir.file_name().context("a run folder in runs/")?;
+    let link = runs.join("latest");
+    let next = runs.join(format!(".latest-{}", std::process::id()));
+    let _ = std::fs::remove_file(&next);
+    std::os::unix::fs::symlink(name, &next)
+        .and_then(|()| std::fs::rename(&next, &link))
+        .with_context(|| format!("cannot point {} at {}", link.display(), dir.display()))
 }
 
 /// A new run id: 64 random bits from the kernel, so that no one can guess the names of a run's
