@@ -99,20 +99,24 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
         assert!(trajectory.columns.contains_key(column), "trajectory.csv has no {column}");
     }
 
-    // latency.hlog is a standard HdrHistogram interval log holding every end-to-end sample.
+    // latency.hlog is a standard HdrHistogram interval log holding every end-to-end sample,
+    // tagged end_to_end and again untagged (what the reference tools read by default).
     let hlog = std::fs::read(r.dir.join("latency.hlog")).unwrap();
-    let mut e2e_count = 0;
+    let (mut e2e_count, mut untagged_count) = (0, 0);
     for entry in hdrhistogram::serialization::interval_log::IntervalLogIterator::new(&hlog) {
-        if let Ok(hdrhistogram::serialization::interval_log::LogEntry::Interval(h)) = entry
-            && h.tag().map(|t| t.as_str()) == Some("end_to_end")
-        {
+        if let Ok(hdrhistogram::serialization::interval_log::LogEntry::Interval(h)) = entry {
             let bytes = base64_decode(h.encoded_histogram());
             let hist: hdrhistogram::Histogram<u64> =
                 hdrhistogram::serialization::Deserializer::new().deserialize(&mut bytes.as_slice()).unwrap();
-            e2e_count += hist.len();
+            match h.tag().map(|t| t.as_str()) {
+                Some("end_to_end") => e2e_count += hist.len(),
+                None => untagged_count += hist.len(),
+                Some(_) => {}
+            }
         }
     }
     assert_eq!(e2e_count, records);
+    assert_eq!(untagged_count, records);
 }
 
 /// Standard base64, as the interval log writes it.

@@ -16,6 +16,9 @@ use crate::contract::report::{HOPS, MonitorReport};
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 use crate::monitor::stats::histogram;
 
+/// The end-to-end histogram's tag; it is also written untagged.
+const END_TO_END: &str = "end_to_end";
+
 /// Length of one interval histogram, in wall-clock time.
 const INTERVAL_NS: u64 = 1_000_000_000;
 
@@ -42,7 +45,7 @@ impl LatencyLog {
 
     fn flush_interval(&mut self, start: u64, end: u64) -> Result<()> {
         let length = Duration::from_nanos(end.saturating_sub(start).max(1));
-        let histograms = std::iter::once(("end_to_end", &mut self.end_to_end))
+        let histograms = std::iter::once((END_TO_END, &mut self.end_to_end))
             .chain(HOPS.iter().map(|h| h.0).zip(self.hops.iter_mut()));
         self.log.write(wall_time(start), length, histograms)
     }
@@ -130,7 +133,8 @@ impl IntervalLog {
         IntervalLogWriterBuilder::new()
             .add_comment("LoopLab latency per hop and end to end, in ns")
             .add_comment(
-                "Tags: end_to_end and one per hop; one interval histogram per tag per second of wall-clock time",
+                "Tags: end_to_end (also untagged) and one per hop; one interval histogram per tag per second of \
+                 wall-clock time",
             )
             .with_start_time(base)
             .with_base_time(base)
@@ -160,8 +164,12 @@ impl IntervalLog {
             if histogram.is_empty() {
                 continue;
             }
-            log.write_histogram(histogram, offset, length, Tag::new(tag))
-                .map_err(|e| anyhow!("write latency.hlog: {e}"))?;
+            // End to end also goes untagged: the reference HistogramLogProcessor reads only
+            // untagged intervals unless told a tag, and fails on a log without any.
+            let tags = if tag == END_TO_END { vec![None, Tag::new(tag)] } else { vec![Tag::new(tag)] };
+            for tag in tags {
+                log.write_histogram(histogram, offset, length, tag).map_err(|e| anyhow!("write latency.hlog: {e}"))?;
+            }
             histogram.reset();
         }
         Ok(())
@@ -172,18 +180,25 @@ impl IntervalLog {
 mod tests {
     use super::*;
 
-    /// The start time stamps of the intervals in a log, and its BaseTime entries.
-    fn read_log(path: &Path) -> (Vec<Duration>, usize) {
+    /// The intervals of a log as (start time stamp, tag), and its BaseTime entries.
+    fn read_log(path: &Path) -> (Vec<(Duration, Option<String>)>, usize) {
         let text = std::fs::read(path).unwrap();
-        let (mut starts, mut bases) = (vec![], 0);
+        let (mut intervals, mut bases) = (vec![], 0);
         for entry in IntervalLogIterator::new(&text) {
             match entry.expect("a valid interval log") {
-                LogEntry::Interval(interval) => starts.push(interval.start_timestamp()),
+                LogEntry::Interval(interval) => {
+                    intervals.push((interval.start_timestamp(), interval.tag().map(|t| t.as_str().to_owned())))
+                }
                 LogEntry::BaseTime(_) => bases += 1,
                 LogEntry::StartTime(_) => {}
             }
         }
-        (starts, bases)
+        (intervals, bases)
+    }
+
+    /// The start time stamps of the intervals with this tag (None: untagged).
+    fn starts(intervals: &[(Duration, Option<String>)], tag: Option<&str>) -> Vec<Duration> {
+        intervals.iter().filter(|(_, t)| t.as_deref() == tag).map(|(start, _)| *start).collect()
     }
 
     fn write_interval(log: &mut IntervalLog, start: SystemTime) {
@@ -213,9 +228,13 @@ mod tests {
         write_interval(&mut second, at(3500));
         drop(second);
 
-        let (starts, bases) = read_log(&dir.join("latency.hlog"));
+        let (intervals, bases) = read_log(&dir.join("latency.hlog"));
         std::fs::remove_dir_all(&dir).unwrap();
         assert_eq!(bases, 1, "one header, the first monitor's");
-        assert_eq!(starts, [0, 1000, 2500, 3500].map(Duration::from_millis));
+        let expected = [0, 1000, 2500, 3500].map(Duration::from_millis);
+        assert_eq!(starts(&intervals, Some("end_to_end")), expected);
+        // End to end again, untagged, for tools that read only untagged intervals.
+        assert_eq!(starts(&intervals, None), expected);
+        assert_eq!(intervals.len(), 8);
     }
 }
