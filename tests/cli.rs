@@ -121,7 +121,7 @@ fn a_missing_binary_is_named() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(
-        stderr.contains("missing binary") && stderr.contains(&dir.join("monitor").display().to_string()),
+        stderr.contains("missing binary") && stderr.contains(&dir.join("looplab-monitor").display().to_string()),
         "{stderr}"
     );
     assert!(!out_dir.exists());

@@ -270,16 +270,17 @@ fn sigint_and_sigterm_stop_the_run_cleanly_with_a_report() {
     }
 }
 
-/// The launcher's children: (name, pid, command line).
+/// The launcher's children: (role name, pid, command line); the role is read off the binary's
+/// name, `looplab-<role>` (the kernel's `comm` cuts it at 15 bytes).
 fn children_of(launcher: u32) -> Vec<(String, i32, String)> {
     std::fs::read_to_string(format!("/proc/{launcher}/task/{launcher}/children"))
         .unwrap()
         .split_whitespace()
         .map(|pid| pid.parse::<i32>().unwrap())
         .filter_map(|pid| {
-            let name = std::fs::read_to_string(format!("/proc/{pid}/comm")).ok()?.trim().to_owned();
             let cmdline = std::fs::read_to_string(format!("/proc/{pid}/cmdline")).ok()?.replace('\0', " ");
-            Some((name, pid, cmdline))
+            let binary = std::path::Path::new(cmdline.split(' ').next()?).file_name()?.to_str()?.to_owned();
+            Some((binary.strip_prefix("looplab-").unwrap_or(&binary).to_owned(), pid, cmdline))
         })
         .collect()
 }

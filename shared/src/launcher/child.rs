@@ -18,13 +18,19 @@ use crate::launcher::outcome::Exit;
 pub type Binaries = BTreeMap<Role, PathBuf>;
 
 /// The five loop binaries, next to this one.
+/// The loop process's binary, beside the launcher: `looplab-<role>`, so that an installed
+/// LoopLab cannot shadow a system tool (lm-sensors has a `sensors`).
+pub fn binary_name(role: Role) -> String {
+    format!("looplab-{}", role.name())
+}
+
 pub fn locate_binaries() -> Result<Binaries> {
     let exe = std::env::current_exe().context("cannot find the looplab executable")?;
     let dir = exe.parent().ok_or_else(|| anyhow!("{} has no parent folder", exe.display()))?;
     build_siblings_under_cargo(dir)?;
     let mut found = BTreeMap::new();
     for role in Role::START_ORDER {
-        let path = dir.join(role.name());
+        let path = dir.join(binary_name(role));
         if !path.is_file() {
             bail!(
                 "missing binary {}: the loop processes are built with the launcher; run `cargo build --release` \
