@@ -291,6 +291,24 @@ fn runs_latest_names_the_newest_run_and_report_reprints_it() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Shell completions and the man page come from the same command definitions as --help.
+#[test]
+fn completions_and_the_man_page_describe_every_command() {
+    let bash = stdout_of(&["completions", "bash"]);
+    let check =
+        std::process::Command::new("bash").args(["-n", "-c", &bash]).output().expect("bash checks the script's syntax");
+    assert!(check.status.success(), "{}", String::from_utf8_lossy(&check.stderr));
+    let man = stdout_of(&["man"]);
+    assert!(man.contains(".TH looplab 1"), "{man}");
+    for command in ["run", "list", "show", "sweep", "bench", "report", "clean", "completions"] {
+        assert!(bash.contains(&format!("looplab__subcmd__{command}")), "bash completes {command}");
+        assert!(man.contains(&format!("looplab\\-{command}")), "the man page lists {command}");
+    }
+    for shell in ["zsh", "fish"] {
+        assert!(stdout_of(&["completions", shell]).contains("looplab"), "{shell}");
+    }
+}
+
 #[test]
 fn a_sweep_over_too_many_values_is_refused_before_any_run() {
     let output = looplab()

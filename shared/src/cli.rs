@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Result;
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, Parser, Subcommand};
 
 use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
@@ -51,6 +51,13 @@ enum Command {
         /// The run folder (for the newest run: runs/latest)
         run_dir: PathBuf,
     },
+    /// Print a shell completion script: `looplab completions bash > /etc/bash_completion.d/looplab`
+    Completions {
+        /// bash, zsh, fish, elvish or powershell
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff): `looplab man > looplab.1; man ./looplab.1`
+    Man,
     /// Remove what runs killed with SIGKILL left in shared memory (their launcher is gone): kill
     /// their orphaned processes, remove their files. `looplab run` does this too before it starts.
     Clean,
@@ -188,6 +195,13 @@ pub fn main() -> ExitCode {
         },
         Some(Command::Run(args)) => run(args),
         Some(Command::Clean) => clean(),
+        Some(Command::Completions { shell }) => {
+            clap_complete::generate(shell, &mut Cli::command(), "looplab", &mut std::io::stdout());
+            ExitCode::SUCCESS
+        }
+        Some(Command::Man) => report_failure(
+            clap_mangen::Man::new(Cli::command()).render(&mut std::io::stdout()).map_err(anyhow::Error::from),
+        ),
         Some(Command::Report { run_dir }) => match report::read_summary(&run_dir) {
             Ok(summary) => {
                 print!("{}", report::render(&summary));
