@@ -220,6 +220,7 @@ fn run_all(
     stop: &StopFlag,
 ) -> Vec<Option<Result<(Summary, Outcome)>>> {
     let next = std::sync::atomic::AtomicUsize::new(0);
+    let progress = progress_bar(configs.len() as u64, "values");
     type Slot = std::sync::Mutex<Option<Result<(Summary, Outcome)>>>;
     let results: Vec<Slot> = configs.iter().map(|_| std::sync::Mutex::new(None)).collect();
     std::thread::scope(|scope| {
@@ -241,14 +242,25 @@ fn run_all(
                         break;
                     }
                     if let Ok((summary, _)) = &result {
-                        eprintln!("  {param} = {}: {} loops", value_text(*value), summary.loops);
+                        progress.suspend(|| eprintln!("  {param} = {}: {} loops", value_text(*value), summary.loops));
                     }
+                    progress.inc(1);
                     *results[i].lock().expect("not poisoned") = Some(result);
                 }
             });
         }
     });
+    progress.finish_and_clear();
     results.into_iter().map(|r| r.into_inner().expect("not poisoned")).collect()
+}
+
+/// A progress bar on stderr with the time left, `len` steps of `what`; drawn only on a
+/// terminal (a log gets the plain lines printed around it).
+pub fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::with_draw_target(Some(len), indicatif::ProgressDrawTarget::stderr());
+    let template = format!("{{bar:24}} {{pos}}/{{len}} {what} · {{elapsed}} so far, about {{eta}} left");
+    bar.set_style(indicatif::ProgressStyle::with_template(&template).expect("valid template"));
+    bar
 }
 
 fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>) -> SweepPoint {

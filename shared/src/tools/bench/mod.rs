@@ -383,8 +383,10 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let mut floor: BTreeMap<String, Vec<u64>> = BTreeMap::new();
     let mut ours: BTreeMap<&'static str, LoopAccumulator> = BTreeMap::new();
     let mut baseline = LoopAccumulator::default();
+    // Each round, then the payload sweep, then the lockstep speed.
+    let progress = crate::tools::sweep::progress_bar(rounds as u64 + 2, "parts");
     for round in 0..rounds {
-        eprintln!("  round {} of {rounds}", round + 1);
+        progress.suspend(|| eprintln!("  round {} of {rounds}", round + 1));
         for mode in MODES {
             let series = pingpong::ping(&setup, Transport::Iox, mode, message_bytes, floor_rounds, 1_000_000)?;
             floor.entry(mode.name().into()).or_default().extend(series.one_way_ns);
@@ -404,9 +406,10 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         for (role, cpu) in Role::ALL.into_iter().filter(|r| r.in_loop()).zip(result.cpu_s) {
             *baseline.cpu_s.entry(role).or_default() += cpu;
         }
+        progress.inc(1);
     }
 
-    eprintln!("  payload sweep");
+    progress.suspend(|| eprintln!("  payload sweep"));
     let sizes: Vec<usize> = (0..9).map(|i| 64usize << (2 * i)).collect();
     let samples = if quick { 40 } else { 300 };
     let mut payload = Vec::new();
@@ -421,7 +424,8 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         });
     }
 
-    eprintln!("  lockstep speed");
+    progress.inc(1);
+    progress.suspend(|| eprintln!("  lockstep speed"));
     let lockstep_seconds = if quick { 3.0 } else { 20.0 };
     let sets = ["mode=lockstep".to_string(), format!("duration_s={lockstep_seconds:?}")];
     let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
@@ -432,6 +436,7 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         return Err(Interrupted.into());
     }
     let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 }, &stop)?;
+    progress.finish_and_clear();
 
     let mut loops: Vec<LoopBench> =
         LOOP_CONFIGS.iter().filter_map(|c| ours.remove(c.name).map(|acc| acc.finish(c.name, c.rate_hz))).collect();
