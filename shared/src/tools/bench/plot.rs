@@ -20,24 +20,54 @@ fn legend_mark(x: i32, y: i32, colour: RGBColor) -> PathElement<(i32, i32)> {
     PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
 }
 
-/// Latency CDFs on a log time axis: one curve per (name, sorted samples in ns).
+/// A latency tick label in µs: whole numbers without a decimal point.
+fn micros_label(us: &f64) -> String {
+    if *us >= 1.0 { format!("{us:.0}") } else { format!("{us:.1}") }
+}
+
+/// A share of the samples as a percentage: "10%", "0.1%".
+fn share_label(share: &f64) -> String {
+    let percent = share * 100.0;
+    if percent >= 1.0 {
+        format!("{percent:.0}%")
+    } else {
+        format!("{}%", format!("{percent:.4}").trim_end_matches('0'))
+    }
+}
+
+/// A payload size tick label: "64 B", "4 KiB", "1 MiB".
+fn bytes_label(bytes: &f64) -> String {
+    match *bytes {
+        b if b >= 1024.0 * 1024.0 => format!("{:.0} MiB", b / (1024.0 * 1024.0)),
+        b if b >= 1024.0 => format!("{:.0} KiB", b / 1024.0),
+        b => format!("{b:.0} B"),
+    }
+}
+
+/// Latency distributions on log-log axes: for each (name, sorted samples in ns), the share of
+/// samples at or above each latency. The tail reads downwards (1 %, 0.1 %, ...) instead of being
+/// squeezed into the top of a linear CDF. A series of one value is a vertical line (a floor).
 pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()> {
     let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
     let us = |ns: u64| (ns as f64 / 1e3).max(0.1);
     let lo = series.iter().filter_map(|(_, s)| s.first()).map(|v| us(*v)).fold(f64::MAX, f64::min).max(0.1);
     let hi = series.iter().filter_map(|(_, s)| s.last()).map(|v| us(*v)).fold(1.0, f64::max);
+    let most = series.iter().map(|(_, s)| s.len()).max().unwrap_or(1).max(10) as f64;
+    let floor_share = 0.8 / most;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
         .margin(15)
         .x_label_area_size(45)
-        .y_label_area_size(55)
-        .build_cartesian_2d((lo * 0.8..hi * 1.2).log_scale(), 0.0..1.0)
+        .y_label_area_size(60)
+        .build_cartesian_2d((lo * 0.8..hi * 1.2).log_scale(), (floor_share..1.0).log_scale())
         .map_err(|e| anyhow!("{e}"))?;
     chart
         .configure_mesh()
         .x_desc("latency, µs (log)")
-        .y_desc("fraction of samples at or below")
+        .y_desc("samples at or above (log)")
+        .x_label_formatter(&micros_label)
+        .y_label_formatter(&share_label)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
     for (i, (name, samples)) in series.iter().enumerate() {
@@ -46,10 +76,14 @@ pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()
         }
         let colour = COLOURS[i % COLOURS.len()];
         let n = samples.len();
-        // At most 2000 points per curve.
-        let step = n.div_ceil(2000).max(1);
-        let points: Vec<(f64, f64)> =
-            (0..n).step_by(step).chain([n - 1]).map(|j| (us(samples[j]), (j + 1) as f64 / n as f64)).collect();
+        let points: Vec<(f64, f64)> = if n == 1 {
+            vec![(us(samples[0]), floor_share), (us(samples[0]), 1.0)]
+        } else {
+            // At most 2000 points per curve, and every point of the last 1 % (the tail).
+            let step = n.div_ceil(2000).max(1);
+            let tail = n - n.div_ceil(100);
+            (0..tail).step_by(step).chain(tail..n).map(|j| (us(samples[j]), (n - j) as f64 / n as f64)).collect()
+        };
         chart
             .draw_series(LineSeries::new(points, colour.stroke_width(2)))
             .map_err(|e| anyhow!("{e}"))?
@@ -58,6 +92,8 @@ pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()
     }
     chart
         .configure_series_labels()
+        // Lower right: the curves fall from the top left, so this corner is the emptiest (the
+        // floor's vertical line sits at the far left).
         .position(SeriesLabelPosition::LowerRight)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
@@ -83,8 +119,10 @@ pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()
         .map_err(|e| anyhow!("{e}"))?;
     chart
         .configure_mesh()
-        .x_desc("payload, bytes (log)")
+        .x_desc("payload (log)")
         .y_desc("latency, µs (log)")
+        .x_label_formatter(&bytes_label)
+        .y_label_formatter(&micros_label)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
     for (i, (name, points)) in series.iter().enumerate() {
@@ -107,4 +145,22 @@ pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
     root.present().map_err(|e| anyhow!("{e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tick_labels_read_as_numbers_with_units() {
+        assert_eq!(micros_label(&1000.0), "1000");
+        assert_eq!(micros_label(&0.5), "0.5");
+        assert_eq!(bytes_label(&64.0), "64 B");
+        assert_eq!(bytes_label(&4096.0), "4 KiB");
+        assert_eq!(bytes_label(&1048576.0), "1 MiB");
+        assert_eq!(share_label(&1.0), "100%");
+        assert_eq!(share_label(&0.01), "1%");
+        assert_eq!(share_label(&0.001), "0.1%");
+        assert_eq!(share_label(&0.0001), "0.01%");
+    }
 }
