@@ -35,11 +35,12 @@ fn share_label(share: &f64) -> String {
     }
 }
 
-/// A payload size tick label: "64 B", "4 KiB", "1 MiB".
+/// A payload size tick label in decimal units, as the log axis ticks at powers of ten:
+/// "100 B", "10 kB", "1 MB".
 fn bytes_label(bytes: &f64) -> String {
     match *bytes {
-        b if b >= 1024.0 * 1024.0 => format!("{:.0} MiB", b / (1024.0 * 1024.0)),
-        b if b >= 1024.0 => format!("{:.0} KiB", b / 1024.0),
+        b if b >= 1e6 => format!("{} MB", b / 1e6),
+        b if b >= 1e3 => format!("{} kB", b / 1e3),
         b => format!("{b:.0} B"),
     }
 }
@@ -92,10 +93,10 @@ pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()
     }
     chart
         .configure_series_labels()
-        // Lower right: the curves fall from the top left, so this corner is the emptiest (the
-        // floor's vertical line sits at the far left).
+        // Lower right: the curves fall from the top left, so this corner is the emptiest; see
+        // through, for a tail that reaches it.
         .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.8))
+        .background_style(WHITE.mix(0.5))
         .border_style(BLACK)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
@@ -156,8 +157,8 @@ mod tests {
         assert_eq!(micros_label(&1000.0), "1000");
         assert_eq!(micros_label(&0.5), "0.5");
         assert_eq!(bytes_label(&64.0), "64 B");
-        assert_eq!(bytes_label(&4096.0), "4 KiB");
-        assert_eq!(bytes_label(&1048576.0), "1 MiB");
+        assert_eq!(bytes_label(&10000.0), "10 kB");
+        assert_eq!(bytes_label(&1e6), "1 MB");
         assert_eq!(share_label(&1.0), "100%");
         assert_eq!(share_label(&0.01), "1%");
         assert_eq!(share_label(&0.001), "0.1%");
