@@ -32,7 +32,7 @@ pub const MAX_LOOPS: u64 = 1_000_000_000;
 
 pub use crate::config::error::{COMMON_KEYS, LaunchError};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 #[strum(serialize_all = "lowercase")]
 pub enum Mode {

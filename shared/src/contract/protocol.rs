@@ -118,7 +118,7 @@ pub struct StageReport {
 }
 
 /// What an adaptive wait did, for the process's report.
-#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct WaitCounts {
     /// Waits that found the input within the poll window.
     pub caught: u64,

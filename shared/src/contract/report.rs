@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::contract::role::Topic;
+use crate::contract::role::{Role, Topic};
 
 /// Most missing ranges listed in the report.
 pub const MAX_MISSING_RANGES: usize = 100;
@@ -24,7 +24,7 @@ pub const HOPS: [(&str, usize, usize); 7] = [
 
 /// A latency distribution as the summary reports it, in nanoseconds. Percentiles come from the
 /// HDR histogram (within 0.1%); count, min, max and mean are exact. All `None` when empty.
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Stats {
     pub count: u64,
     pub min: Option<u64>,
@@ -65,6 +65,10 @@ pub struct MonitorReport {
     pub notes: Vec<String>,
     /// What each fault of the launch file did to the loop, in its order.
     pub faults: Vec<FaultEffect>,
+    /// Per stage, the loop records received that each of its incarnations handled (index:
+    /// incarnation): the counts of a killed incarnation, which sent no report.
+    #[serde(default)]
+    pub records_by_incarnation: BTreeMap<Role, Vec<u64>>,
 }
 
 impl MonitorReport {
@@ -78,7 +82,7 @@ impl MonitorReport {
 
 /// Loops without a loop record: every one counted, the first [`MAX_MISSING_RANGES`] ranges
 /// listed. Serialized flat into the summary's `monitor` object.
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct MissingLoops {
     /// Inclusive [first, last] ranges, in order.
     #[serde(rename = "missing")]
@@ -122,7 +126,7 @@ impl MissingLoops {
 }
 
 /// What one fault did to the loop and to the physical system, in simulation time.
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct FaultEffect {
     /// Ticks with no fresh command (none came, or it was late, rejected or lost) from the
     /// injection until the first fresh one after the fault ended (after a kill: the first that

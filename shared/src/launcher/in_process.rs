@@ -27,9 +27,9 @@ pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &
     let reports = Reports {
         plant: Some(ran.plant),
         stages: BTreeMap::from([
-            (Role::Sensors, vec![ran.sensors]),
-            (Role::Estimator, vec![ran.estimator]),
-            (Role::Controller, vec![ran.controller]),
+            (Role::Sensors, BTreeMap::from([(0, ran.sensors)])),
+            (Role::Estimator, BTreeMap::from([(0, ran.estimator)])),
+            (Role::Controller, BTreeMap::from([(0, ran.controller)])),
         ]),
         monitor: Some(recording.finish()?),
     };

@@ -10,7 +10,7 @@ use crate::config::faults::{FaultKind, FaultSpec};
 use crate::contract::role::Role;
 
 /// What noticed a fault first (`summary.json`'s `detected_by`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 pub enum DetectedBy {
     /// A kill: the process's output closed and it was reaped.
     #[serde(rename = "the process exited")]

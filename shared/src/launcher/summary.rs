@@ -1,11 +1,13 @@
 //! `summary.json`: its types, and the builder that makes one from explicit inputs (the
 //! processes' reports, their starts and what the supervisor saw), so that a run without child
-//! processes can build it from its own reports.
+//! processes can build it from its own reports. Its JSON Schema, generated from these types, is
+//! kept in `shared/schema/summary.schema.json`.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::Result;
+use schemars::{JsonSchema, Schema, SchemaGenerator, json_schema};
 use serde::{Deserialize, Serialize, Serializer};
 
 use crate::config::faults::FaultKind;
@@ -21,8 +23,29 @@ use crate::launcher::run_dir::write_atomically;
 pub use crate::model::scenario::ErrorMeasureInfo;
 use crate::model::scenario::Scenario;
 
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+/// The layout version of `summary.json`: bump it on any incompatible change (a key removed,
+/// renamed, retyped or given another meaning). New keys are compatible.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// The summary of one LoopLab run (`summary.json` in the run folder).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct Summary {
+    /// The layout version of this file, bumped on any incompatible change.
+    #[serde(default)]
+    pub schema_version: u32,
+    /// The LoopLab version that wrote it.
+    #[serde(default)]
+    pub looplab_version: String,
+    /// The git commit the launcher was built from, with "-dirty" if the work tree had changes,
+    /// or "unknown" (built outside a git repository).
+    #[serde(default)]
+    pub git_commit: String,
+    /// The launcher's command line, program first.
+    #[serde(default)]
+    pub command_line: Vec<String>,
+    /// The machine it ran on.
+    #[serde(default)]
+    pub machine: Machine,
     pub scenario: String,
     /// One line naming the system and its variant.
     pub title: String,
@@ -40,6 +63,7 @@ pub struct Summary {
     /// Every planned loop ran and every process ended cleanly.
     pub completed: bool,
     /// Why the run ended early, when it did.
+    #[schemars(with = "Option<String>")]
     pub stopped_because: Option<StopReason>,
     pub deadline_misses: u64,
     pub rejected_commands: u64,
@@ -93,7 +117,7 @@ fn by_name<V: Serialize, S: Serializer>(map: &BTreeMap<Role, V>, serializer: S) 
 
 /// One injected fault: what the launcher saw (wall-clock, from the injection) and what it did
 /// to the loop and the physical system (simulation time, from the monitor).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct FaultReport {
     /// In the `--fault` form.
     pub fault: String,
@@ -116,38 +140,41 @@ pub struct FaultReport {
     pub effect: Option<FaultEffect>,
 }
 
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct TimelineEntry {
     /// Wall-clock ms after tick 0.
     pub at_ms: f64,
     pub event: String,
 }
 
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct ProcessInfo {
     pub name: Role,
     /// 0 for the first start, then one more per restart.
     pub incarnation: u32,
     pub pid: u32,
     /// Exit status as text: "0", "1", "signal 9", or "running" if it never ended.
+    #[schemars(schema_with = "exit_schema")]
     pub exit: Exit,
     /// User + system CPU time, seconds.
     pub cpu_s: f64,
-    /// Sensors, estimator, controller: inputs handled, and loops never seen (real-time mode: a
-    /// newer input replaced them, or the plant skipped the tick).
+    /// Sensors, estimator, controller: this incarnation's inputs handled, and loops it never saw
+    /// (real-time mode: a newer input replaced them, or the plant skipped the tick). An
+    /// incarnation that sent no report (killed) has, for `processed`, the loop records the
+    /// monitor received with its mark, and no `skipped`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub processed: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub skipped: Option<u64>,
 }
 
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct Latency {
     pub end_to_end: Stats,
     pub hops: BTreeMap<String, Stats>,
 }
 
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct Jitter {
     /// |actual tick period − dt|, real-time mode only.
     pub plant_tick: Stats,
@@ -155,7 +182,8 @@ pub struct Jitter {
     pub plant_wake_latency: Stats,
 }
 
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+/// What the monitor recorded of the loop.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct MonitorCounts {
     /// Loops with their loop record (the last monitor's, after restarts).
     pub records: u64,
@@ -178,7 +206,57 @@ pub struct MonitorCounts {
     pub dropped_for_monitor: u64,
 }
 
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+/// The machine a run ran on.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
+pub struct Machine {
+    /// CPUs this process could use (available parallelism).
+    pub cpus: u32,
+    /// The CPU's `model name` in /proc/cpuinfo, if it has one.
+    pub cpu_model: Option<String>,
+    /// The kernel's release (`uname -r`).
+    pub kernel: String,
+    pub hostname: String,
+}
+
+impl Machine {
+    /// This machine.
+    pub fn this() -> Self {
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get() as u32);
+        let cpu_model = std::fs::read_to_string("/proc/cpuinfo").ok().and_then(|info| {
+            info.lines()
+                .filter_map(|line| line.split_once(':'))
+                .find(|(key, _)| key.trim() == "model name")
+                .map(|(_, value)| value.trim().to_owned())
+        });
+        // SAFETY: uname fills the zeroed struct it is given; its fields are NUL-terminated.
+        let (kernel, hostname) = unsafe {
+            let mut names: libc::utsname = std::mem::zeroed();
+            if libc::uname(&mut names) == 0 {
+                let text =
+                    |field: &[libc::c_char]| std::ffi::CStr::from_ptr(field.as_ptr()).to_string_lossy().into_owned();
+                (text(&names.release), text(&names.nodename))
+            } else {
+                (String::new(), String::new())
+            }
+        };
+        Self { cpus, cpu_model, kernel, hostname }
+    }
+}
+
+/// The JSON Schema of `summary.json`, as kept in `shared/schema/summary.schema.json`: what a
+/// summary is written as (serialized), pretty-printed with a final newline.
+pub fn json_schema() -> String {
+    let generator = schemars::generate::SchemaSettings::draft2020_12().for_serialize().into_generator();
+    let schema = generator.into_root_schema_for::<Summary>();
+    serde_json::to_string_pretty(&schema).expect("a schema is JSON") + "\n"
+}
+
+/// An [`Exit`] is written as its text.
+fn exit_schema(_: &mut SchemaGenerator) -> Schema {
+    json_schema!({ "type": "string", "pattern": "^(-?[0-9]+|signal [0-9]+|running)$" })
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct SharedMemoryCheck {
     /// No file of the run is left in /dev/shm or /tmp/iceoryx2.
     pub clean: bool,
@@ -191,7 +269,7 @@ pub struct SharedMemoryCheck {
 /// One restart, in wall-clock ms after the launcher saw the process die (its output closed and
 /// it was reaped): its dead node's resources removed, the backoff, the new process started, its
 /// ports up. `null` for a step that never came (the run ended first).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct RestartSteps {
     pub process: Role,
     /// The incarnation that was started.
@@ -209,8 +287,8 @@ pub struct RestartSteps {
 pub struct Reports {
     /// The last plant's.
     pub plant: Option<PlantReport>,
-    /// Per stage, the reports of every incarnation that ended cleanly.
-    pub stages: BTreeMap<Role, Vec<StageReport>>,
+    /// Per stage, the report of each incarnation that sent one (ended cleanly), by incarnation.
+    pub stages: BTreeMap<Role, BTreeMap<u32, StageReport>>,
     /// The last monitor's.
     pub monitor: Option<MonitorReport>,
 }
@@ -265,8 +343,14 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
     let wall_ns = plant.last_publish_ns.saturating_sub(plant.first_publish_ns);
     let wall_time_s = wall_ns as f64 * 1e-9;
     let missing = monitor.missing.clone().up_to(monitor.loops_seen, plant.loops);
-    let stage_total = |f: fn(&StageReport) -> u64| -> u64 { reports.stages.values().flatten().map(f).sum() };
+    let stage_total =
+        |f: fn(&StageReport) -> u64| -> u64 { reports.stages.values().flat_map(|r| r.values()).map(f).sum() };
     Summary {
+        schema_version: SCHEMA_VERSION,
+        looplab_version: env!("CARGO_PKG_VERSION").into(),
+        git_commit: env!("LOOPLAB_GIT_COMMIT").into(),
+        command_line: std::env::args_os().map(|arg| arg.to_string_lossy().into_owned()).collect(),
+        machine: Machine::this(),
         scenario: config.scenario.clone(),
         title: scenario.title(),
         mode: config.mode,
@@ -289,7 +373,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         wall_time_s,
         loops_per_s: if wall_ns > 0 { plant.loops.saturating_sub(1) as f64 / wall_time_s } else { 0.0 },
         restarts: starts.iter().map(|(&role, runs)| (role, runs.len().saturating_sub(1) as u32)).collect(),
-        processes: processes(starts, reports),
+        processes: processes(starts, reports, &monitor),
         adaptive_waits: adaptive_waits(&plant, reports),
         latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
         jitter_ns: Jitter {
@@ -321,20 +405,23 @@ pub fn write(summary: &Summary, run_dir: &Path) -> Result<()> {
     write_atomically(&run_dir.join("summary.json"), &(serde_json::to_string_pretty(summary)? + "\n"))
 }
 
-/// One entry per start, in start order, with the stages' counts over their incarnations.
-fn processes(starts: &BTreeMap<Role, Vec<Start>>, reports: &Reports) -> Vec<ProcessInfo> {
+/// One entry per start, in start order; a stage's with that incarnation's own counts: from its
+/// report, or (killed, no report) the loop records the monitor received with its mark.
+fn processes(starts: &BTreeMap<Role, Vec<Start>>, reports: &Reports, monitor: &MonitorReport) -> Vec<ProcessInfo> {
     let mut processes = vec![];
     for role in Role::START_ORDER {
-        let stage_reports = reports.stages.get(&role);
+        let recorded = monitor.records_by_incarnation.get(&role);
         for (n, start) in starts.get(&role).into_iter().flatten().enumerate() {
+            let incarnation = n as u32;
+            let report = reports.stages.get(&role).and_then(|r| r.get(&incarnation));
             processes.push(ProcessInfo {
                 name: role,
-                incarnation: n as u32,
+                incarnation,
                 pid: start.pid,
                 exit: start.exit,
                 cpu_s: start.cpu_s,
-                processed: stage_reports.map(|r| r.iter().map(|r| r.processed).sum()),
-                skipped: stage_reports.map(|r| r.iter().map(|r| r.skipped).sum()),
+                processed: report.map(|r| r.processed).or_else(|| recorded.map(|r| r.get(n).copied().unwrap_or(0))),
+                skipped: report.map(|r| r.skipped),
             });
         }
     }
@@ -354,7 +441,7 @@ fn adaptive_waits(plant: &PlantReport, reports: &Reports) -> BTreeMap<Role, Wait
     };
     add(Role::Plant, plant.wait);
     for (&role, stage_reports) in &reports.stages {
-        for r in stage_reports {
+        for r in stage_reports.values() {
             add(role, r.wait);
         }
     }
@@ -414,6 +501,11 @@ pub(crate) mod tests {
     /// A complete lockstep run's summary, for the tests of what reads one.
     pub(crate) fn summary() -> Summary {
         Summary {
+            schema_version: SCHEMA_VERSION,
+            looplab_version: "0.1.0".into(),
+            git_commit: "unknown".into(),
+            command_line: vec!["looplab".into(), "run".into()],
+            machine: Machine::default(),
             scenario: "pendulum".into(),
             title: "pendulum".into(),
             mode: Mode::Lockstep,
@@ -471,7 +563,7 @@ pub(crate) mod tests {
         let monitor = MonitorReport { records: 500, loops_seen: 500, ..Default::default() };
         let reports = Reports {
             plant: Some(plant),
-            stages: Role::STAGES.into_iter().map(|r| (r, vec![stage.clone()])).collect(),
+            stages: Role::STAGES.into_iter().map(|r| (r, [(0, stage.clone())].into())).collect(),
             monitor: Some(monitor),
         };
         let starts: BTreeMap<Role, Vec<Start>> =
@@ -526,6 +618,89 @@ pub(crate) mod tests {
         assert!(!summary.completed);
         assert_eq!(summary.stopped_because, Some(StopReason::PlantStoppedEarly));
         assert_eq!(summary.monitor.missing.ranges, [[300, 399]], "the loops after the last the monitor saw");
+    }
+
+    /// The schema kept in the repo is the one the types make; `LOOPLAB_WRITE_SCHEMA=1` rewrites it.
+    #[test]
+    fn summary_schema_is_the_file_in_the_repo() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("schema/summary.schema.json");
+        let schema = json_schema();
+        if std::env::var_os("LOOPLAB_WRITE_SCHEMA").is_some() {
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(&path, &schema).unwrap();
+        }
+        let kept = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(
+            kept == schema,
+            "{} is not the schema of `Summary`; regenerate it with \
+             `LOOPLAB_WRITE_SCHEMA=1 cargo test --release -p looplab-shared summary_schema`",
+            path.display()
+        );
+    }
+
+    /// A killed incarnation sends no report: its count comes from the monitor's loop records,
+    /// the restarted one's from its own report, and neither repeats the other's.
+    #[test]
+    fn each_incarnation_of_a_stage_has_its_own_counts() {
+        let overrides = [Override::parse("mode=lockstep").unwrap(), Override::parse("duration_s=2").unwrap()];
+        let (config, scenario) = resolve("pendulum", &overrides).unwrap();
+        let reported = StageReport { processed: 1500, skipped: 2, ..Default::default() };
+        let reports = Reports {
+            plant: Some(PlantReport { loops: 2000, ..Default::default() }),
+            stages: [(Role::Estimator, [(1, reported)].into())].into(),
+            monitor: Some(MonitorReport {
+                records_by_incarnation: [(Role::Estimator, vec![500, 1500]), (Role::Sensors, vec![2000])].into(),
+                ..Default::default()
+            }),
+        };
+        let start = |pid, exit| Start { pid, exit, cpu_s: 0.0 };
+        let starts: BTreeMap<Role, Vec<Start>> = [
+            (Role::Estimator, vec![start(1, Exit::Signal(9)), start(2, Exit::Status(0))]),
+            (Role::Plant, vec![start(3, Exit::Status(0))]),
+        ]
+        .into();
+        let summary = build(SummaryInputs {
+            config: &config,
+            scenario: scenario.as_ref(),
+            run_id: "0123",
+            run_dir: Path::new("/tmp/run"),
+            started_at: String::new(),
+            outcome: &Outcome::Completed,
+            reports: &reports,
+            starts: &starts,
+            log: &RunLog::default(),
+            shared_memory: SharedMemoryCheck::default(),
+        });
+        let counts: Vec<_> =
+            summary.processes.iter().map(|p| (p.name, p.incarnation, p.processed, p.skipped)).collect();
+        assert_eq!(
+            counts,
+            [
+                (Role::Estimator, 0, Some(500), None),
+                (Role::Estimator, 1, Some(1500), Some(2)),
+                (Role::Plant, 0, None, None)
+            ]
+        );
+    }
+
+    #[test]
+    fn a_summary_says_what_wrote_it_and_where() {
+        let s = build(SummaryInputs {
+            config: &resolve("pendulum", &[]).unwrap().0,
+            scenario: resolve("pendulum", &[]).unwrap().1.as_ref(),
+            run_id: "0123",
+            run_dir: Path::new("/tmp/run"),
+            started_at: String::new(),
+            outcome: &Outcome::Completed,
+            reports: &Reports::default(),
+            starts: &BTreeMap::new(),
+            log: &RunLog::default(),
+            shared_memory: SharedMemoryCheck::default(),
+        });
+        assert_eq!((s.schema_version, s.looplab_version.as_str()), (1, env!("CARGO_PKG_VERSION")));
+        assert_eq!(s.command_line, std::env::args().collect::<Vec<_>>());
+        assert_eq!(s.machine.cpus as usize, std::thread::available_parallelism().unwrap().get());
+        assert!(!s.machine.kernel.is_empty() && !s.machine.hostname.is_empty(), "{:?}", s.machine);
     }
 
     #[test]

@@ -505,7 +505,7 @@ impl<'a> Supervisor<'a> {
         if incarnation != self.processes[role].incarnation() {
             // A report from an incarnation that has since been replaced.
             if let Line::Event(ChildEvent::StageReport(r)) = line {
-                self.reports.stages.entry(role).or_default().push(r);
+                self.reports.stages.entry(role).or_default().insert(incarnation, r);
             }
             return None;
         }
@@ -573,7 +573,9 @@ impl<'a> Supervisor<'a> {
             }
             ChildEvent::PlantReport(r) => self.reports.plant = Some(r),
             ChildEvent::MonitorReport(r) => self.reports.monitor = Some(*r),
-            ChildEvent::StageReport(r) => self.reports.stages.entry(role).or_default().push(r),
+            ChildEvent::StageReport(r) => {
+                self.reports.stages.entry(role).or_default().insert(incarnation, r);
+            }
         }
         None
     }

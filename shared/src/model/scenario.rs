@@ -143,7 +143,7 @@ impl ErrorMeasure {
 }
 
 /// An [`ErrorMeasure`] as `summary.json` writes it.
-#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct ErrorMeasureInfo {
     pub name: String,
     pub recovery_band: f64,

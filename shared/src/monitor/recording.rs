@@ -11,7 +11,7 @@ use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::msg::PlantCounters;
 use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
-use crate::contract::role::Topic;
+use crate::contract::role::{Role, Topic};
 use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::join::{Joiner, LoopParts, Sample};
@@ -97,6 +97,16 @@ impl Recording {
             // The first record: those before it went out before this monitor was up. (The
             // first monitor is up before the loop starts.)
             self.report.records_before_start = record.sequence.saturating_sub(1);
+        }
+        if let Sample::Loop(record) = &sample {
+            for stage in Role::STAGES {
+                let incarnation = record.header.incarnations[stage.slot().expect("a stage has a slot")] as usize;
+                let counts = self.report.records_by_incarnation.entry(stage).or_default();
+                if counts.len() <= incarnation {
+                    counts.resize(incarnation + 1, 0);
+                }
+                counts[incarnation] += 1;
+            }
         }
         *self.report.received.entry(topic.name().to_owned()).or_default() += 1;
         // A part of a loop written already came too late: it stays counted as received.
