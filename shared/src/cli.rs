@@ -11,7 +11,7 @@ use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::runtime::ipc;
 use crate::scenarios;
-use crate::tools::{bench, sweep};
+use crate::tools::{bench, export, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -53,6 +53,15 @@ enum Command {
     /// loop, per wait strategy, plus zero copy, the monitor's cost and lockstep speed; writes
     /// bench.json and SVG charts
     Bench(bench::BenchArgs),
+    /// Write a file for an existing run folder from its files: --mcap writes run.mcap (for
+    /// Foxglove or PlotJuggler), as every run does, for a run folder that has none
+    Export {
+        /// The run folder (runs/<time>-<scenario> or a run's --out)
+        run_dir: PathBuf,
+        /// Write run.mcap
+        #[arg(long, required = true)]
+        mcap: bool,
+    },
     /// (internal) the far end of the bench's ping-pong
     #[command(hide = true)]
     BenchEcho(bench::pingpong::EchoArgs),
@@ -185,6 +194,14 @@ pub fn main() -> ExitCode {
         Some(Command::Clean) => clean(),
         Some(Command::Sweep(args)) => sweep(args),
         Some(Command::Bench(args)) => report_failure(bench::run(&args)),
+        Some(Command::Export { run_dir, mcap: _ }) => match export::write_mcap(&run_dir) {
+            Ok(path) => {
+                println!("wrote {}", path.display());
+                ExitCode::SUCCESS
+            }
+            Err(export::ExportError::BadInput(why)) => bad_input(why),
+            Err(export::ExportError::Failed(e)) => report_failure(Err(e)),
+        },
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default()),
