@@ -11,7 +11,7 @@ use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::runtime::ipc;
 use crate::scenarios;
-use crate::tools::{bench, sweep};
+use crate::tools::{bench, export, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -22,7 +22,7 @@ use crate::tools::{bench, sweep};
 The plant, sensors, estimator, controller and a monitor each run as their own process. LoopLab \
 reports the latency of every hop and end to end, the plant's tick jitter, deadline misses, sensor \
 data age and the scenario's control metrics, and writes a run folder with summary.json, \
-trajectory.csv, loops.csv, latency.hlog and the resolved launch file.\n\n\
+trajectory.csv, loops.csv, latency.hlog, run.mcap (for Foxglove and PlotJuggler) and the resolved launch file.\n\n\
 With no command, runs the default: the pendulum scenario, real time, 1 kHz, 10 s.",
     after_help = "Examples:\n  looplab\n  looplab list\n  looplab show pendulum\n  looplab run pendulum --mode lockstep --duration 30 \
 --set sensors.encoder.bias=0.05 --set estimator.kind=no-bias\n  looplab run my-launch.toml --out /tmp/run1"
@@ -65,6 +65,15 @@ enum Command {
     /// loop, per wait strategy, plus zero copy, the monitor's cost and lockstep speed; writes
     /// bench.json and SVG charts
     Bench(bench::BenchArgs),
+    /// Write a file for an existing run folder from its files: --mcap writes run.mcap (for
+    /// Foxglove or PlotJuggler), as every run does, for a run folder that has none
+    Export {
+        /// The run folder (runs/<time>-<scenario> or a run's --out)
+        run_dir: PathBuf,
+        /// Write run.mcap
+        #[arg(long, required = true)]
+        mcap: bool,
+    },
     /// (internal) the far end of the bench's ping-pong
     #[command(hide = true)]
     BenchEcho(bench::pingpong::EchoArgs),
@@ -137,7 +146,7 @@ struct LaunchArgs {
 #[command(
     after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
 and meaning; --set takes any of them.\n\
-Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, launch.toml (resolved), logs/.\n\
+Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, run.mcap, launch.toml (resolved), logs/.\n\
 Exit codes: 0 completed, 1 the run failed (a process died, or files were left in shared memory), \
 2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
 )]
@@ -211,6 +220,14 @@ pub fn main() -> ExitCode {
         },
         Some(Command::Sweep(args)) => sweep(args),
         Some(Command::Bench(args)) => report_failure(bench::run(&args)),
+        Some(Command::Export { run_dir, mcap: _ }) => match export::write_mcap(&run_dir) {
+            Ok(path) => {
+                println!("wrote {}", path.display());
+                ExitCode::SUCCESS
+            }
+            Err(export::ExportError::BadInput(why)) => bad_input(why),
+            Err(export::ExportError::Failed(e)) => report_failure(Err(e)),
+        },
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default()),

@@ -3,6 +3,7 @@
 
 pub mod hlog;
 pub mod loops;
+pub mod mcap;
 pub mod trajectory;
 
 use std::fs::File;
@@ -63,6 +64,7 @@ pub fn open(setup: &SinkSetup) -> Result<Vec<Box<dyn RunSink>>> {
         Box::new(trajectory::TrajectoryCsv::open(setup)?),
         Box::new(loops::LoopsCsv::open(setup)?),
         Box::new(hlog::LatencyLog::open(setup)?),
+        Box::new(mcap::McapRecording::open(setup)?),
     ])
 }
 

@@ -1,0 +1,250 @@
+//! `run.mcap`, read back with the `mcap` crate's reader: one message per loop and channel as
+//! `summary.json` counts them, every value of `trajectory.csv` exactly, the log time's clock in
+//! each channel's metadata, and `looplab export` writing the same from the run folder's files.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use common::{fresh_dir, looplab, run};
+use serde_json::Value;
+
+const TOPICS: [&str; 7] = ["/state", "/measurements", "/estimate", "/command", "/loop", "/latency", "/faults"];
+
+/// One message: its log time, publish time and JSON.
+struct Message {
+    log_time: u64,
+    publish_time: u64,
+    data: Vec<u8>,
+    json: Value,
+}
+
+/// A recording as its channels' messages, in file order, and each channel's metadata.
+struct Recording {
+    messages: BTreeMap<String, Vec<Message>>,
+    metadata: BTreeMap<String, BTreeMap<String, String>>,
+}
+
+impl Recording {
+    fn read(path: &Path) -> Self {
+        let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        // The summary section: the file was finished.
+        let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary section");
+        let mut metadata = BTreeMap::new();
+        for channel in summary.channels.values() {
+            let schema = channel.schema.as_ref().expect("every channel has a schema");
+            assert_eq!((schema.encoding.as_str(), channel.message_encoding.as_str()), ("jsonschema", "json"));
+            let _: Value = serde_json::from_slice(&schema.data).expect("the schema is JSON");
+            metadata.insert(channel.topic.clone(), channel.metadata.clone());
+        }
+        let mut messages: BTreeMap<String, Vec<Message>> = TOPICS.iter().map(|t| (t.to_string(), vec![])).collect();
+        for message in mcap::MessageStream::new(&bytes).unwrap() {
+            let message = message.unwrap();
+            let json = serde_json::from_slice(&message.data).expect("a message is JSON");
+            messages.get_mut(&message.channel.topic).expect("a known topic").push(Message {
+                log_time: message.log_time,
+                publish_time: message.publish_time,
+                data: message.data.into_owned(),
+                json,
+            });
+        }
+        Self { messages, metadata }
+    }
+
+    fn count(&self, topic: &str) -> u64 {
+        self.messages[topic].len() as u64
+    }
+}
+
+/// A CSV file: its header in order and its rows.
+fn csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().split(',').map(str::to_owned).collect();
+    (header, lines.map(|l| l.split(',').map(str::to_owned).collect()).collect())
+}
+
+/// Every value of trajectory.csv equals the recording's, exactly: the state's columns in /state,
+/// `meas.<sensor>[.<component>]` in /measurements, `est.*` in /estimate and `cmd.*` in /command.
+fn assert_trajectory_matches(dir: &Path, recording: &Recording) {
+    let (header, rows) = csv(&dir.join("trajectory.csv"));
+    let topic = |column: &str| match column.split_once('.') {
+        Some(("meas", _)) => "/measurements",
+        Some(("est", _)) => "/estimate",
+        Some(("cmd", _)) => "/command",
+        _ => "/state",
+    };
+    for (column, name) in header.iter().enumerate().skip(2) {
+        let messages = &recording.messages[topic(name)];
+        assert_eq!(messages.len(), rows.len(), "{name}");
+        for (row, message) in rows.iter().zip(messages) {
+            let json = &message.json;
+            assert_eq!(json["k"].as_u64(), Some(row[0].parse().unwrap()));
+            assert_eq!(json["t"].as_f64(), Some(row[1].parse().unwrap()));
+            let value = match name.split('.').collect::<Vec<_>>()[..] {
+                ["meas", sensor] => {
+                    let value = json[sensor]["value"].as_object().unwrap();
+                    assert_eq!(value.len(), 1, "{name}: one component");
+                    value.values().next().unwrap().clone()
+                }
+                ["meas", sensor, component] => json[sensor]["value"][component].clone(),
+                [_, component] => json[component].clone(),
+                _ => json[name.as_str()].clone(),
+            };
+            let expected: f64 = row[column].parse().unwrap();
+            assert_eq!(value.as_f64(), Some(expected), "{name} at k = {}", row[0]);
+        }
+    }
+}
+
+/// Messages per channel as summary.json counts them, for a whole lockstep run.
+fn assert_counts(summary: &Value, recording: &Recording) {
+    let loops = summary["loops"].as_u64().unwrap();
+    let records = summary["monitor"]["records"].as_u64().unwrap();
+    assert_eq!(records, loops);
+    for topic in ["/state", "/measurements", "/estimate", "/command", "/loop", "/latency"] {
+        assert_eq!(recording.count(topic), loops, "{topic}");
+    }
+    assert_eq!(recording.count("/faults"), summary["faults"].as_array().unwrap().len() as u64);
+}
+
+fn assert_clock(recording: &Recording, clock: &str) {
+    for topic in TOPICS {
+        assert_eq!(recording.metadata[topic].get("log_time").map(String::as_str), Some(clock), "{topic}");
+    }
+}
+
+#[test]
+fn a_lockstep_run_records_every_loop_and_fault_and_export_writes_the_same() {
+    let r = run(
+        "mcap-lockstep",
+        &[
+            "--mode",
+            "lockstep",
+            "--duration",
+            "2",
+            "--fault",
+            "delay controller by 3 ticks at 0.5s for 0.2s",
+            "--fault",
+            "drop estimator 50% at 1s for 0.1s",
+        ],
+    );
+    let live = Recording::read(&r.dir.join("run.mcap"));
+    assert_eq!(r.summary["loops"], 2000);
+    assert_counts(&r.summary, &live);
+    assert_clock(&live, "simulation");
+    assert_trajectory_matches(&r.dir, &live);
+
+    // Log time: simulation time of tick k (1 kHz: k ms); publish time the same in lockstep.
+    for topic in ["/state", "/loop"] {
+        for message in &live.messages[topic] {
+            assert_eq!(message.log_time, message.json["k"].as_u64().unwrap() * 1_000_000, "{topic}");
+            assert_eq!(message.publish_time, message.log_time);
+        }
+    }
+    // The loop record and the latencies, as loops.csv has them.
+    let (header, loops) = csv(&r.dir.join("loops.csv"));
+    let column = |name: &str| header.iter().position(|c| c == name).unwrap();
+    let lost = live.messages["/loop"].iter().filter(|m| m.json["lost"] == true).count();
+    assert!(lost > 0, "the dropped estimates reach the plant marked lost");
+    assert_eq!(lost as u64, r.summary["lost_commands"].as_u64().unwrap());
+    for (row, latency) in loops.iter().zip(&live.messages["/latency"]) {
+        assert_eq!(latency.json["end_to_end_ns"].as_u64(), Some(row[column("end_to_end_ns")].parse().unwrap()));
+        let hop = |from: &str, to: &str| -> u64 {
+            row[column(to)].parse::<u64>().unwrap() - row[column(from)].parse::<u64>().unwrap()
+        };
+        assert_eq!(
+            latency.json["controller_to_plant_ns"].as_u64(),
+            Some(hop("controller_publish_ns", "plant_receive_ns"))
+        );
+    }
+    // Each fault at its tick, with what the summary says it did.
+    for (message, fault) in live.messages["/faults"].iter().zip(r.summary["faults"].as_array().unwrap()) {
+        assert_eq!(message.json["fault"], fault["fault"]);
+        assert_eq!(message.json["t"], fault["at_s"]);
+        assert_eq!(message.log_time, (fault["at_s"].as_f64().unwrap() * 1e9).round() as u64);
+        assert_eq!(message.json["outage_ticks"], fault["effect"]["outage_ticks"]);
+        assert_eq!(message.json["within_limits"], fault["effect"]["within_limits"]);
+    }
+    let encoder = &live.messages["/measurements"][5].json["encoder"];
+    assert_eq!((encoder["fresh"].as_bool(), encoder["sample_time"].as_f64()), (Some(true), Some(0.005)));
+
+    // The export from the files: the same vectors, latencies and faults byte for byte, at the
+    // same times; the files keep no sample times, fresh or lost flags.
+    std::fs::remove_file(r.dir.join("run.mcap")).unwrap();
+    let out = looplab().arg("export").arg(&r.dir).arg("--mcap").output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let exported = Recording::read(&r.dir.join("run.mcap"));
+    assert_counts(&r.summary, &exported);
+    assert_clock(&exported, "simulation");
+    assert_trajectory_matches(&r.dir, &exported);
+    for topic in ["/state", "/estimate", "/command", "/latency", "/faults"] {
+        let (a, b) = (&live.messages[topic], &exported.messages[topic]);
+        assert!(a.iter().zip(b).all(|(a, b)| a.data == b.data && a.log_time == b.log_time), "{topic}");
+    }
+    assert_eq!(exported.messages["/measurements"][5].json["encoder"].get("fresh"), None);
+    assert_eq!(exported.messages["/loop"][5].json.get("lost"), None);
+}
+
+#[test]
+fn a_real_time_run_logs_the_plants_clock() {
+    let r = run("mcap-realtime", &["--mode", "realtime", "--duration", "0.2"]);
+    let recording = Recording::read(&r.dir.join("run.mcap"));
+    assert_clock(&recording, "wall_clock");
+    // Every message of loop k is logged at the plant's publish stamp of loop k, and published
+    // when its stage published it.
+    let (header, loops) = csv(&r.dir.join("loops.csv"));
+    let column = |name: &str| header.iter().position(|c| c == name).unwrap();
+    let stamps: BTreeMap<u64, (u64, u64)> = loops
+        .iter()
+        .filter(|row| !row[column("plant_publish_ns")].is_empty())
+        .map(|row| {
+            let stamp = |name: &str| row[column(name)].parse::<u64>().unwrap();
+            (stamp("k"), (stamp("plant_publish_ns"), stamp("controller_publish_ns")))
+        })
+        .collect();
+    assert!(stamps.len() >= 100, "{} loop records", stamps.len());
+    assert_eq!(recording.count("/loop"), r.summary["monitor"]["records"].as_u64().unwrap());
+    for message in &recording.messages["/command"] {
+        let k = message.json["k"].as_u64().unwrap();
+        if let Some(&(plant_publish, controller_publish)) = stamps.get(&k) {
+            assert_eq!((message.log_time, message.publish_time), (plant_publish, controller_publish), "loop {k}");
+        }
+    }
+}
+
+#[test]
+fn a_restarted_monitor_writes_the_next_recording() {
+    let r = run("mcap-restart", &["--mode", "lockstep", "--duration", "2", "--fault", "kill monitor at 1s"]);
+    // The killed monitor's file has no summary section (what it holds depends on when it last
+    // flushed, in wall-clock time).
+    let first = std::fs::read(r.dir.join("run.mcap")).unwrap();
+    assert!(!matches!(mcap::Summary::read(&first), Ok(Some(_))), "no summary section");
+    // The restarted monitor's file is whole and holds the loops its report covers.
+    let second = Recording::read(&r.dir.join("run.1.mcap"));
+    let monitor = &r.summary["monitor"];
+    let records = monitor["records"].as_u64().unwrap();
+    assert_eq!(records + monitor["missing_loops"].as_u64().unwrap(), 2000);
+    assert_eq!(second.count("/loop"), records);
+    let first_k = second.messages["/state"][0].json["k"].as_u64().unwrap();
+    assert_eq!(first_k, monitor["missing_before_restart"].as_u64().unwrap());
+    assert!(!r.dir.join("run.2.mcap").exists());
+}
+
+#[test]
+fn export_of_what_is_not_a_run_folder_is_one_clear_error() {
+    let rejects = |dir: &Path, expected: &str| {
+        let out = looplab().arg("export").arg(dir).arg("--mcap").output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(stderr.contains(expected), "{stderr}");
+    };
+    let dir = fresh_dir("mcap-not-a-run");
+    rejects(&dir, "no such folder");
+    std::fs::create_dir_all(&dir).unwrap();
+    rejects(&dir, "not a run folder (it has no launch.toml)");
+    assert!(!dir.join("run.mcap").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
