@@ -76,6 +76,30 @@ impl LoopTrace {
             self.plant_receive,
         ]
     }
+
+    /// The inverse of [`LoopTrace::stamps`] (a trace read back from loops.csv).
+    pub fn from_stamps(s: [u64; 8]) -> Self {
+        let [
+            plant_publish,
+            sensors_receive,
+            sensors_publish,
+            estimator_receive,
+            estimator_publish,
+            controller_receive,
+            controller_publish,
+            plant_receive,
+        ] = s;
+        LoopTrace {
+            plant_publish,
+            sensors_receive,
+            sensors_publish,
+            estimator_receive,
+            estimator_publish,
+            controller_receive,
+            controller_publish,
+            plant_receive,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]

@@ -603,21 +603,31 @@ pub(crate) mod tests {
             monitor: Some(MonitorReport { records: 300, loops_seen: 300, ..Default::default() }),
             ..reports
         };
-        let summary = build(SummaryInputs {
-            config: &config,
-            scenario: scenario.as_ref(),
+        let summary = summary_of(&config, scenario.as_ref(), &short, &BTreeMap::new());
+        assert!(!summary.completed);
+        assert_eq!(summary.stopped_because, Some(StopReason::PlantStoppedEarly));
+        assert_eq!(summary.monitor.missing.ranges, [[300, 399]], "the loops after the last the monitor saw");
+    }
+
+    /// The summary of a completed run with these reports and process starts, the rest default.
+    fn summary_of(
+        config: &LaunchConfig,
+        scenario: &dyn Scenario,
+        reports: &Reports,
+        starts: &BTreeMap<Role, Vec<Start>>,
+    ) -> Summary {
+        build(SummaryInputs {
+            config,
+            scenario,
             run_id: "0123",
             run_dir: Path::new("/tmp/run"),
             started_at: String::new(),
             outcome: &Outcome::Completed,
-            reports: &short,
-            starts: &BTreeMap::new(),
+            reports,
+            starts,
             log: &RunLog::default(),
             shared_memory: SharedMemoryCheck::default(),
-        });
-        assert!(!summary.completed);
-        assert_eq!(summary.stopped_because, Some(StopReason::PlantStoppedEarly));
-        assert_eq!(summary.monitor.missing.ranges, [[300, 399]], "the loops after the last the monitor saw");
+        })
     }
 
     /// The schema kept in the repo is the one the types make; `LOOPLAB_WRITE_SCHEMA=1` rewrites it.
@@ -659,18 +669,7 @@ pub(crate) mod tests {
             (Role::Plant, vec![start(3, Exit::Status(0))]),
         ]
         .into();
-        let summary = build(SummaryInputs {
-            config: &config,
-            scenario: scenario.as_ref(),
-            run_id: "0123",
-            run_dir: Path::new("/tmp/run"),
-            started_at: String::new(),
-            outcome: &Outcome::Completed,
-            reports: &reports,
-            starts: &starts,
-            log: &RunLog::default(),
-            shared_memory: SharedMemoryCheck::default(),
-        });
+        let summary = summary_of(&config, scenario.as_ref(), &reports, &starts);
         let counts: Vec<_> =
             summary.processes.iter().map(|p| (p.name, p.incarnation, p.processed, p.skipped)).collect();
         assert_eq!(
@@ -685,18 +684,10 @@ pub(crate) mod tests {
 
     #[test]
     fn a_summary_says_what_wrote_it_and_where() {
-        let s = build(SummaryInputs {
-            config: &resolve("pendulum", &[]).unwrap().0,
-            scenario: resolve("pendulum", &[]).unwrap().1.as_ref(),
-            run_id: "0123",
-            run_dir: Path::new("/tmp/run"),
-            started_at: String::new(),
-            outcome: &Outcome::Completed,
-            reports: &Reports::default(),
-            starts: &BTreeMap::new(),
-            log: &RunLog::default(),
-            shared_memory: SharedMemoryCheck::default(),
-        });
+        let s = {
+            let (config, scenario) = resolve("pendulum", &[]).unwrap();
+            summary_of(&config, scenario.as_ref(), &Reports::default(), &BTreeMap::new())
+        };
         assert_eq!((s.schema_version, s.looplab_version.as_str()), (1, env!("CARGO_PKG_VERSION")));
         assert_eq!(s.command_line, std::env::args().collect::<Vec<_>>());
         assert_eq!(s.machine.cpus as usize, std::thread::available_parallelism().unwrap().get());

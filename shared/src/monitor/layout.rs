@@ -16,6 +16,19 @@ pub struct Layout {
 }
 
 impl Layout {
+    /// A small made-up layout for the sinks' unit tests: two state components, two sensors
+    /// (one scalar, one of two components), one estimate, one input.
+    #[cfg(test)]
+    pub fn example() -> Self {
+        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        Layout {
+            state: names(&["theta", "omega"]),
+            sensors: vec![("encoder".into(), names(&["angle"])), ("imu".into(), names(&["x", "y"]))],
+            estimate: names(&["theta"]),
+            input: names(&["u"]),
+        }
+    }
+
     pub fn new(config: &LaunchConfig, scenario: &dyn Scenario) -> Self {
         let names = |components: &[Component]| components.iter().map(|c| c.name.to_string()).collect::<Vec<_>>();
         let vectors = scenario.vectors();

@@ -155,30 +155,10 @@ fn add_loop(row: &[&str], parts: &mut LoopParts) -> Result<u64> {
     let _end_to_end = take::<u64>(&mut cells, 1)?;
     let flags = take::<u32>(&mut cells, 2)?;
     let timing = take::<u64>(&mut cells, 3)?;
-    let trace = match stamps.as_deref() {
-        Some(
-            &[
-                plant_publish,
-                sensors_receive,
-                sensors_publish,
-                estimator_receive,
-                estimator_publish,
-                controller_receive,
-                controller_publish,
-                plant_receive,
-            ],
-        ) => LoopTrace {
-            plant_publish,
-            sensors_receive,
-            sensors_publish,
-            estimator_receive,
-            estimator_publish,
-            controller_receive,
-            controller_publish,
-            plant_receive,
-        },
-        _ => LoopTrace::default(),
-    };
+    let trace = stamps
+        .as_deref()
+        .and_then(|s| <[u64; 8]>::try_from(s).ok())
+        .map_or_else(LoopTrace::default, LoopTrace::from_stamps);
     let set = |header: &mut crate::contract::msg::Header| {
         header.k = k;
         header.t = t;

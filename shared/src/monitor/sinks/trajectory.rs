@@ -80,13 +80,7 @@ mod tests {
     use crate::monitor::layout::Layout;
 
     fn layout() -> Layout {
-        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
-        Layout {
-            state: names(&["theta", "omega"]),
-            sensors: vec![("encoder".into(), names(&["angle"])), ("imu".into(), names(&["x", "y"]))],
-            estimate: names(&["theta"]),
-            input: names(&["u"]),
-        }
+        Layout::example()
     }
 
     fn whole_loop() -> LoopParts {
