@@ -165,7 +165,7 @@ fn bench_quick_writes_every_part() {
     assert_eq!(sizes, (0..9).map(|i| 64u64 << (2 * i)).collect::<Vec<_>>());
     assert!(report["lockstep_loops_per_s"].as_f64().unwrap() > 0.0);
     assert!(report["in_process_loops_per_s"].as_f64().unwrap() > report["lockstep_loops_per_s"].as_f64().unwrap());
-    for chart in ["latency-cdf.svg", "floor-cdf.svg", "payload.svg"] {
+    for chart in ["latency-cdf.png", "floor-cdf.png", "payload.png"] {
         let svg = std::fs::read_to_string(dir.join(chart)).unwrap();
         assert!(svg.starts_with("<svg") && svg.contains("polyline"), "{chart}");
     }

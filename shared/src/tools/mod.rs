@@ -1,5 +1,7 @@
-//! Layer 7, the tools built on the launcher: `looplab sweep`, `looplab bench` and `looplab export`.
+//! Layer 7, the tools built on the launcher: `looplab sweep`, `looplab bench`, `looplab export`,
+//! and the figures (`plot`).
 
 pub mod bench;
 pub mod export;
+pub mod plot;
 pub mod sweep;

@@ -13,7 +13,6 @@
 
 pub mod codec;
 pub mod pingpong;
-mod plot;
 pub mod restarts;
 pub mod uds_loop;
 
@@ -33,6 +32,7 @@ use crate::contract::msg::PlantState;
 use crate::contract::role::Role;
 use crate::launcher::{Binaries, Outcome, Summary};
 use crate::runtime::signals::{Interrupted, StopFlag};
+use crate::tools::plot::latency as plot;
 
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
@@ -461,12 +461,12 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         // Four one-way hops, as a loop of them would take at best.
         curves.push(("floor: 4 × spin hop (median)".into(), vec![4 * sorted(spin.clone())[spin.len() / 2]]));
     }
-    plot::cdf(&out.join("latency-cdf.svg"), "end-to-end loop latency, 1 kHz", &curves)?;
+    plot::cdf(&out.join("latency-cdf.png"), "end-to-end loop latency, 1 kHz", &curves)?;
     let floor_curves: Vec<(String, Vec<u64>)> =
         floor.into_iter().map(|(k, v)| (format!("iceoryx2 hop, {k}"), sorted(v))).collect();
-    plot::cdf(&out.join("floor-cdf.svg"), "one-way iceoryx2 hop, loop message size, 1 kHz", &floor_curves)?;
+    plot::cdf(&out.join("floor-cdf.png"), "one-way iceoryx2 hop, loop message size, 1 kHz", &floor_curves)?;
     plot::payload(
-        &out.join("payload.svg"),
+        &out.join("payload.png"),
         &[
             ("iceoryx2 (zero copy)".into(), report.payload.iter().map(|p| (p.bytes, p.iceoryx2_us.p50)).collect()),
             ("unix socket + bincode".into(), report.payload.iter().map(|p| (p.bytes, p.unix_socket_us.p50)).collect()),

@@ -1,24 +1,12 @@
-//! The bench's charts, as SVG (no fonts or image libraries needed).
+//! Latency charts: distributions on log-log axes (bench, plot, compare) and latency against
+//! payload size (bench).
 
 use std::path::Path;
 
-use anyhow::{Result, anyhow};
+use anyhow::Result;
 use plotters::prelude::*;
 
-const COLOURS: [RGBColor; 7] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(127, 127, 127),
-];
-
-/// A legend's short line in a series' colour.
-fn legend_mark(x: i32, y: i32, colour: RGBColor) -> PathElement<(i32, i32)> {
-    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-}
+use crate::tools::plot::{FONT, colour, legend_mark, plot_error, png};
 
 /// A latency tick label in µs: whole numbers without a decimal point.
 fn micros_label(us: &f64) -> String {
@@ -49,20 +37,19 @@ fn bytes_label(bytes: &f64) -> String {
 /// samples at or above each latency. The tail reads downwards (1 %, 0.1 %, ...) instead of being
 /// squeezed into the top of a linear CDF. A series of one value is a vertical line (a floor).
 pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()> {
-    let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let root = png(path, (900, 560))?;
     let us = |ns: u64| (ns as f64 / 1e3).max(0.1);
     let lo = series.iter().filter_map(|(_, s)| s.first()).map(|v| us(*v)).fold(f64::MAX, f64::min).max(0.1);
     let hi = series.iter().filter_map(|(_, s)| s.last()).map(|v| us(*v)).fold(1.0, f64::max);
     let most = series.iter().map(|(_, s)| s.len()).max().unwrap_or(1).max(10) as f64;
     let floor_share = 0.8 / most;
     let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
+        .caption(title, (FONT, 20))
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(60)
         .build_cartesian_2d((lo * 0.8..hi * 1.2).log_scale(), (floor_share..1.0).log_scale())
-        .map_err(|e| anyhow!("{e}"))?;
+        .map_err(plot_error)?;
     chart
         .configure_mesh()
         .x_desc("latency, µs (log)")
@@ -70,12 +57,12 @@ pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()
         .x_label_formatter(&micros_label)
         .y_label_formatter(&share_label)
         .draw()
-        .map_err(|e| anyhow!("{e}"))?;
+        .map_err(plot_error)?;
     for (i, (name, samples)) in series.iter().enumerate() {
         if samples.is_empty() {
             continue;
         }
-        let colour = COLOURS[i % COLOURS.len()];
+        let colour = colour(i);
         let n = samples.len();
         let points: Vec<(f64, f64)> = if n == 1 {
             vec![(us(samples[0]), floor_share), (us(samples[0]), 1.0)]
@@ -87,7 +74,7 @@ pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()
         };
         chart
             .draw_series(LineSeries::new(points, colour.stroke_width(2)))
-            .map_err(|e| anyhow!("{e}"))?
+            .map_err(plot_error)?
             .label(name.clone())
             .legend(move |(x, y)| legend_mark(x, y, colour));
     }
@@ -99,25 +86,24 @@ pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()
         .background_style(WHITE.mix(0.5))
         .border_style(BLACK)
         .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))
+        .map_err(plot_error)?;
+    root.present().map_err(plot_error)
 }
 
 /// Median one-way latency against payload size, log-log: one curve per transport.
 pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()> {
-    let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let root = png(path, (900, 560))?;
     let xs = series.iter().flat_map(|(_, p)| p.iter().map(|(b, _)| *b as f64));
     let (x_lo, x_hi) = xs.fold((f64::MAX, 1.0f64), |(lo, hi), x| (lo.min(x), hi.max(x)));
     let ys = series.iter().flat_map(|(_, p)| p.iter().map(|(_, us)| *us));
     let (y_lo, y_hi) = ys.fold((f64::MAX, 1.0f64), |(lo, hi), y| (lo.min(y), hi.max(y)));
     let mut chart = ChartBuilder::on(&root)
-        .caption("one-way latency against payload size (median)", ("sans-serif", 20))
+        .caption("one-way latency against payload size (median)", (FONT, 20))
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(55)
         .build_cartesian_2d((x_lo * 0.8..x_hi * 1.25).log_scale(), (y_lo.max(0.1) * 0.8..y_hi * 1.25).log_scale())
-        .map_err(|e| anyhow!("{e}"))?;
+        .map_err(plot_error)?;
     chart
         .configure_mesh()
         .x_desc("payload (log)")
@@ -125,18 +111,16 @@ pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()
         .x_label_formatter(&bytes_label)
         .y_label_formatter(&micros_label)
         .draw()
-        .map_err(|e| anyhow!("{e}"))?;
+        .map_err(plot_error)?;
     for (i, (name, points)) in series.iter().enumerate() {
-        let colour = COLOURS[i % COLOURS.len()];
+        let colour = colour(i);
         let points: Vec<(f64, f64)> = points.iter().map(|(b, us)| (*b as f64, *us)).collect();
         chart
             .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))
-            .map_err(|e| anyhow!("{e}"))?
+            .map_err(plot_error)?
             .label(name.clone())
             .legend(move |(x, y)| legend_mark(x, y, colour));
-        chart
-            .draw_series(points.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
-            .map_err(|e| anyhow!("{e}"))?;
+        chart.draw_series(points.into_iter().map(|p| Circle::new(p, 3, colour.filled()))).map_err(plot_error)?;
     }
     chart
         .configure_series_labels()
@@ -144,8 +128,8 @@ pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))
+        .map_err(plot_error)?;
+    root.present().map_err(plot_error)
 }
 
 #[cfg(test)]

@@ -1,0 +1,73 @@
+//! Figures as PNG (plotters' bitmap backend), with an embedded font so a figure renders the same
+//! on a machine with no fonts installed. `latency`: latency distributions (bench, plot, compare).
+
+pub mod latency;
+
+use std::path::Path;
+use std::sync::Once;
+
+use anyhow::{Result, anyhow};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+/// A figure's font family; registered once per process from the embedded DejaVu Sans.
+pub const FONT: &str = "sans-serif";
+
+/// Series colours (matplotlib's first seven, which readers of papers know).
+pub const COLOURS: [RGBColor; 7] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(127, 127, 127),
+];
+
+/// The colour of series `i`.
+pub fn colour(i: usize) -> RGBColor {
+    COLOURS[i % COLOURS.len()]
+}
+
+fn register_fonts() {
+    static FONTS: Once = Once::new();
+    FONTS.call_once(|| {
+        for (style, bytes) in [(FontStyle::Normal, dejavu::sans::regular()), (FontStyle::Bold, dejavu::sans::bold())] {
+            plotters::style::register_font(FONT, style, bytes).unwrap_or_else(|_| panic!("the embedded font loads"));
+        }
+    });
+}
+
+/// A white PNG canvas of `size` pixels at `path`; `present()` it to write the file.
+pub fn png(path: &Path, size: (u32, u32)) -> Result<DrawingArea<BitMapBackend<'_>, Shift>> {
+    register_fonts();
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_error)?;
+    Ok(root)
+}
+
+/// plotters' errors carry the backend's error type; the figures report them as text.
+pub fn plot_error(e: impl std::fmt::Display) -> anyhow::Error {
+    anyhow!("drawing a figure: {e}")
+}
+
+/// A legend's short line in a series' colour.
+pub fn legend_mark(x: i32, y: i32, colour: RGBColor) -> PathElement<(i32, i32)> {
+    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_png_with_text_is_written() {
+        let path = std::env::temp_dir().join(format!("looplab-png-test-{}.png", std::process::id()));
+        let root = png(&path, (200, 100)).unwrap();
+        root.draw_text("latency, µs", &(FONT, 16).into_font().color(&BLACK), (10, 40)).unwrap();
+        root.present().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    }
+}
