@@ -158,8 +158,11 @@ fn missing_text(m: &MissingLoops) -> String {
     if m.missing_loops == 0 {
         return String::new();
     }
-    let ranges: Vec<String> = m.ranges.iter().map(|[a, b]| format!("{a}–{b}")).collect();
-    let omitted = match m.missing_ranges_omitted {
+    // A few ranges read at a glance; summary.json keeps them all.
+    const SHOWN: usize = 6;
+    let ranges: Vec<String> =
+        m.ranges.iter().take(SHOWN).map(|[a, b]| if a == b { a.to_string() } else { format!("{a}–{b}") }).collect();
+    let omitted = match m.missing_ranges_omitted + m.ranges.len().saturating_sub(SHOWN) as u64 {
         0 => String::new(),
         n => format!(" and {n} more ranges"),
     };
@@ -272,6 +275,16 @@ mod tests {
     use crate::launcher::outcome::StopReason;
     use crate::launcher::summary::tests::summary;
     use crate::launcher::summary::{FaultReport, RestartSteps};
+
+    #[test]
+    fn missing_loops_show_six_ranges_and_count_the_rest() {
+        let mut missing = MissingLoops::default();
+        for k in [3, 10, 20, 30, 40, 50, 60, 70] {
+            missing.add(k, k);
+        }
+        missing.add(71, 75);
+        assert_eq!(missing_text(&missing), "; no record for 13 loops: 3, 10, 20, 30, 40, 50 and 2 more ranges");
+    }
 
     fn summary_with_fault() -> Summary {
         Summary {
