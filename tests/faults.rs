@@ -108,6 +108,8 @@ fn each_loop_process_killed_in_real_time_restarts_and_the_loop_goes_on() {
     assert!(timeline.contains(&"inject: kill estimator at 2s"), "{timeline:?}");
     assert!(timeline.contains(&"estimator ready again"), "{timeline:?}");
     assert!(r.stdout().contains("timeline"), "the printed report has the timeline");
+    // Loops whose record a dead process never sent leave their stamps' cells empty.
+    assert_loops_csv_integers(&r.dir);
     assert_every_process_ended_alive(s);
     assert_clean(s);
 }
@@ -154,13 +156,13 @@ fn corrupt_commands_are_rejected_and_never_reach_the_plants_state() {
     assert_eq!(effect(&s.faults[0]).outage_ticks, 100);
     assert_eq!(effect(&s.faults[1]).outage_ticks, 50);
     let trajectory = r.trajectory();
-    for column in ["theta", "theta_dot", "wheel_speed"] {
+    for column in ["theta_rad", "theta_dot_rad_per_s", "wheel_speed_rad_per_s"] {
         let values = trajectory.col(column);
         assert_eq!(values.len(), 4000);
         assert!(values.iter().all(|v| v.is_finite()), "a non-finite {column} reached the plant");
     }
     // The commands themselves were corrupt: the monitor saw them.
-    let commands = trajectory.col("cmd.current");
+    let commands = trajectory.col("cmd.current_A");
     assert!(commands[2000..2100].iter().all(|u| u.is_nan()));
     assert!(commands[3000..3050].iter().all(|u| *u == 50.0));
     assert!(effect(&s.faults[0]).within_limits && effect(&s.faults[1]).within_limits);
@@ -266,6 +268,9 @@ fn a_restarted_monitor_accounts_for_every_loop_and_continues_the_latency_log() {
         .collect();
     assert!(!starts.is_empty(), "latency.hlog has no interval");
     assert!(starts.windows(2).all(|w| w[0] <= w[1]), "interval start times go back: {starts:?}");
+    // Three monitors wrote loops.csv, each appending after what the last one flushed.
+    let rows = assert_loops_csv_integers(&r.dir) as u64;
+    assert!(rows > m.records, "{rows} rows, {} of the last monitor", m.records);
     assert_every_process_ended_alive(s);
     assert_clean(s);
 }

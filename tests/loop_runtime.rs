@@ -5,7 +5,10 @@ mod common;
 
 use std::time::{Duration, Instant};
 
-use common::{Exit, Mode, Role, StopReason, Summary, Table, alive, fresh_dir, load_summary, looplab, run};
+use common::{
+    Exit, Mode, Role, StopReason, Summary, Table, alive, assert_loops_csv_integers, fresh_dir, load_summary, looplab,
+    run,
+};
 
 const STATS_FIELDS: [&str; 8] = ["count", "min", "p50", "p90", "p99", "p999", "max", "mean"];
 const HOPS: [&str; 7] = [
@@ -90,12 +93,20 @@ fn realtime_run_writes_the_summary_contract_and_records_every_loop_it_got() {
     assert!(resolved.contains("duration_s = 2.0"), "the resolved launch file has the override");
     let loops = Table::read(&r.dir.join("loops.csv"));
     // One row per loop seen (a skipped tick after the last published state has none).
-    let rows = loops.rows.len() as u64;
+    let rows = assert_loops_csv_integers(&r.dir) as u64;
+    assert_eq!(rows, loops.rows.len() as u64);
     assert!(published <= rows && rows <= s.loops, "{rows} rows");
     let trajectory = r.trajectory();
-    for column in
-        ["t", "theta", "theta_dot", "wheel_speed", "meas.encoder", "meas.wheel_speed", "est.bias", "cmd.current"]
-    {
+    for column in [
+        "t_s",
+        "theta_rad",
+        "theta_dot_rad_per_s",
+        "wheel_speed_rad_per_s",
+        "meas.encoder_rad",
+        "meas.wheel_speed_rad_per_s",
+        "est.bias_rad",
+        "cmd.current_A",
+    ] {
         assert!(trajectory.columns.contains_key(column), "trajectory.csv has no {column}");
     }
 

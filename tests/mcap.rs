@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use common::{fresh_dir, looplab, run};
+use looplab_shared::monitor::layout::column_name;
 use serde_json::Value;
 
 const TOPICS: [&str; 7] = ["/state", "/measurements", "/estimate", "/command", "/loop", "/latency", "/faults"];
@@ -20,10 +21,11 @@ struct Message {
     json: Value,
 }
 
-/// A recording as its channels' messages, in file order, and each channel's metadata.
+/// A recording as its channels' messages, in file order, and each channel's metadata and schema.
 struct Recording {
     messages: BTreeMap<String, Vec<Message>>,
     metadata: BTreeMap<String, BTreeMap<String, String>>,
+    schemas: BTreeMap<String, Value>,
 }
 
 impl Recording {
@@ -31,11 +33,12 @@ impl Recording {
         let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         // The summary section: the file was finished.
         let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary section");
-        let mut metadata = BTreeMap::new();
+        let (mut metadata, mut schemas) = (BTreeMap::new(), BTreeMap::new());
         for channel in summary.channels.values() {
             let schema = channel.schema.as_ref().expect("every channel has a schema");
             assert_eq!((schema.encoding.as_str(), channel.message_encoding.as_str()), ("jsonschema", "json"));
-            let _: Value = serde_json::from_slice(&schema.data).expect("the schema is JSON");
+            let schema: Value = serde_json::from_slice(&schema.data).expect("the schema is JSON");
+            schemas.insert(channel.topic.clone(), schema);
             metadata.insert(channel.topic.clone(), channel.metadata.clone());
         }
         let mut messages: BTreeMap<String, Vec<Message>> = TOPICS.iter().map(|t| (t.to_string(), vec![])).collect();
@@ -49,7 +52,7 @@ impl Recording {
                 json,
             });
         }
-        Self { messages, metadata }
+        Self { messages, metadata, schemas }
     }
 
     fn count(&self, topic: &str) -> u64 {
@@ -65,33 +68,56 @@ fn csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
     (header, lines.map(|l| l.split(',').map(str::to_owned).collect()).collect())
 }
 
-/// Every value of trajectory.csv equals the recording's, exactly: the state's columns in /state,
-/// `meas.<sensor>[.<component>]` in /measurements, `est.*` in /estimate and `cmd.*` in /command.
-fn assert_trajectory_matches(dir: &Path, recording: &Recording) {
-    let (header, rows) = csv(&dir.join("trajectory.csv"));
-    let topic = |column: &str| match column.split_once('.') {
-        Some(("meas", _)) => "/measurements",
-        Some(("est", _)) => "/estimate",
-        Some(("cmd", _)) => "/command",
-        _ => "/state",
+/// Where each column of trajectory.csv is in the recording, from the channels' schemas: a field
+/// keeps the component's name and gives its unit as its description, and the column is that
+/// name with the unit (`theta_dot` in rad/s: `theta_dot_rad_per_s`). Column → (topic, path).
+fn columns_in(recording: &Recording) -> BTreeMap<String, (&'static str, Vec<String>)> {
+    let fields = |schema: &Value| -> Vec<(String, String)> {
+        let properties = schema["properties"].as_object().unwrap();
+        let unit = |field: &Value| field["description"].as_str().unwrap_or("").to_string();
+        properties
+            .iter()
+            .filter(|(name, _)| !["k", "t"].contains(&name.as_str()))
+            .map(|(n, f)| (n.clone(), unit(f)))
+            .collect()
     };
+    let mut columns = BTreeMap::new();
+    for (topic, prefix) in [("/state", ""), ("/estimate", "est."), ("/command", "cmd.")] {
+        for (name, unit) in fields(&recording.schemas[topic]) {
+            columns.insert(column_name(&format!("{prefix}{name}"), &unit), (topic, vec![name]));
+        }
+    }
+    let measurements = &recording.schemas["/measurements"];
+    for (sensor, _) in fields(measurements) {
+        let components = fields(&measurements["properties"][&sensor]["properties"]["value"]);
+        let one = components.len() == 1;
+        for (component, unit) in components {
+            let name = if one { format!("meas.{sensor}") } else { format!("meas.{sensor}.{component}") };
+            columns
+                .insert(column_name(&name, &unit), ("/measurements", vec![sensor.clone(), "value".into(), component]));
+        }
+    }
+    columns
+}
+
+/// Every value of trajectory.csv equals the recording's, exactly, in the field its column names
+/// (see [`columns_in`]); `t_s` is the recording's `t`, k / rate exactly.
+fn assert_trajectory_matches(dir: &Path, recording: &Recording, rate_hz: f64) {
+    let (header, rows) = csv(&dir.join("trajectory.csv"));
+    assert_eq!(header[..2], ["k", "t_s"]);
+    let columns = columns_in(recording);
+    assert_eq!(columns.len(), header.len() - 2, "{header:?} against {:?}", columns.keys());
     for (column, name) in header.iter().enumerate().skip(2) {
-        let messages = &recording.messages[topic(name)];
+        let (topic, path) = columns.get(name).unwrap_or_else(|| panic!("{name} is in no schema: {:?}", columns.keys()));
+        let messages = &recording.messages[*topic];
         assert_eq!(messages.len(), rows.len(), "{name}");
         for (row, message) in rows.iter().zip(messages) {
             let json = &message.json;
-            assert_eq!(json["k"].as_u64(), Some(row[0].parse().unwrap()));
+            let k: u64 = row[0].parse().unwrap();
+            assert_eq!(json["k"].as_u64(), Some(k));
             assert_eq!(json["t"].as_f64(), Some(row[1].parse().unwrap()));
-            let value = match name.split('.').collect::<Vec<_>>()[..] {
-                ["meas", sensor] => {
-                    let value = json[sensor]["value"].as_object().unwrap();
-                    assert_eq!(value.len(), 1, "{name}: one component");
-                    value.values().next().unwrap().clone()
-                }
-                ["meas", sensor, component] => json[sensor]["value"][component].clone(),
-                [_, component] => json[component].clone(),
-                _ => json[name.as_str()].clone(),
-            };
+            assert_eq!(row[1].parse::<f64>().unwrap(), k as f64 / rate_hz);
+            let value = path.iter().fold(json, |json, key| &json[key.as_str()]);
             let expected: f64 = row[column].parse().unwrap();
             assert_eq!(value.as_f64(), Some(expected), "{name} at k = {}", row[0]);
         }
@@ -134,7 +160,7 @@ fn a_lockstep_run_records_every_loop_and_fault_and_export_writes_the_same() {
     assert_eq!(r.summary["loops"], 2000);
     assert_counts(&r.summary, &live);
     assert_clock(&live, "simulation");
-    assert_trajectory_matches(&r.dir, &live);
+    assert_trajectory_matches(&r.dir, &live, 1000.0);
 
     // Log time: simulation time of tick k (1 kHz: k ms); publish time the same in lockstep.
     for topic in ["/state", "/loop"] {
@@ -178,13 +204,28 @@ fn a_lockstep_run_records_every_loop_and_fault_and_export_writes_the_same() {
     let exported = Recording::read(&r.dir.join("run.mcap"));
     assert_counts(&r.summary, &exported);
     assert_clock(&exported, "simulation");
-    assert_trajectory_matches(&r.dir, &exported);
+    assert_trajectory_matches(&r.dir, &exported, 1000.0);
     for topic in ["/state", "/estimate", "/command", "/latency", "/faults"] {
         let (a, b) = (&live.messages[topic], &exported.messages[topic]);
         assert!(a.iter().zip(b).all(|(a, b)| a.data == b.data && a.log_time == b.log_time), "{topic}");
     }
     assert_eq!(exported.messages["/measurements"][5].json["encoder"].get("fresh"), None);
     assert_eq!(exported.messages["/loop"][5].json.get("lost"), None);
+
+    // The cells are read by position: a header other than the layout's (here one from before
+    // the units) is one clear error, and no file.
+    std::fs::remove_file(r.dir.join("run.mcap")).unwrap();
+    let trajectory = std::fs::read_to_string(r.dir.join("trajectory.csv")).unwrap();
+    std::fs::write(r.dir.join("trajectory.csv"), trajectory.replacen("k,t_s,", "k,t,", 1)).unwrap();
+    let out = looplab().arg("export").arg(&r.dir).arg("--mcap").output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.contains(r#"trajectory.csv: column 2 is "t", a run of its launch.toml writes "t_s" there"#),
+        "{stderr}"
+    );
+    assert!(!r.dir.join("run.mcap").exists());
 }
 
 #[test]

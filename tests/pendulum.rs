@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{run, run_in_process};
+use common::{assert_loops_csv_integers, run, run_in_process};
 
 /// The paper's K and two other stabilising gains.
 const GAINS: [[f64; 3]; 3] = [[-378.0, -55.0, -1.0], [-300.0, -45.0, -0.8], [-420.0, -60.0, -1.2]];
@@ -65,11 +65,13 @@ fn bias_observer_finds_the_bias_and_stops_the_wheel() {
         let theta = r.metric("theta_mean_last_1s_rad");
         assert!(theta.abs() < 1e-3, "δ = {delta}, K = {k:?}: θ settles at {theta}");
 
+        // In one process the monitor writes loops.csv as the five processes' monitor does.
+        assert_loops_csv_integers(&r.dir);
         let trajectory = r.trajectory();
         let worst_after_10s = trajectory
-            .col("t")
+            .col("t_s")
             .iter()
-            .zip(trajectory.col("wheel_speed"))
+            .zip(trajectory.col("wheel_speed_rad_per_s"))
             .filter(|(t, _)| **t >= 10.0)
             .map(|(_, w)| w.abs())
             .fold(0.0, f64::max);
@@ -107,8 +109,8 @@ fn sensor_values_are_held_between_their_own_sample_instants() {
         ],
     );
     let t = r.trajectory();
-    let (theta, wheel) = (t.col("theta"), t.col("wheel_speed"));
-    let (encoder, speed) = (t.col("meas.encoder"), t.col("meas.wheel_speed"));
+    let (theta, wheel) = (t.col("theta_rad"), t.col("wheel_speed_rad_per_s"));
+    let (encoder, speed) = (t.col("meas.encoder_rad"), t.col("meas.wheel_speed_rad_per_s"));
     let q = 2.0 * std::f64::consts::PI / 10000.0;
     assert_eq!(theta.len(), 1000);
     let mut changes = 0;

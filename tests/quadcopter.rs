@@ -19,14 +19,25 @@ fn case(name: &str) -> String {
 fn analytic_altitude_response() {
     let r = run_in_process("quad-analytic", &[&case("1-analytic")]);
     let t = r.trajectory();
-    let time = t.col("t");
+    let time = t.col("t_s");
     assert_eq!(time.len(), 10_000);
     // Each column parsed once, not once per row.
-    let (p_z, v_z) = (t.col("p_z"), t.col("v_z"));
-    let others: Vec<(&str, Vec<f64>)> = ["p_x", "p_y", "v_x", "v_y", "w_x", "w_y", "w_z", "R_12", "R_13", "R_23"]
-        .into_iter()
-        .map(|name| (name, t.col(name)))
-        .collect();
+    let (p_z, v_z) = (t.col("p_z_m"), t.col("v_z_m_per_s"));
+    let others: Vec<(&str, Vec<f64>)> = [
+        "p_x_m",
+        "p_y_m",
+        "v_x_m_per_s",
+        "v_y_m_per_s",
+        "w_x_rad_per_s",
+        "w_y_rad_per_s",
+        "w_z_rad_per_s",
+        "R_12",
+        "R_13",
+        "R_23",
+    ]
+    .into_iter()
+    .map(|name| (name, t.col(name)))
+    .collect();
     let (mut worst_p, mut worst_v) = (0.0f64, 0.0f64);
     for (k, &s) in time.iter().enumerate() {
         let p = 0.05 - 0.15 * (-2.0 * s).exp() + 0.1 * (-3.0 * s).exp();
@@ -134,8 +145,8 @@ fn lemniscate_with_a_disturbance_finds_the_disturbance() {
     assert!(rms > 0.0 && rms < 0.08, "steady-state RMS ‖z₁‖ {rms} m");
     let b = [-0.3, 0.2, -0.1];
     let t = r.trajectory();
-    let (time, xi1) = (t.col("t"), t.col("est.xi_1"));
-    let xi2 = ["est.xi_2x", "est.xi_2y", "est.xi_2z"].map(|name| t.col(name));
+    let (time, xi1) = (t.col("t_s"), t.col("est.xi_1_per_kg"));
+    let xi2 = ["est.xi_2x_m_per_s2", "est.xi_2y_m_per_s2", "est.xi_2z_m_per_s2"].map(|name| t.col(name));
     let error_at = |at: f64| {
         let k = time.iter().position(|s| *s >= at).expect("the run reaches the time");
         let error: f64 = xi2.iter().zip(b).map(|(xi2, b)| (xi2[k] / xi1[k] - b).powi(2)).sum();

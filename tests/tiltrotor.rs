@@ -70,8 +70,8 @@ fn the_controllers_compare_as_in_the_paper() {
 fn the_filter_corrects_exactly_when_a_new_fix_arrives() {
     let r = run_in_process("tilt-zoh", &[NLLS, "--duration", "5"]);
     let t = r.trajectory();
-    let (k, fix, corrected) = (t.col("k"), t.col("meas.position.x"), t.col("est.corrected"));
-    let (x_hat, prior) = (t.col("est.x_hat"), t.col("est.x_prior"));
+    let (k, fix, corrected) = (t.col("k"), t.col("meas.position.x_m"), t.col("est.corrected"));
+    let (x_hat, prior) = (t.col("est.x_hat_m"), t.col("est.x_prior_m"));
     assert_eq!(k.len(), 500);
     for i in 0..k.len() {
         let new_sample = i == 0 || fix[i] != fix[i - 1];
@@ -97,7 +97,7 @@ fn the_plant_step_is_converged_in_the_closed_loop() {
             args.extend(["--set", q]);
         }
         let t = run_in_process(&format!("tilt-substeps-{substeps}"), &args).trajectory();
-        ["x", "y", "z", "phi", "theta", "psi", "alpha_r", "gamma_1"].map(|name| t.col(name))
+        ["x_m", "y_m", "z_m", "phi_rad", "theta_rad", "psi_rad", "alpha_r_rad", "gamma_1_rad"].map(|name| t.col(name))
     });
     let distance = |a: &[Vec<f64>; 8], b: &[Vec<f64>; 8]| {
         a.iter().zip(b).flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs())).fold(0.0, f64::max)

@@ -1,10 +1,12 @@
 //! Golden hashes: the exact bytes of `trajectory.csv` for short lockstep runs of every launch
 //! file, each scenario by name, a mass step and the in-loop faults (delay, drop, corrupt).
 //!
-//! These hashes were recorded on commit 817977e (the tilt-rotor rows with issue 12, when the
-//! scenario was added) and must never change in a refactor: a refactor
-//! that changes one of them has changed what the loop computes (or how it writes it). Only a
-//! deliberate model change may re-record them, and its commit says which rows changed and why.
+//! These hashes were re-recorded with issue 13, when the columns got their units (`t_s`,
+//! `theta_rad`, ...) and `t` became k / rate (`0.009`, not `0.009000000000000001`): the values
+//! parse equal to those of 817977e (the tilt-rotor rows: issue 12), that commit says how it was
+//! checked. They must never change in a refactor: a refactor that changes one of them has
+//! changed what the loop computes (or how it writes it). Only a deliberate model or format
+//! change may re-record them, and its commit says which rows changed and why.
 //! On a mismatch the test prints every row that differs with the hash it got, so a deliberate
 //! change can copy them all at once.
 //!
@@ -32,76 +34,76 @@ const CASES: &[(&str, &[&str], &str)] = &[
     (
         "launch/pendulum.toml",
         &["launch/pendulum.toml"],
-        "baa50e9880cf25af5e854fb51808407d0ee40e8365acccab8cd5ae750e163cd0",
+        "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d",
     ),
     // By name, the scenario's own launch file: the same bytes as the file.
-    ("pendulum (by name)", &["pendulum"], "baa50e9880cf25af5e854fb51808407d0ee40e8365acccab8cd5ae750e163cd0"),
+    ("pendulum (by name)", &["pendulum"], "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d"),
     (
         "launch/quadcopter.toml",
         &["launch/quadcopter.toml"],
-        "8506a170afd5dd2c736eb5a3bc3c134b1c62bc820c5e1721a2baf26fd65736bf",
+        "d24bdf7ea684518c6374697a9b27a203df081477870e6aae54301ab01ec5649a",
     ),
-    ("quadcopter (by name)", &["quadcopter"], "8506a170afd5dd2c736eb5a3bc3c134b1c62bc820c5e1721a2baf26fd65736bf"),
+    ("quadcopter (by name)", &["quadcopter"], "d24bdf7ea684518c6374697a9b27a203df081477870e6aae54301ab01ec5649a"),
     (
         "launch/quadcopter/1-analytic.toml",
         &["launch/quadcopter/1-analytic.toml"],
-        "e3a085fc8e751b7d0a9fbfa82e5396407942087c05abc262a574db3694661354",
+        "bf0dfee8a94e5b43ac5c9a55f1dd6fe14e9f006d7b962f576f53efe3672284ee",
     ),
     (
         "launch/quadcopter/2-not-rich.toml",
         &["launch/quadcopter/2-not-rich.toml"],
-        "805a4fd541115302e5812e8ec3843c289888f0f68da1e63bc2946cc1293fe782",
+        "1a96b000062ad01b655a1ddd7a0d9b5d044a4db96022ed2fd30f52c6e8fc4e8e",
     ),
     (
         "launch/quadcopter/3-rich.toml",
         &["launch/quadcopter/3-rich.toml"],
-        "1a43ac24f91539946037626fd2251017a27c39b8a21ee6814d57abd50f07b5b6",
+        "78437070485cdfb380034bdffadd90d108af0c9d78cab183fdeeb2f0b14c7e78",
     ),
     (
         "launch/quadcopter/4-closed-loop.toml",
         &["launch/quadcopter/4-closed-loop.toml"],
-        "89fceae57a9903ae0d4e756a3caa1f49d0f8515512f76fa568f58b75d8517ef4",
+        "181ede7bae5e92a7eac99ed4c88a8dd3e9058ed384787df632569d200743a68f",
     ),
     (
         "launch/quadcopter/5-stochastic-snr.toml",
         &["launch/quadcopter/5-stochastic-snr.toml"],
-        "fc560e8bce20e119e4bec66797e8d9f599dca734747acefa6953314607a531fc",
+        "dff828ec5d8b9d0d18cf0c3c088f471e502711e71ade6179c1678f85f971f62e",
     ),
     // Sets only mode and duration: the same bytes as launch/quadcopter.toml.
     (
         "launch/quadcopter/6-lemniscate.toml",
         &["launch/quadcopter/6-lemniscate.toml"],
-        "8506a170afd5dd2c736eb5a3bc3c134b1c62bc820c5e1721a2baf26fd65736bf",
+        "d24bdf7ea684518c6374697a9b27a203df081477870e6aae54301ab01ec5649a",
     ),
     // 1200 Hz, rate loop, held commands; its mass step (35.2 s) is past these 2 s ...
     (
         "launch/quadcopter/7-hover-mass-step.toml",
         &["launch/quadcopter/7-hover-mass-step.toml"],
-        "fb9a7eb061a245f94bf40a1fe9b01982f94b5e0141c0de9e136f892c56042279",
+        "13b4c8c5fe6b49c23d0ae3a3c66706155de943b637572323837f4c6c748455be",
     ),
     // ... so this row moves it to 1 s.
     (
         "launch/quadcopter/7-hover-mass-step.toml, mass step at 1 s",
         &["launch/quadcopter/7-hover-mass-step.toml", "--set", "plant.mass_step_at_s=1.0"],
-        "62ba4dc14b436a8812f0fabf13bdc43338291cdfa84e1830a547c158869a2c58",
+        "edabe9152269dfabc3e2d8dd0b041649e89fe0558943be466c17f41fff746cec",
     ),
     // Added with the tilt-rotor (issue 12), recorded on its commit: 200 loops at 100 Hz.
     (
         "launch/tiltrotor.toml",
         &["launch/tiltrotor.toml"],
-        "1ada356b499b4ea07d32ff250097e3b6e8e0cc827f89567374ab940c966aaba0",
+        "a3f834ec63be502d51ed43d6aaab5c75b72818327e968d8bb89bfee86225ef17",
     ),
-    ("tiltrotor (by name)", &["tiltrotor"], "1ada356b499b4ea07d32ff250097e3b6e8e0cc827f89567374ab940c966aaba0"),
+    ("tiltrotor (by name)", &["tiltrotor"], "a3f834ec63be502d51ed43d6aaab5c75b72818327e968d8bb89bfee86225ef17"),
     // Sets only mode and the kind it already has: the same bytes as launch/tiltrotor.toml.
     (
         "launch/tiltrotor/1-nlls-2l.toml",
         &["launch/tiltrotor/1-nlls-2l.toml"],
-        "1ada356b499b4ea07d32ff250097e3b6e8e0cc827f89567374ab940c966aaba0",
+        "a3f834ec63be502d51ed43d6aaab5c75b72818327e968d8bb89bfee86225ef17",
     ),
     (
         "launch/tiltrotor/2-nlpt-2l.toml",
         &["launch/tiltrotor/2-nlpt-2l.toml"],
-        "9555469be2d28b5b50de757964ad14100eee5c81189e490ffa77af95266ba900",
+        "3e80c10dde26ce66c1767cc9c12af40fefaed1a60bca5feb6879de4fe90b1586",
     ),
     // In-loop faults in lockstep: applied by the processes by loop index, hence deterministic.
     (
@@ -115,7 +117,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "--fault",
             "corrupt controller nan at 1.2s for 50ms",
         ],
-        "3fda4286cb89c70022b8026d4f54c5569398a0dfa205bf312ae67fc33e495309",
+        "c3f26b40252948db8fa59e00da87a0138d2ef8abdb866590c039b3927494a82e",
     ),
     (
         "pendulum, faults: delay sensors and estimator, drop estimator and controller, corrupt inf and out-of-range",
@@ -134,7 +136,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "--fault",
             "corrupt controller out-of-range at 1.5s for 100ms",
         ],
-        "2dd6efd59e9d5e9bd3cdb66f498ae27b89ffae407d53ef69c21ca125ef9ce2a2",
+        "2dc0d1d0b2e4143ed878a80d976199c17f8bde300df4d4ab361d50291907c190",
     ),
 ];
 
@@ -206,7 +208,7 @@ fn check(scenario: &str, in_process: bool) {
     }
     assert!(
         failures.is_empty(),
-        "{} of {} trajectory.csv hashes ({scenario}, {}) differ from those recorded (817977e; the tilt-rotor rows with issue 12):\n{}",
+        "{} of {} trajectory.csv hashes ({scenario}, {}) differ from those recorded (with issue 13):\n{}",
         failures.len(),
         cases.len(),
         if in_process { "in-process" } else { "five processes" },

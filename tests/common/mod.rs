@@ -143,6 +143,21 @@ impl Table {
     }
 }
 
+/// Every cell of loops.csv but `t_s` is a whole number or empty (a part that did not arrive), so
+/// a reader can take the stamps as integers; `t_s` is a number. Returns the number of rows.
+pub fn assert_loops_csv_integers(dir: &Path) -> usize {
+    let loops = Table::read(&dir.join("loops.csv"));
+    let t = loops.columns["t_s"];
+    for (line, row) in loops.rows.iter().enumerate() {
+        assert_eq!(row.len(), loops.columns.len(), "loops.csv line {}", line + 2);
+        for (i, cell) in row.iter().enumerate() {
+            let ok = if i == t { cell.parse::<f64>().is_ok() } else { cell.is_empty() || cell.parse::<u64>().is_ok() };
+            assert!(ok, "loops.csv line {}, column {}: {cell:?}", line + 2, i + 1);
+        }
+    }
+    loops.rows.len()
+}
+
 /// True if a process with this pid exists (and is not a zombie of ours).
 pub fn alive(pid: i64) -> bool {
     std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| !stat.contains(") Z "))

@@ -8,7 +8,7 @@ use std::fmt;
 use crate::config::error::{COMMON_KEYS, LaunchError};
 use crate::contract::msg::{MAX_ESTIMATE, MAX_INPUT, MAX_SENSOR_DIM, MAX_STATE};
 
-/// One component of a vector: its name (a column of `trajectory.csv`) and its unit.
+/// One component of a vector: its name and its unit (together a column of `trajectory.csv`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Component {
     pub name: &'static str,
@@ -22,7 +22,7 @@ impl Component {
     }
 }
 
-/// A component reads as its name, so that column headers are `format!("meas.{sensor}.{c}")`.
+/// A component reads as its name (as a field of the MCAP recording is named).
 impl fmt::Display for Component {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name)

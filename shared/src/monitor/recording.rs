@@ -29,6 +29,7 @@ pub type StatusCallback = Box<dyn FnMut(&MonitorStatus) -> Result<()> + Send>;
 
 pub struct Recording {
     dt: f64,
+    rate_hz: f64,
     joiner: Joiner,
     layout: Layout,
     stats: LoopStats,
@@ -63,6 +64,7 @@ impl Recording {
         let wall_clock = config.mode == Mode::Realtime;
         Ok(Self {
             dt: config.dt(),
+            rate_hz: config.rate_hz,
             joiner: Joiner::new(JOIN_WINDOW),
             stats: LoopStats::new(layout.sensors.len(), config.dt(), wall_clock),
             layout,
@@ -167,7 +169,8 @@ impl Recording {
 
     /// Writes loop `k` (whatever arrived of it).
     fn write(&mut self, k: u64, parts: &LoopParts) -> Result<()> {
-        let t = k as f64 * self.dt;
+        // k / rate is the closest double to the exact time (k·dt prints 0.009000000000000001).
+        let t = k as f64 / self.rate_hz;
         if let Some(state) = &parts.state {
             self.last_counters = state.counters;
         }

@@ -12,7 +12,7 @@ use crate::contract::report::FaultEffect;
 use crate::monitor::join::LoopParts;
 use crate::monitor::layout::Layout;
 use crate::monitor::sinks::mcap::{Detail, FILE, McapRecording};
-use crate::monitor::sinks::{JoinedLoop, RunSink};
+use crate::monitor::sinks::{JoinedLoop, RunSink, loops};
 use crate::scenarios;
 
 /// Why an export did not happen.
@@ -32,8 +32,6 @@ impl From<anyhow::Error> for ExportError {
 
 /// The files of a run folder the export reads.
 const INPUTS: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];
-/// Columns of loops.csv: k, t, the trace's stamps, end to end, deadline miss, rejected, tick timing.
-const LOOPS_COLUMNS: usize = 2 + LoopTrace::STAMP_NAMES.len() + 3 + 3;
 
 /// Writes `run_dir/run.mcap` from the run folder's files; returns its path.
 pub fn write_mcap(run_dir: &Path) -> Result<PathBuf, ExportError> {
@@ -58,10 +56,9 @@ pub fn write_mcap(run_dir: &Path) -> Result<PathBuf, ExportError> {
 
     let trajectory = read("trajectory.csv")?;
     let loops = read("loops.csv")?;
-    let columns = 2 + layout.state.len() + layout.sensor_dims().iter().sum::<usize>() + layout.estimate.len();
-    let columns = columns + layout.input.len();
-    let mut trajectory_rows = rows(&trajectory, "trajectory.csv", columns).map_err(|e| bad(e.to_string()))?;
-    let mut loops_rows = rows(&loops, "loops.csv", LOOPS_COLUMNS).map_err(|e| bad(e.to_string()))?;
+    let mut trajectory_rows =
+        rows(&trajectory, "trajectory.csv", &layout.trajectory_columns()).map_err(|e| bad(e.to_string()))?;
+    let mut loops_rows = rows(&loops, "loops.csv", &loops::columns()).map_err(|e| bad(e.to_string()))?;
 
     let path = run_dir.join(FILE);
     let mut recording = McapRecording::create(&path, &config, &layout, Detail::Files)?;
@@ -86,13 +83,23 @@ pub fn write_mcap(run_dir: &Path) -> Result<PathBuf, ExportError> {
     Ok(path)
 }
 
-/// The data rows of a CSV file, each split into its cells, after checking the header's width.
-fn rows<'a>(text: &'a str, name: &str, columns: usize) -> Result<impl Iterator<Item = Vec<&'a str>> + 'a> {
+/// The data rows of a CSV file, each split into its cells, after checking that the header is
+/// the one a run of the launch file writes (the cells are read by position).
+fn rows<'a>(text: &'a str, name: &str, columns: &[String]) -> Result<impl Iterator<Item = Vec<&'a str>> + 'a> {
     let mut lines = text.lines();
     let header = lines.next().ok_or_else(|| anyhow!("{name} is empty"))?;
-    let found = header.split(',').count();
+    let found: Vec<&str> = header.split(',').collect();
     if found != columns {
-        return Err(anyhow!("{name} has {found} columns, the launch file's run writes {columns}"));
+        // The first column that differs (or is missing, or is one too many).
+        let at = (0..).find(|&i| found.get(i).copied() != columns.get(i).map(String::as_str)).expect("they differ");
+        let show = |column: Option<&str>| column.map_or("nothing".to_string(), |c| format!("{c:?}"));
+        return Err(anyhow!(
+            "{name}: column {} is {}, a run of its launch.toml writes {} there (the header must be {:?})",
+            at + 1,
+            show(found.get(at).copied()),
+            show(columns.get(at).map(String::as_str)),
+            columns.join(",")
+        ));
     }
     Ok(lines.map(|line| line.split(',').collect()))
 }

@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use crate::contract::msg::LoopTrace;
+use crate::monitor::layout::column_name;
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 
 pub struct LoopsCsv {
@@ -18,17 +19,22 @@ pub struct LoopsCsv {
 impl LoopsCsv {
     pub fn open(setup: &SinkSetup) -> Result<Self> {
         let (mut file, new) = create(setup.run_dir, "loops.csv", setup.restarted)?;
-        let mut columns: Vec<String> = vec!["k".into(), "t".into()];
-        columns.extend(LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")));
-        columns.extend(
-            ["end_to_end_ns", "deadline_miss", "rejected", "tick_scheduled_ns", "tick_wake_ns", "tick_period_ns"]
-                .map(String::from),
-        );
         if new {
-            writeln!(file, "{}", columns.join(","))?;
+            writeln!(file, "{}", columns().join(","))?;
         }
         Ok(Self { file, run_dir: setup.run_dir.to_path_buf() })
     }
+}
+
+/// The header of `loops.csv`: every column but `t_s` holds a whole number (or nothing).
+pub fn columns() -> Vec<String> {
+    let mut columns = vec!["k".to_string(), column_name("t", "s")];
+    columns.extend(LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")));
+    columns.extend(
+        ["end_to_end_ns", "deadline_miss", "rejected", "tick_scheduled_ns", "tick_wake_ns", "tick_period_ns"]
+            .map(String::from),
+    );
+    columns
 }
 
 impl RunSink for LoopsCsv {

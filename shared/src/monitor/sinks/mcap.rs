@@ -13,6 +13,7 @@ use serde_json::{Value, json};
 
 use crate::config::faults::FaultSpec;
 use crate::config::launch::{LaunchConfig, Mode};
+use crate::config::schema::Component;
 use crate::contract::msg::Header;
 use crate::contract::report::{FaultEffect, HOPS, MonitorReport};
 use crate::contract::role::Role;
@@ -92,7 +93,7 @@ fn key(name: &str) -> Vec<u8> {
 
 impl Keys {
     fn new(layout: &Layout) -> Self {
-        let keys = |names: &[String]| names.iter().map(|n| key(n)).collect();
+        let keys = |components: &[Component]| components.iter().map(|c| key(c.name)).collect();
         Self {
             state: keys(&layout.state),
             sensors: layout
@@ -392,6 +393,14 @@ impl RunSink for McapRecording {
 /// non-finite value (a corrupted command's NaN), which JSON cannot hold.
 fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
     let float = || json!({"type": ["number", "null"]});
+    // A component's field keeps its name (a viewer plots by name) and gives its unit here.
+    let component = |c: &Component| {
+        let mut field = float();
+        if !matches!(c.unit, "1" | "") {
+            field["description"] = c.unit.into();
+        }
+        (c.name.to_string(), field)
+    };
     let integer = |description: &str| json!({"type": "integer", "description": description});
     let boolean = |description: &str| json!({"type": "boolean", "description": description});
     let object = |title: &str, properties: Vec<(String, Value)>| {
@@ -409,19 +418,17 @@ fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
             ("t".to_string(), json!({"type": "number", "description": "simulation time of tick k, s"})),
         ]
     };
-    let vector = |title: &str, names: &[String]| {
+    let vector = |title: &str, components: &[Component]| {
         let mut properties = loop_fields();
-        properties.extend(names.iter().map(|n| (n.clone(), float())));
+        properties.extend(components.iter().map(component));
         object(title, properties)
     };
     let live = detail == Detail::Live;
 
     let mut measurements = loop_fields();
     for (name, components) in &layout.sensors {
-        let mut sensor = vec![(
-            "value".to_string(),
-            object(&format!("{name} value"), components.iter().map(|c| (c.clone(), float())).collect()),
-        )];
+        let mut sensor =
+            vec![("value".to_string(), object(&format!("{name} value"), components.iter().map(component).collect()))];
         if live {
             sensor.extend([
                 ("sample_time".into(), json!({"type": "number", "description": "when the truth behind the value was sampled (simulation time), s"})),
@@ -506,11 +513,14 @@ mod tests {
         );
         let float = json!({"type": ["number", "null"]});
         assert_eq!(schemas[0]["required"], json!(["k", "t", "theta", "omega"]));
-        assert_eq!(schemas[0]["properties"]["omega"], float);
+        assert_eq!(schemas[0]["properties"]["omega"], json!({"type": ["number", "null"], "description": "rad/s"}));
         assert_eq!(schemas[0]["properties"]["k"]["type"], "integer");
         let imu = &schemas[1]["properties"]["imu"];
         assert_eq!(imu["required"], json!(["value", "sample_time", "fresh"]));
         assert_eq!(imu["properties"]["value"]["required"], json!(["x", "y"]));
+        assert_eq!(imu["properties"]["value"]["properties"]["x"]["description"], "m/s²");
+        // A pure number has no unit to give.
+        assert_eq!(imu["properties"]["value"]["properties"]["y"], float);
         assert_eq!(imu["properties"]["fresh"]["type"], "boolean");
         assert_eq!(schemas[1]["required"], json!(["k", "t", "encoder", "imu"]));
         assert_eq!(schemas[3]["required"], json!(["k", "t", "u"]));
@@ -532,7 +542,7 @@ mod tests {
         for entry in crate::scenarios::ALL {
             let (config, scenario) = crate::scenarios::resolve(entry.name, &[]).unwrap();
             let layout = Layout::new(&config, scenario.as_ref());
-            for name in layout.state.iter().chain(&layout.estimate).chain(&layout.input) {
+            for name in layout.state.iter().chain(&layout.estimate).chain(&layout.input).map(|c| c.name) {
                 assert!(name != "k" && name != "t", "{}: a component is named {name}", entry.name);
             }
         }

@@ -23,18 +23,8 @@ impl TrajectoryCsv {
     pub fn open(setup: &SinkSetup) -> Result<Self> {
         let layout = setup.layout;
         let (mut file, new) = create(setup.run_dir, "trajectory.csv", setup.restarted)?;
-        let mut columns: Vec<String> = vec!["k".into(), "t".into()];
-        columns.extend(layout.state.iter().cloned());
-        for (name, components) in &layout.sensors {
-            match &components[..] {
-                [_] => columns.push(format!("meas.{name}")),
-                components => columns.extend(components.iter().map(|c| format!("meas.{name}.{c}"))),
-            }
-        }
-        columns.extend(layout.estimate.iter().map(|n| format!("est.{n}")));
-        columns.extend(layout.input.iter().map(|n| format!("cmd.{n}")));
         if new {
-            writeln!(file, "{}", columns.join(","))?;
+            writeln!(file, "{}", layout.trajectory_columns().join(","))?;
         }
         Ok(Self {
             file,
@@ -126,7 +116,7 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
         assert_eq!(
             text,
-            "k,t,theta,omega,meas.encoder,meas.imu.x,meas.imu.y,est.theta,cmd.u\n\
+            "k,t_s,theta_rad,omega_rad_per_s,meas.encoder_rad,meas.imu.x_m_per_s2,meas.imu.y,est.theta_rad,cmd.u_N_m\n\
              0,0,0.5,-1.25,0.1,2,3,0.25,-0.75\n\
              1,0.001,0.5,-1.25,,,,,-0.75\n\
              5,0.005,,,,,,,\n"
