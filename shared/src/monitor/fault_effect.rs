@@ -115,9 +115,10 @@ impl FaultTracker {
         }
     }
 
-    /// The fault's effect, with loop indices turned into simulation time (`dt` per loop).
-    pub fn finish(mut self, dt: f64) -> FaultEffect {
-        let at = |k: u64| k as f64 * dt;
+    /// The fault's effect, with loop indices turned into simulation time, k / rate exactly as
+    /// the recorder's `t` (k·dt would print 0.009000000000000001).
+    pub fn finish(mut self, rate_hz: f64) -> FaultEffect {
+        let at = |k: u64| k as f64 / rate_hz;
         self.effect.commands_back_at_s = self.back.map(at);
         self.effect.rejoined_at_s = self.rejoined.map(at);
         self.effect.recovery_s = match self.last_outside {
@@ -198,17 +199,17 @@ mod tests {
                 tracker.observe(k as u64, parts, &measure());
             }
         }
-        let dt = config.dt();
-        let effects: Vec<FaultEffect> = trackers.into_iter().map(|t| t.finish(dt)).collect();
+        let rate = config.rate_hz;
+        let effects: Vec<FaultEffect> = trackers.into_iter().map(|t| t.finish(rate)).collect();
         assert_eq!(
             effects[0],
             FaultEffect {
                 outage_ticks: 2,
-                commands_back_at_s: Some(8.0 * dt),
+                commands_back_at_s: Some(8.0 / rate),
                 rejoined_at_s: None,
                 worst_error_during: Some(0.5),
                 worst_error_after: Some(0.2),
-                recovery_s: Some(2.0 * dt),
+                recovery_s: Some(2.0 / rate),
                 within_limits: true,
                 error_peak_first_s: Some(0.5),
                 error_peak_last_s: Some(0.5),
@@ -218,11 +219,11 @@ mod tests {
             effects[1],
             FaultEffect {
                 outage_ticks: 1,
-                commands_back_at_s: Some(14.0 * dt),
-                rejoined_at_s: Some(14.0 * dt),
+                commands_back_at_s: Some(14.0 / rate),
+                rejoined_at_s: Some(14.0 / rate),
                 worst_error_during: Some(0.4),
                 worst_error_after: Some(1.2),
-                recovery_s: Some(5.0 * dt),
+                recovery_s: Some(5.0 / rate),
                 within_limits: false,
                 error_peak_first_s: Some(1.2),
                 error_peak_last_s: Some(1.2),

@@ -28,7 +28,6 @@ const JOIN_WINDOW: u64 = 2 * MONITOR_BUFFER as u64;
 pub type StatusCallback = Box<dyn FnMut(&MonitorStatus) -> Result<()> + Send>;
 
 pub struct Recording {
-    dt: f64,
     rate_hz: f64,
     joiner: Joiner,
     layout: Layout,
@@ -63,7 +62,6 @@ impl Recording {
         // wall-clock time, so a command's latency ages its data and a `stop` lasts for the loop.
         let wall_clock = config.mode == Mode::Realtime;
         Ok(Self {
-            dt: config.dt(),
             rate_hz: config.rate_hz,
             joiner: Joiner::new(JOIN_WINDOW),
             stats: LoopStats::new(layout.sensors.len(), config.dt(), wall_clock),
@@ -160,7 +158,7 @@ impl Recording {
             .collect();
         report.metrics = self.metrics.finish();
         report.notes = self.metrics.notes();
-        report.faults = self.faults.into_iter().map(|f| f.finish(self.dt)).collect();
+        report.faults = self.faults.into_iter().map(|f| f.finish(self.rate_hz)).collect();
         for sink in &mut self.sinks {
             sink.finish(&report)?;
         }
