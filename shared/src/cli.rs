@@ -1,6 +1,7 @@
 //! The top layer: `looplab`'s command line. Parses the arguments and hands each command to the
 //! layer that does it: `run` to the launcher, `sweep` and `bench` to the tools.
 
+use std::io::IsTerminal as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -147,7 +148,7 @@ struct LaunchArgs {
     after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
 and meaning; --set takes any of them.\n\
 Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, run.mcap, launch.toml (resolved), logs/.\n\
-Exit codes: 0 completed, 1 the run failed (a process died, or files were left in shared memory), \
+Exit codes: 0 completed (or stopped with q in the dashboard), 1 the run failed (a process died, or files were left in shared memory), \
 2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
 )]
 struct RunArgs {
@@ -168,6 +169,10 @@ struct RunArgs {
     /// No live status line
     #[arg(long, short)]
     quiet: bool,
+    /// Show the run live in the terminal: latency per hop and end to end, tick jitter, the
+    /// processes, faults as they happen and the key signals; q stops the run in order, as Ctrl-C
+    #[arg(long, conflicts_with_all = ["quiet", "in_process"])]
+    dashboard: bool,
     /// Run the same plant, sensors, estimator and controller in this one process, in loop order,
     /// with no IPC and no monitor process (lockstep only): the run folder is the same and
     /// trajectory.csv byte-identical to the five-process run's, many times faster
@@ -183,6 +188,7 @@ impl Default for RunArgs {
             launch: LaunchArgs::default(),
             out: None,
             quiet: false,
+            dashboard: false,
             in_process: false,
         }
     }
@@ -334,6 +340,9 @@ fn run(args: RunArgs) -> ExitCode {
     {
         return bad_input(format!("--in-process: {why}; leave out --in-process to run the five processes"));
     }
+    if args.dashboard && !std::io::stdout().is_terminal() {
+        return bad_input("--dashboard: standard output is not a terminal; run it in one, or leave out --dashboard");
+    }
     // The in-process run needs no loop binaries.
     let binaries = if args.in_process {
         None
@@ -350,7 +359,12 @@ fn run(args: RunArgs) -> ExitCode {
     let ran = match &binaries {
         Some(binaries) => {
             report_abandoned(&ipc::clean_abandoned_runs());
-            launcher::run_once(&config, scenario.as_ref(), binaries, &run_dir, args.quiet)
+            let view = match (args.dashboard, args.quiet) {
+                (true, _) => launcher::LiveView::Dashboard,
+                (false, true) => launcher::LiveView::Quiet,
+                (false, false) => launcher::LiveView::StatusLine,
+            };
+            launcher::run_with(&config, scenario.as_ref(), binaries, &run_dir, view)
         }
         None => launcher::in_process::run_in_process(&config, scenario.as_ref(), &run_dir),
     };

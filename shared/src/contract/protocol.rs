@@ -57,18 +57,55 @@ pub enum ChildEvent {
         process: String,
         at_ns: u64,
     },
-    Status(MonitorStatus),
+    Status(Box<MonitorStatus>),
     PlantReport(PlantReport),
     StageReport(StageReport),
     MonitorReport(Box<crate::contract::report::MonitorReport>),
 }
 
-/// The live numbers behind the launcher's status line.
+/// The live numbers behind the launcher's status line and its dashboard.
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct MonitorStatus {
     pub loops_recorded: u64,
     pub end_to_end_p99_ns: Option<u64>,
     pub deadline_misses: u64,
+    /// What happened since the previous status (the monitor process sends it; a recording with
+    /// no one watching has none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub live: Option<LiveStatus>,
+}
+
+/// The loop since the previous status: latencies, tick timing and a few of the scenario's
+/// signals, for the dashboard.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct LiveStatus {
+    pub end_to_end: LiveLatency,
+    /// In the order of `contract::report::HOPS`.
+    pub hops: Vec<LiveLatency>,
+    /// |tick period − dt| of the plant's clocked ticks (none in lockstep).
+    pub tick_period_error: LiveLatency,
+    /// The key signals (`monitor::live::key_signals`), a few points per status.
+    pub points: Vec<SignalPoint>,
+}
+
+/// One latency (ns): the loops since the previous status (how many, the largest), the last second
+/// of loops (p50, p99, max) and the run's maximum so far.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct LiveLatency {
+    pub count: u64,
+    pub latest_max: Option<u64>,
+    pub p50: Option<u64>,
+    pub p99: Option<u64>,
+    pub max: Option<u64>,
+    pub run_max: Option<u64>,
+}
+
+/// The key signals at simulation time `t`: per signal its true value and its estimate (None:
+/// not estimated, missing or not finite).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct SignalPoint {
+    pub t: f64,
+    pub values: Vec<[Option<f64>; 2]>,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]

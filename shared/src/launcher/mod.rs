@@ -4,6 +4,7 @@
 //! The command line that calls it is `crate::cli`.
 
 pub mod child;
+pub mod dashboard;
 pub mod inject;
 pub mod outcome;
 pub mod report;
@@ -17,5 +18,5 @@ pub use outcome::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Exit, 
 pub use report::exit_code;
 pub use run_dir::{create_run_dir, new_run_id, write_atomically};
 pub use summary::Summary;
-pub use supervisor::run_once;
+pub use supervisor::{LiveView, run_once, run_with};
 pub mod in_process;

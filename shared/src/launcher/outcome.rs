@@ -21,6 +21,8 @@ pub enum Outcome {
     /// The plant finished its loops (whether all loops ran is the summary's `completed`).
     Completed,
     Interrupted,
+    /// The user quit the dashboard (`q`): stopped in order, as for Ctrl-C, and not a failure.
+    Quit,
     /// The run cannot go on; the reason in words.
     Failed(String),
 }
@@ -32,6 +34,8 @@ pub enum StopReason {
     PlantStoppedEarly,
     #[strum(serialize = "interrupted by a signal")]
     Interrupted,
+    #[strum(serialize = "quit from the dashboard")]
+    Quit,
     /// A process could not go on or be restarted, the loop stalled...: the reason in words.
     #[strum(default)]
     Failed(String),
@@ -45,6 +49,7 @@ impl StopReason {
             Outcome::Completed if plant_stopped_early => Some(StopReason::PlantStoppedEarly),
             Outcome::Completed => None,
             Outcome::Interrupted => Some(StopReason::Interrupted),
+            Outcome::Quit => Some(StopReason::Quit),
             Outcome::Failed(why) => Some(StopReason::Failed(why.clone())),
         }
     }
@@ -129,6 +134,7 @@ mod tests {
         for (reason, text) in [
             (StopReason::PlantStoppedEarly, "the plant stopped before the last loop"),
             (StopReason::Interrupted, "interrupted by a signal"),
+            (StopReason::Quit, "quit from the dashboard"),
             (StopReason::Failed("the monitor sent no report".into()), "the monitor sent no report"),
         ] {
             let json = serde_json::to_string(&reason).unwrap();

@@ -19,8 +19,8 @@ pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
                 format!("the run did not complete: {why} ({} of {} loops)", summary.loops, summary.loops_planned);
             (EXIT_FAILED, Some(error))
         }
-        Outcome::Completed if summary.shared_memory.clean => (EXIT_OK, None),
-        Outcome::Completed => {
+        Outcome::Completed | Outcome::Quit if summary.shared_memory.clean => (EXIT_OK, None),
+        Outcome::Completed | Outcome::Quit => {
             let error = format!("files of the run were left behind: {}", summary.shared_memory.leftover.join(", "));
             (EXIT_FAILED, Some(error))
         }
@@ -343,6 +343,7 @@ mod tests {
         let done = summary();
         assert_eq!(exit_code(&Outcome::Completed, &done), (0, None));
         assert_eq!(exit_code(&Outcome::Interrupted, &done), (130, None));
+        assert_eq!(exit_code(&Outcome::Quit, &done), (0, None));
         assert_eq!(
             exit_code(&Outcome::Failed("sensors could not be restarted".into()), &done),
             (1, Some("sensors could not be restarted".into()))

@@ -7,6 +7,8 @@ use std::io::Write as _;
 use std::ops::{Index, IndexMut};
 use std::path::{Path, PathBuf};
 use std::process::ChildStdin;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
@@ -19,12 +21,15 @@ use crate::contract::clock::now_ns;
 use crate::contract::protocol::{ChildEvent, MonitorStatus};
 use crate::contract::role::Role;
 use crate::launcher::child::{self, Binaries, ChildArgs, ChildLine, Line, Start};
+use crate::launcher::dashboard::{self, Dashboard, ProcessRow, ProcessState, Update};
 use crate::launcher::inject::{self, DetectedBy};
 use crate::launcher::outcome::{Exit, Outcome};
 use crate::launcher::restart::{self, Death, Decision, RestartRecord};
 use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
+use crate::monitor::layout::Layout;
+use crate::monitor::live::key_signals;
 use crate::runtime::ipc;
 use crate::runtime::signals::StopFlag;
 
@@ -40,6 +45,16 @@ const MONITOR_SILENCE: Duration = Duration::from_millis(300);
 /// Longest wait between two looks at the fault schedule.
 const SUPERVISE_TICK: Duration = Duration::from_millis(2);
 
+/// What the user sees while a run goes on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LiveView {
+    Quiet,
+    /// A progress bar with the end-to-end p99 on stderr.
+    StatusLine,
+    /// The full-screen dashboard (stdout must be a terminal).
+    Dashboard,
+}
+
 /// Runs one launch configuration to its end in `run_dir` (which must exist, with `logs/`):
 /// writes `launch.toml` and `summary.json` there.
 pub fn run_once(
@@ -49,7 +64,18 @@ pub fn run_once(
     run_dir: &Path,
     quiet: bool,
 ) -> Result<(Summary, Outcome)> {
-    Supervisor::run(config, scenario, binaries, run_dir, quiet)
+    run_with(config, scenario, binaries, run_dir, if quiet { LiveView::Quiet } else { LiveView::StatusLine })
+}
+
+/// [`run_once`], shown as `view` says.
+pub fn run_with(
+    config: &LaunchConfig,
+    scenario: &dyn Scenario,
+    binaries: &Binaries,
+    run_dir: &Path,
+    view: LiveView,
+) -> Result<(Summary, Outcome)> {
+    Supervisor::run(config, scenario, binaries, run_dir, view)
 }
 
 /// A process of the loop across its restarts.
@@ -98,6 +124,25 @@ impl Process {
             Some(exit) if exit != Exit::Running => format!("{} exited with status {exit}", self.role),
             _ => format!("{} closed its output", self.role),
         }
+    }
+
+    /// What the dashboard calls its state.
+    fn row(&self) -> ProcessRow {
+        let state = if self.gone {
+            ProcessState::Dead
+        } else if self.restart.is_some() {
+            ProcessState::Restarting
+        } else if !self.running() {
+            ProcessState::Exited
+        } else if self.stopped {
+            ProcessState::Stopped
+        } else if self.ready {
+            ProcessState::Running
+        } else {
+            ProcessState::Starting
+        };
+        let pid = self.runs.last().filter(|r| r.exit == Exit::Running).map(|r| r.pid);
+        ProcessRow { role: self.role, state, restarts: self.incarnation(), pid }
     }
 
     fn ended_cleanly(&self) -> bool {
@@ -172,6 +217,11 @@ struct Supervisor<'a> {
     /// Clean-up requests (a process) for the clean-up thread: iceoryx2's clean-up of a dead
     /// process's resources can wait on the file system, and nothing of the supervision may.
     cleaner: Option<Sender<Role>>,
+    dashboard: Option<Dashboard>,
+    /// The processes as last sent to the dashboard.
+    shown: Vec<ProcessRow>,
+    /// Set by the dashboard's `q`.
+    quit: Arc<AtomicBool>,
 }
 
 impl<'a> Supervisor<'a> {
@@ -180,15 +230,19 @@ impl<'a> Supervisor<'a> {
         scenario: &dyn Scenario,
         binaries: &'a Binaries,
         run_dir: &Path,
-        quiet: bool,
+        view: LiveView,
     ) -> Result<(Summary, Outcome)> {
         let (launch_file, started_at) = begin_run(run_dir, config)?;
         let stop = StopFlag::install()?;
 
-        let progress = if quiet {
-            ProgressBar::hidden()
-        } else {
-            ProgressBar::with_draw_target(Some(config.loops()), ProgressDrawTarget::stderr())
+        let progress = match view {
+            LiveView::StatusLine => ProgressBar::with_draw_target(Some(config.loops()), ProgressDrawTarget::stderr()),
+            LiveView::Quiet | LiveView::Dashboard => ProgressBar::hidden(),
+        };
+        let quit = Arc::new(AtomicBool::new(false));
+        let dashboard = match view {
+            LiveView::Dashboard => Some(Dashboard::open(dashboard_header(config, scenario), quit.clone())?),
+            LiveView::Quiet | LiveView::StatusLine => None,
         };
         progress.set_style(
             ProgressStyle::with_template("{spinner} {bar:16} {pos}/{len} loops · {msg}").expect("valid template"),
@@ -241,6 +295,9 @@ impl<'a> Supervisor<'a> {
             removed_dead_nodes: 0,
             stop,
             cleaner: Some(cleaner),
+            dashboard,
+            shown: vec![],
+            quit,
         };
         let spawned: Result<()> = Role::START_ORDER.into_iter().try_for_each(|role| supervisor.spawn(role));
         let outcome = match spawned {
@@ -249,6 +306,9 @@ impl<'a> Supervisor<'a> {
         };
         supervisor.stop_all();
         supervisor.progress.finish_and_clear();
+        if let Some(dashboard) = supervisor.dashboard.take() {
+            dashboard.close();
+        }
         let outcome = match outcome {
             Outcome::Completed => supervisor.check_ends(),
             other => other,
@@ -306,15 +366,39 @@ impl<'a> Supervisor<'a> {
     /// Notes `event` on the timeline, at `ns`.
     fn note(&mut self, ns: u64, event: String) {
         self.log.note(ns, event);
+        if let (Some(dashboard), Some(entry)) = (&self.dashboard, self.log.timeline.last()) {
+            dashboard.send(Update::Event(entry.clone()));
+        }
+    }
+
+    /// The user quit the dashboard, or a signal asked to stop.
+    fn stop_outcome(&self) -> Option<Outcome> {
+        if self.stop.requested() {
+            Some(Outcome::Interrupted)
+        } else if self.quit.load(Ordering::Relaxed) {
+            Some(Outcome::Quit)
+        } else {
+            None
+        }
+    }
+
+    /// Sends the dashboard the processes' states when they changed.
+    fn show_processes(&mut self) {
+        let Some(dashboard) = &self.dashboard else { return };
+        let rows: Vec<ProcessRow> = self.processes.iter().map(Process::row).collect();
+        if rows != self.shown {
+            dashboard.send(Update::Processes(rows.clone()));
+            self.shown = rows;
+        }
     }
 
     fn supervise(&mut self) -> Outcome {
-        let stop = self.stop.clone();
         // Start-up: every process, the monitor included, has its ports before the first sample.
         let deadline = Instant::now() + READY_TIMEOUT;
         while !self.processes.iter().all(|p| p.ready) {
-            if stop.requested() {
-                return Outcome::Interrupted;
+            self.show_processes();
+            if let Some(outcome) = self.stop_outcome() {
+                return outcome;
             }
             match self.events.recv_timeout(Duration::from_millis(50)) {
                 Ok(event) => {
@@ -342,8 +426,9 @@ impl<'a> Supervisor<'a> {
         self.last_status = Instant::now();
 
         loop {
-            if stop.requested() {
-                return Outcome::Interrupted;
+            self.show_processes();
+            if let Some(outcome) = self.stop_outcome() {
+                return outcome;
             }
             if let Some(outcome) = self.due_actions() {
                 return outcome;
@@ -570,6 +655,9 @@ impl<'a> Supervisor<'a> {
             ChildEvent::Status(status) => {
                 self.last_status = Instant::now();
                 self.show(&status);
+                if let Some(dashboard) = &self.dashboard {
+                    dashboard.send(Update::Status(status));
+                }
             }
             ChildEvent::PlantReport(r) => self.reports.plant = Some(r),
             ChildEvent::MonitorReport(r) => self.reports.monitor = Some(*r),
@@ -693,11 +781,15 @@ impl<'a> Supervisor<'a> {
     /// Stops every process still running, in order, each with SIGTERM and then, past its
     /// timeout, SIGKILL; collects their reports on the way.
     fn stop_all(&mut self) {
+        if let Some(dashboard) = &self.dashboard {
+            dashboard.send(Update::Stopping);
+        }
         // A stopped process cannot act on SIGTERM.
         for p in self.processes.iter() {
             p.signal(libc::SIGCONT);
         }
         for role in Role::STOP_ORDER {
+            self.show_processes();
             if self.processes[role].try_reap() {
                 continue;
             }
@@ -730,5 +822,18 @@ impl<'a> Supervisor<'a> {
         while let Ok(event) = self.events.recv_timeout(Duration::from_millis(200)) {
             self.handle(event);
         }
+    }
+}
+
+/// The dashboard's fixed lines: the run, and the key signals with their units.
+fn dashboard_header(config: &LaunchConfig, scenario: &dyn Scenario) -> dashboard::Header {
+    let signals = key_signals(&Layout::new(config, scenario))
+        .into_iter()
+        .map(|s| (format!("{} [{}]", s.name, s.unit), s.estimate.is_some()))
+        .collect();
+    dashboard::Header {
+        run: format!("{} · {} · {} Hz", config.scenario, config.mode.name(), config.rate_hz),
+        loops_planned: config.loops(),
+        signals,
     }
 }

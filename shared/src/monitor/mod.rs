@@ -5,11 +5,13 @@
 //! - [`recording`]: the recorder it feeds, usable without a process.
 //! - [`join`]: the five messages of each loop joined by k; [`stats`]: the latency histograms;
 //!   [`fault_effect`]: what each fault did; [`stall`]: stalled processes found from the data.
-//! - [`sinks`]: the files of the run folder, one sink each.
+//! - [`sinks`]: the files of the run folder, one sink each; [`live`]: what the dashboard shows,
+//!   sent with each status.
 
 pub mod fault_effect;
 pub mod join;
 pub mod layout;
+pub mod live;
 pub mod process;
 pub mod recording;
 pub mod sinks;

@@ -68,7 +68,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     estimates.subscriber.connect(&context.stop)?;
     commands.subscriber.connect(&context.stop)?;
     records.subscriber.connect(&context.stop)?;
-    let status: StatusCallback = Box::new(|status| emit(&ChildEvent::Status(status.clone())));
+    let status: StatusCallback = Box::new(|status| emit(&ChildEvent::Status(Box::new(status.clone()))));
     let recording =
         Recording::new(config, context.scenario.as_ref(), &context.run_dir, context.incarnation, Some(status))?;
     // The mode's one say in the monitor process. In real time the monitor must never slow the

@@ -16,6 +16,7 @@ use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::join::{Joiner, LoopParts, Sample};
 use crate::monitor::layout::Layout;
+use crate::monitor::live::Live;
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
 use crate::monitor::stats::LoopStats;
 use crate::runtime::ipc::MONITOR_BUFFER;
@@ -40,6 +41,8 @@ pub struct Recording {
     /// The plant's counters in the newest state written.
     last_counters: PlantCounters,
     status: Option<StatusCallback>,
+    /// What the next status reports of the loops since the last (only with a status callback).
+    live: Option<Live>,
     /// A restarted monitor starts at the first loop it sees; the first one starts at 0.
     started: bool,
     restarted: bool,
@@ -58,6 +61,7 @@ impl Recording {
         let layout = Layout::new(config, scenario);
         let restarted = incarnation > 0;
         let sinks = sinks::open(&SinkSetup { run_dir, restarted, config, layout: &layout })?;
+        let live = status.is_some().then(|| Live::new(&layout, config.rate_hz));
         // The one place the mode matters to the recording: in real time the loop runs in
         // wall-clock time, so a command's latency ages its data and a `stop` lasts for the loop.
         let wall_clock = config.mode == Mode::Realtime;
@@ -72,6 +76,7 @@ impl Recording {
             sinks,
             report: MonitorReport::default(),
             last_counters: PlantCounters::default(),
+            live,
             status,
             started: !restarted,
             restarted,
@@ -118,19 +123,15 @@ impl Recording {
         Ok(())
     }
 
-    /// The live numbers for the status line.
-    pub fn status(&self) -> MonitorStatus {
-        MonitorStatus {
-            loops_recorded: self.report.records,
-            end_to_end_p99_ns: self.stats.end_to_end.quantile(0.99),
-            deadline_misses: self.last_counters.deadline_misses,
-        }
-    }
-
     /// Reports the status (if there is a callback) and flushes every sink.
     pub fn checkpoint(&mut self) -> Result<()> {
-        let status = self.status();
         if let Some(callback) = &mut self.status {
+            let status = MonitorStatus {
+                loops_recorded: self.report.records,
+                end_to_end_p99_ns: self.stats.end_to_end.quantile(0.99),
+                deadline_misses: self.last_counters.deadline_misses,
+                live: self.live.as_mut().map(|live| live.take(&self.stats)),
+            };
             callback(&status)?;
         }
         self.sinks.iter_mut().try_for_each(|sink| sink.flush())
@@ -173,6 +174,9 @@ impl Recording {
             self.last_counters = state.counters;
         }
         self.stats.observe(t, parts);
+        if let Some(live) = &mut self.live {
+            live.observe(k, t, parts, &self.stats);
+        }
         if parts.record.is_some() {
             self.report.records += 1;
         } else {
@@ -293,10 +297,12 @@ mod tests {
         assert_eq!(report.records_before_start, 3);
         assert_eq!((report.records, report.loops_seen), (3, 6));
         assert_eq!(report.lost_records(6), 0);
-        assert_eq!(
-            statuses.lock().unwrap()[..],
-            [MonitorStatus { loops_recorded: 3, end_to_end_p99_ns: Some(0), deadline_misses: 0 }]
-        );
+        let statuses = statuses.lock().unwrap();
+        let [status] = &statuses[..] else { panic!("one status: {statuses:?}") };
+        assert_eq!((status.loops_recorded, status.end_to_end_p99_ns, status.deadline_misses), (3, Some(0), 0));
+        // The live part covers the three loops since it started; no point falls on a tenth loop.
+        let live = status.live.as_ref().expect("a status for a watcher has its live part");
+        assert_eq!((live.end_to_end.count, live.hops.len(), live.points.len()), (3, 7, 0));
         // The first recording was dropped without finishing: what it wrote stays, and the second
         // appends (loop 2 went to neither).
         let ks: Vec<&str> = rows.iter().map(|r| r.split(',').next().unwrap()).collect();

@@ -41,6 +41,11 @@ impl Distribution {
         (!self.histogram.is_empty()).then(|| self.histogram.value_at_quantile(q))
     }
 
+    /// The largest value recorded (exact).
+    pub fn max(&self) -> Option<u64> {
+        (!self.histogram.is_empty()).then_some(self.max)
+    }
+
     pub fn stats(&self) -> Stats {
         let count = self.histogram.len();
         if count == 0 {
@@ -90,6 +95,11 @@ impl LoopStats {
         }
     }
 
+    /// |a tick's period − dt|.
+    pub fn tick_period_error(&self, period_ns: u64) -> u64 {
+        (period_ns as i64 - self.period_ns).unsigned_abs()
+    }
+
     /// Records loop `k` at simulation time `t`.
     pub fn observe(&mut self, t: f64, parts: &LoopParts) {
         if let Some(state) = &parts.state {
@@ -97,7 +107,7 @@ impl LoopStats {
             // Tick 0 is published at start, not on a timer wake-up; in lockstep the plant has
             // no clock and every timing is zero.
             if timing.period_ns > 0 {
-                self.plant_tick_jitter.record((timing.period_ns as i64 - self.period_ns).unsigned_abs());
+                self.plant_tick_jitter.record(self.tick_period_error(timing.period_ns));
                 self.plant_wake_latency.record(timing.wake_ns.saturating_sub(timing.scheduled_ns));
             }
         }

@@ -113,7 +113,7 @@ fn measure(condition: &str, kills: usize, out: &Path, binaries: &Binaries) -> Re
     let dir = crate::launcher::create_run_dir(Some(&out.join(condition)), "pendulum")?;
     let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
     match outcome {
-        Outcome::Interrupted => return Err(Interrupted.into()),
+        Outcome::Interrupted | Outcome::Quit => return Err(Interrupted.into()),
         Outcome::Failed(why) => return Err(anyhow!("the {condition} run failed: {why}")),
         Outcome::Completed => {}
     }
