@@ -256,6 +256,17 @@ pub struct Panel {
 }
 
 impl Panel {
+    /// The span of its curves and marks (bounds do not widen it).
+    fn y_range(&self) -> Range<f64> {
+        y_range(self.curves.iter().flat_map(|c| &c.points).chain(&self.marks).map(|p| p.1))
+    }
+
+    /// The bounds that reach into its range, the only ones drawn.
+    fn bounds_shown(&self) -> impl Iterator<Item = &Curve> {
+        let y = self.y_range();
+        self.bounds.iter().filter(move |c| c.points.iter().any(|p| y.contains(&p.1)))
+    }
+
     pub fn new(title: impl Into<String>, y_desc: impl Into<String>, curves: Vec<Curve>) -> Self {
         Panel { title: title.into(), y_desc: y_desc.into(), curves, bounds: vec![], marks: vec![] }
     }
@@ -352,7 +363,7 @@ impl Figure {
         area.draw_text(&self.title, &(FONT, size).into_font().color(&BLACK), (16, 8)).map_err(plot_error)?;
         let mut entries: Vec<(String, RGBColor, Line)> = Vec::new();
         for panel in &self.panels {
-            for c in panel.curves.iter().chain(&panel.bounds) {
+            for c in panel.curves.iter().chain(panel.bounds_shown()) {
                 if !entries.iter().any(|(label, ..)| *label == c.label) {
                     entries.push((c.label.clone(), c.colour, c.line));
                 }
@@ -400,7 +411,7 @@ impl Figure {
     }
 
     fn draw_panel(&self, area: &DrawingArea<BitMapBackend<'_>, Shift>, panel: &Panel) -> anyhow::Result<()> {
-        let y = y_range(panel.curves.iter().flat_map(|c| &c.points).chain(&panel.marks).map(|p| p.1));
+        let y = panel.y_range();
         let mut chart = ChartBuilder::on(area)
             .caption(&panel.title, (FONT, 17))
             .margin(10)
@@ -422,10 +433,9 @@ impl Figure {
             .x_label_formatter(&tick_label)
             .draw()
             .map_err(plot_error)?;
-        let inside = |c: &&Curve| c.points.iter().any(|p| y.contains(&p.1));
         let area = &chart.plotting_area().clone();
         // Bounds first: a command at its limit stays visible over the limit's line.
-        for curve in panel.bounds.iter().filter(inside).chain(&panel.curves) {
+        for curve in panel.bounds_shown().chain(&panel.curves) {
             let points: Vec<(f64, f64)> =
                 curve.points.iter().copied().filter(|p| p.0 >= self.x.start && p.0 <= self.x.end).collect();
             let points = thin(points, POINTS_PER_CURVE);
