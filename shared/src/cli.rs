@@ -12,7 +12,8 @@ use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::runtime::ipc;
 use crate::scenarios;
-use crate::tools::{bench, export, sweep};
+use crate::tools::plot::run::PlotError;
+use crate::tools::{bench, export, plot, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -74,6 +75,27 @@ enum Command {
         /// Write run.mcap
         #[arg(long, required = true)]
         mcap: bool,
+    },
+    /// Draw a run folder's figures as PNG into it (estimate.png, commands.png, sensors.png,
+    /// tick-period.png), or with --paper reproduce a paper's figure for a scenario
+    #[command(
+        after_help = "Examples:\n  looplab plot runs/latest\n  looplab plot --paper pendulum --out /tmp/paper-003\n\
+--paper runs the paper's launch files in lockstep in this process (one run folder each, under --out) and draws: \
+pendulum: paper 003's Figs. 3 and 4 (angle and flywheel speed without and with bias estimation); \
+quadcopter: paper 001's Fig. 17 (the mass estimate as weight is added); \
+tiltrotor: paper 004's Fig. 4 (the a-priori x error of NLLS-2L and NLPT-2L against the paper's ±3.81 cm)."
+    )]
+    Plot {
+        /// The run folder (runs/<time>-<scenario>, runs/latest or a run's --out)
+        #[arg(required_unless_present = "paper", conflicts_with = "paper")]
+        run_dir: Option<PathBuf>,
+        /// Reproduce the paper figure of this scenario instead: pendulum, quadcopter or tiltrotor
+        #[arg(long, value_name = "SCENARIO")]
+        paper: Option<String>,
+        /// With --paper: the folder for the runs and figures, new or empty (default:
+        /// runs/<time>-paper-<scenario>)
+        #[arg(long, value_name = "DIR", requires = "paper")]
+        out: Option<PathBuf>,
     },
     /// (internal) the far end of the bench's ping-pong
     #[command(hide = true)]
@@ -178,6 +200,9 @@ struct RunArgs {
     /// trajectory.csv byte-identical to the five-process run's, many times faster
     #[arg(long)]
     in_process: bool,
+    /// After the run, draw its figures into the run folder, as `looplab plot` does
+    #[arg(long)]
+    plot: bool,
 }
 
 impl Default for RunArgs {
@@ -190,6 +215,7 @@ impl Default for RunArgs {
             quiet: false,
             dashboard: false,
             in_process: false,
+            plot: false,
         }
     }
 }
@@ -234,9 +260,26 @@ pub fn main() -> ExitCode {
             Err(export::ExportError::BadInput(why)) => bad_input(why),
             Err(export::ExportError::Failed(e)) => report_failure(Err(e)),
         },
+        Some(Command::Plot { run_dir: Some(run_dir), .. }) => figures(plot::run::plot_run(&run_dir)),
+        Some(Command::Plot { paper: Some(scenario), out, .. }) => {
+            figures(plot::paper::paper_figures(&scenario, out.as_deref()))
+        }
+        Some(Command::Plot { .. }) => bad_input("plot: give a run folder or --paper SCENARIO"),
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default()),
+    }
+}
+
+/// Prints the figures written, or why none were.
+fn figures(written: Result<Vec<PathBuf>, PlotError>) -> ExitCode {
+    match written {
+        Ok(paths) => {
+            paths.iter().for_each(|path| println!("wrote {}", path.display()));
+            ExitCode::SUCCESS
+        }
+        Err(PlotError::BadInput(why)) => bad_input(why),
+        Err(PlotError::Failed(e)) => report_failure(Err(e)),
     }
 }
 
@@ -375,7 +418,9 @@ fn run(args: RunArgs) -> ExitCode {
             if let Some(error) = error {
                 eprintln!("error: {error}");
             }
-            ExitCode::from(code)
+            let plotted = if args.plot { figures(plot::run::plot_run(&run_dir)) } else { ExitCode::SUCCESS };
+            // A run that failed keeps its code; a failed plot fails a run that completed.
+            if code == launcher::EXIT_OK { plotted } else { ExitCode::from(code) }
         }
         Err(e) => {
             eprintln!("error: {e:#}");

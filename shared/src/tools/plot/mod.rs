@@ -1,7 +1,10 @@
 //! Figures as PNG (plotters' bitmap backend), with an embedded font so a figure renders the same
-//! on a machine with no fonts installed. `latency`: latency distributions (bench, plot, compare).
+//! on a machine with no fonts installed. `latency`: latency distributions (bench, plot, compare);
+//! `run`: a run folder's figures (`looplab plot`); `paper`: the papers' figures reproduced.
 
 pub mod latency;
+pub mod paper;
+pub mod run;
 
 use std::path::Path;
 use std::sync::Once;

@@ -1,0 +1,55 @@
+//! `looplab plot`: a real five-process run with `--plot` writes its figures as PNG into the run
+//! folder; `looplab plot` on something that is not a run folder says so and exits with 2.
+
+mod common;
+
+use std::path::Path;
+
+use common::{fresh_dir, looplab, run};
+
+/// A PNG's width and height from its header (the IHDR chunk follows the signature).
+fn png_size(path: &Path) -> (u32, u32) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{} is not a PNG", path.display());
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let number = |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap());
+    (number(16), number(20))
+}
+
+#[test]
+fn a_real_time_run_with_a_kill_plots_its_figures() {
+    let r = run("plot", &["pendulum", "--duration", "1", "--fault", "kill estimator at 0.5s", "--plot"]);
+    let stdout = r.stdout();
+    // Estimate: four components on a 2×2 grid; commands: one; sensors: two, stacked; tick period: one.
+    for (name, size) in [
+        ("estimate.png", (920, 624)),
+        ("commands.png", (1000, 524)),
+        ("sensors.png", (1000, 724)),
+        ("tick-period.png", (1000, 524)),
+    ] {
+        let path = r.dir.join(name);
+        assert!(stdout.contains(&format!("wrote {}", path.display())), "{name} not reported:\n{stdout}");
+        assert_eq!(png_size(&path), size, "{name}");
+    }
+}
+
+#[test]
+fn a_folder_that_is_not_a_run_is_bad_input() {
+    let dir = fresh_dir("plot-not-a-run");
+    std::fs::create_dir_all(&dir).unwrap();
+    let output = looplab().arg("plot").arg(&dir).output().unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&output.stderr),
+        format!("error: {}: not a run folder (it has no launch.toml)\n", dir.display())
+    );
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "nothing is left behind");
+    std::fs::remove_dir(&dir).unwrap();
+
+    let output = looplab().args(["plot", "--paper", "nosuch"]).output().unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&output.stderr),
+        "error: --paper nosuch: no paper figure for it; allowed: pendulum, quadcopter, tiltrotor\n"
+    );
+}
