@@ -3,18 +3,7 @@
 
 mod common;
 
-use std::path::Path;
-
-use common::{fresh_dir, looplab, run};
-
-/// A PNG's width and height from its header (the IHDR chunk follows the signature).
-fn png_size(path: &Path) -> (u32, u32) {
-    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{} is not a PNG", path.display());
-    assert_eq!(&bytes[12..16], b"IHDR");
-    let number = |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap());
-    (number(16), number(20))
-}
+use common::{fresh_dir, looplab, png_size, run};
 
 #[test]
 fn a_real_time_run_with_a_kill_plots_its_figures() {

@@ -159,13 +159,13 @@ impl RunData {
 
     /// The estimate component of this name, as a column.
     pub fn estimate(&self, name: &str) -> Option<&[f64]> {
-        let i = self.layout.estimate.iter().position(|n| n == name)?;
+        let i = self.layout.estimate.iter().position(|c| c.name == name)?;
         Some(&self.trajectory[self.columns.estimate.start + i])
     }
 
     /// The true state component of this name, as a column.
     pub fn state(&self, name: &str) -> Option<&[f64]> {
-        let i = self.layout.state.iter().position(|n| n == name)?;
+        let i = self.layout.state.iter().position(|c| c.name == name)?;
         Some(&self.trajectory[self.columns.state.start + i])
     }
 
@@ -541,9 +541,9 @@ pub fn tick_label(v: &f64) -> String {
 
 /// The true state component an estimate component estimates: the same name, or the name with
 /// a `_hat` (estimate) or `_prior` (a-priori estimate) suffix.
-pub fn true_counterpart<'a>(estimate: &str, state: &'a [String]) -> Option<(usize, &'a str)> {
+pub fn true_counterpart(estimate: &str, state: &[Component]) -> Option<(usize, &'static str)> {
     let base = estimate.strip_suffix("_hat").or_else(|| estimate.strip_suffix("_prior")).unwrap_or(estimate);
-    state.iter().position(|s| s == base).map(|i| (i, state[i].as_str()))
+    state.iter().position(|s| s.name == base).map(|i| (i, state[i].name))
 }
 
 /// The value the launch file gives for an estimate-only component, if it gives one: a sensor's
@@ -817,7 +817,7 @@ mod tests {
 
     #[test]
     fn estimates_find_their_truth_by_name() {
-        let state: Vec<String> = ["x", "theta", "mass"].iter().map(|s| s.to_string()).collect();
+        let state = [Component::new("x", "m"), Component::new("theta", "rad"), Component::new("mass", "kg")];
         assert_eq!(true_counterpart("theta", &state), Some((1, "theta")));
         assert_eq!(true_counterpart("x_hat", &state), Some((0, "x")));
         assert_eq!(true_counterpart("x_prior", &state), Some((0, "x")));
