@@ -11,7 +11,7 @@ use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::runtime::ipc;
 use crate::scenarios;
-use crate::tools::{bench, export, sweep};
+use crate::tools::{bench, compare, export, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -50,6 +50,23 @@ enum Command {
     Report {
         /// The run folder (for the newest run: runs/latest)
         run_dir: PathBuf,
+    },
+    /// Compare finished runs side by side: latency per hop and end to end, deadline misses, loops,
+    /// wait strategy, mode and the scenario's metrics, with ratios against the first run; draws
+    /// their latency distributions on one chart (PNG)
+    #[command(
+        after_help = "Example: two wait strategies\n  looplab run --set wait.strategy=block --out runs/block\n  \
+looplab run --set wait.strategy=adaptive --out runs/adaptive\n  looplab compare runs/block runs/adaptive"
+    )]
+    Compare {
+        /// Two or more run folders (runs/<time>-<scenario>, runs/latest, a run's --out); ratios are
+        /// against the first
+        #[arg(value_name = "RUN_DIR")]
+        runs: Vec<PathBuf>,
+        /// Where to write the chart, a .png (default: compare-<A>-vs-<B>.png beside the first run
+        /// folder)
+        #[arg(long, value_name = "PATH")]
+        out: Option<PathBuf>,
     },
     /// Print a shell completion script: `looplab completions bash > /etc/bash_completion.d/looplab`
     Completions {
@@ -227,6 +244,15 @@ pub fn main() -> ExitCode {
             }
             Err(export::ExportError::BadInput(why)) => bad_input(why),
             Err(export::ExportError::Failed(e)) => report_failure(Err(e)),
+        },
+        Some(Command::Compare { runs, out }) => match compare::compare(&runs, out.as_deref()) {
+            Ok((table, chart)) => {
+                print!("{table}");
+                println!("\nchart: {}", chart.display());
+                ExitCode::SUCCESS
+            }
+            Err(compare::CompareError::BadInput(why)) => bad_input(why),
+            Err(compare::CompareError::Failed(e)) => report_failure(Err(e)),
         },
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
