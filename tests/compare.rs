@@ -66,8 +66,11 @@ fn two_wait_strategies_side_by_side_with_ratios_of_the_printed_numbers() {
     let lines: Vec<&str> = stdout.lines().collect();
     let name = |r: &Run| r.dir.file_name().unwrap().to_string_lossy().into_owned();
     assert_eq!(lines[0], "LoopLab compare · 2 runs · ratios against A (run ÷ A, of the numbers printed)");
-    assert_eq!(lines[1], format!("  A  {}  pendulum · realtime · wait block · 1000 Hz · 0.5 s", name(&block)));
-    assert_eq!(lines[2], format!("  B  {}  pendulum · realtime · wait adaptive · 1000 Hz · 0.5 s", name(&adaptive)));
+    // The folder names padded to one width.
+    let width = name(&block).len().max(name(&adaptive).len());
+    let (a, b) = (name(&block), name(&adaptive));
+    assert_eq!(lines[1], format!("  A  {a:<width$}  pendulum · realtime · wait block · 1000 Hz · 0.5 s"));
+    assert_eq!(lines[2], format!("  B  {b:<width$}  pendulum · realtime · wait adaptive · 1000 Hz · 0.5 s"));
     assert_eq!(lines[3], "");
     assert_eq!(lines[4].split_whitespace().collect::<Vec<_>>(), ["A", "B"]);
     assert_eq!(lines.last().unwrap(), &format!("chart: {}", chart.display()));

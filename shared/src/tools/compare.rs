@@ -317,7 +317,7 @@ mod tests {
         assert_eq!(ratio_label(12.34), "×12.3");
         assert_eq!(ratio_label(150.2), "×150");
         assert_eq!(ratio_label(0.042), "×0.042");
-        assert_eq!(ratio_label(0.00425), "×0.0042");
+        assert_eq!(ratio_label(0.00421), "×0.0042");
         assert_eq!(ratio_label(0.0), "×0");
         assert_eq!(ratio_label(-0.5), "×-0.50");
     }
