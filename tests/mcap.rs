@@ -283,7 +283,7 @@ fn export_of_what_is_not_a_run_folder_is_one_clear_error() {
         assert!(stderr.contains(expected), "{stderr}");
     };
     let dir = fresh_dir("mcap-not-a-run");
-    rejects(&dir, "no such folder");
+    rejects(&dir, "no such run folder");
     std::fs::create_dir_all(&dir).unwrap();
     rejects(&dir, "not a run folder (it has no launch.toml)");
     assert!(!dir.join("run.mcap").exists());

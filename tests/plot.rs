@@ -15,6 +15,7 @@ fn a_real_time_run_with_a_kill_plots_its_figures() {
         ("commands.png", (1000, 524)),
         ("sensors.png", (1000, 724)),
         ("tick-period.png", (1000, 524)),
+        ("latency-cdf.png", (900, 654)),
     ] {
         let path = r.dir.join(name);
         assert!(stdout.contains(&format!("wrote {}", path.display())), "{name} not reported:\n{stdout}");

@@ -12,8 +12,7 @@ use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::runtime::ipc;
 use crate::scenarios;
-use crate::tools::plot::run::PlotError;
-use crate::tools::{bench, export, plot, sweep};
+use crate::tools::{ToolError, bench, compare, export, plot, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -52,6 +51,23 @@ enum Command {
     Report {
         /// The run folder (for the newest run: runs/latest)
         run_dir: PathBuf,
+    },
+    /// Compare finished runs side by side: latency per hop and end to end, deadline misses, loops,
+    /// wait strategy, mode and the scenario's metrics, with ratios against the first run; draws
+    /// their latency distributions on one chart (PNG)
+    #[command(
+        after_help = "Example: two wait strategies\n  looplab run --set wait.strategy=block --out runs/block\n  \
+looplab run --set wait.strategy=adaptive --out runs/adaptive\n  looplab compare runs/block runs/adaptive"
+    )]
+    Compare {
+        /// Two or more run folders (runs/<time>-<scenario>, runs/latest, a run's --out); ratios are
+        /// against the first
+        #[arg(value_name = "RUN_DIR")]
+        runs: Vec<PathBuf>,
+        /// Where to write the chart, a .png (default: compare-<A>-vs-<B>.png beside the first run
+        /// folder)
+        #[arg(long, value_name = "PATH")]
+        out: Option<PathBuf>,
     },
     /// Print a shell completion script: `looplab completions bash > /etc/bash_completion.d/looplab`
     Completions {
@@ -257,14 +273,23 @@ pub fn main() -> ExitCode {
                 println!("wrote {}", path.display());
                 ExitCode::SUCCESS
             }
-            Err(export::ExportError::BadInput(why)) => bad_input(why),
-            Err(export::ExportError::Failed(e)) => report_failure(Err(e)),
+            Err(ToolError::BadInput(why)) => bad_input(why),
+            Err(ToolError::Failed(e)) => report_failure(Err(e)),
         },
         Some(Command::Plot { run_dir: Some(run_dir), .. }) => figures(plot::run::plot_run(&run_dir)),
         Some(Command::Plot { paper: Some(scenario), out, .. }) => {
             figures(plot::paper::paper_figures(&scenario, out.as_deref()))
         }
         Some(Command::Plot { .. }) => bad_input("plot: give a run folder or --paper SCENARIO"),
+        Some(Command::Compare { runs, out }) => match compare::compare(&runs, out.as_deref()) {
+            Ok((table, chart)) => {
+                print!("{table}");
+                println!("\nchart: {}", chart.display());
+                ExitCode::SUCCESS
+            }
+            Err(ToolError::BadInput(why)) => bad_input(why),
+            Err(ToolError::Failed(e)) => report_failure(Err(e)),
+        },
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default()),
@@ -272,14 +297,14 @@ pub fn main() -> ExitCode {
 }
 
 /// Prints the figures written, or why none were.
-fn figures(written: Result<Vec<PathBuf>, PlotError>) -> ExitCode {
+fn figures(written: Result<Vec<PathBuf>, ToolError>) -> ExitCode {
     match written {
         Ok(paths) => {
             paths.iter().for_each(|path| println!("wrote {}", path.display()));
             ExitCode::SUCCESS
         }
-        Err(PlotError::BadInput(why)) => bad_input(why),
-        Err(PlotError::Failed(e)) => report_failure(Err(e)),
+        Err(ToolError::BadInput(why)) => bad_input(why),
+        Err(ToolError::Failed(e)) => report_failure(Err(e)),
     }
 }
 

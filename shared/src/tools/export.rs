@@ -14,35 +14,16 @@ use crate::monitor::layout::Layout;
 use crate::monitor::sinks::mcap::{Detail, FILE, McapRecording};
 use crate::monitor::sinks::{JoinedLoop, RunSink, loops};
 use crate::scenarios;
-
-/// Why an export did not happen.
-#[derive(Debug)]
-pub enum ExportError {
-    /// The folder is not there or not a run folder (exit code 2).
-    BadInput(String),
-    /// Reading or writing failed.
-    Failed(anyhow::Error),
-}
-
-impl From<anyhow::Error> for ExportError {
-    fn from(e: anyhow::Error) -> Self {
-        ExportError::Failed(e)
-    }
-}
+use crate::tools::{ToolError, check_run_folder};
 
 /// The files of a run folder the export reads.
 const INPUTS: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];
 
 /// Writes `run_dir/run.mcap` from the run folder's files; returns its path.
-pub fn write_mcap(run_dir: &Path) -> Result<PathBuf, ExportError> {
+pub fn write_mcap(run_dir: &Path) -> Result<PathBuf, ToolError> {
     let shown = run_dir.display();
-    let bad = |why: String| ExportError::BadInput(format!("{shown}: {why}"));
-    if !run_dir.is_dir() {
-        return Err(bad(if run_dir.exists() { "not a folder".into() } else { "no such folder".into() }));
-    }
-    if let Some(missing) = INPUTS.iter().find(|name| !run_dir.join(name).is_file()) {
-        return Err(bad(format!("not a run folder (it has no {missing})")));
-    }
+    let bad = |why: String| ToolError::BadInput(format!("{shown}: {why}"));
+    check_run_folder(run_dir, &INPUTS)?;
     let (config, scenario) = scenarios::load_resolved(&run_dir.join("launch.toml")).map_err(|e| bad(e.to_string()))?;
     let layout = Layout::new(&config, scenario.as_ref());
     let read = |name: &str| std::fs::read_to_string(run_dir.join(name)).with_context(|| format!("read {shown}/{name}"));

@@ -1,30 +1,132 @@
-//! Latency charts: distributions on log-log axes (bench, plot, compare) and latency against
-//! payload size (bench).
+//! Latency charts: distributions on log-log axes (bench, a run's figure, compare) and latency
+//! against payload size (bench). A run's latencies are read from its loops.csv.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Context as _, Result, anyhow};
+use plotters::coord::Shift;
+use plotters::coord::combinators::{BindKeyPoints, LogCoord, WithKeyPoints};
 use plotters::prelude::*;
 
+use crate::contract::msg::LoopTrace;
+use crate::contract::report::HOPS;
 use crate::tools::plot::{FONT, colour, legend_mark, plot_error, png};
 
-/// A latency tick label in µs: whole numbers without a decimal point.
-fn micros_label(us: &f64) -> String {
-    if *us >= 1.0 { format!("{us:.0}") } else { format!("{us:.1}") }
+/// A series: its name and its samples in ns, sorted.
+pub type Series = (String, Vec<u64>);
+
+/// The name of the end-to-end series.
+pub const END_TO_END: &str = "end to end";
+
+/// The file a run's latency figure is written to, in the run folder.
+pub const RUN_FIGURE: &str = "latency-cdf.png";
+
+/// In loops.csv, k and t come first, then the loop trace's stamps in order, then end to end.
+/// Read by position: the headers' names may change, the order is the trace's.
+const FIRST_STAMP_COLUMN: usize = 2;
+const END_TO_END_COLUMN: usize = FIRST_STAMP_COLUMN + LoopTrace::STAMP_NAMES.len();
+
+/// The hops from one process to the next (plant→sensors, ...): [`HOPS`] less the stages'
+/// compute time, as (name, the sender's publish stamp, the receiver's receive stamp).
+fn transport_hops() -> impl Iterator<Item = (String, usize, usize)> {
+    HOPS.iter()
+        .filter(|(name, _, _)| name.contains("_to_"))
+        .map(|(name, from, to)| (name.replace("_to_", "→"), *from, *to))
 }
 
-/// A share of the samples as a percentage: "10%", "0.1%".
-fn share_label(share: &f64) -> String {
-    let percent = share * 100.0;
-    if percent >= 1.0 {
-        format!("{percent:.0}%")
-    } else {
-        format!("{}%", format!("{percent:.4}").trim_end_matches('0'))
+/// A run's latencies from its loops.csv, sorted, in ns: one series per hop from one process to
+/// the next (receive − the previous process's publish), then end to end. Every loop with a loop
+/// record counts, as in summary.json.
+///
+/// loops.csv rather than latency.hlog: it has every loop's exact value, so the chart reaches
+/// down to the single slowest loop and its percentiles are those of the samples drawn; the
+/// histogram log keeps three significant digits in buckets and splits them by second.
+pub fn read_run_latencies(run_dir: &Path) -> Result<Vec<Series>> {
+    let path = run_dir.join("loops.csv");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("{}: cannot read it", path.display()))?;
+    latencies_from_loops_csv(&text).with_context(|| format!("{}", path.display()))
+}
+
+/// [`read_run_latencies`] on the text of a loops.csv.
+pub fn latencies_from_loops_csv(text: &str) -> Result<Vec<Series>> {
+    let hops: Vec<(String, usize, usize)> = transport_hops().collect();
+    let mut samples: Vec<Vec<u64>> = vec![Vec::new(); hops.len() + 1];
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let cells: Vec<&str> = line.split(',').collect();
+        let number = |column: usize| -> Result<Option<u64>> {
+            match cells.get(column).copied() {
+                None | Some("") => Ok(None),
+                Some(cell) => cell.parse().map(Some).map_err(|e| anyhow!("line {}: {cell:?}: {e}", i + 1)),
+            }
+        };
+        // A loop without a record has empty cells.
+        let Some(end_to_end) = number(END_TO_END_COLUMN)? else { continue };
+        for (series, (_, from, to)) in samples.iter_mut().zip(&hops) {
+            let (Some(sent), Some(received)) = (number(FIRST_STAMP_COLUMN + from)?, number(FIRST_STAMP_COLUMN + to)?)
+            else {
+                return Err(anyhow!("line {}: a loop with an end-to-end latency but not every stamp", i + 1));
+            };
+            // As the monitor counts a hop (monitor/join.rs).
+            series.push(received.saturating_sub(sent));
+        }
+        samples[hops.len()].push(end_to_end);
+    }
+    let names = hops.into_iter().map(|(name, _, _)| name).chain([END_TO_END.to_owned()]);
+    Ok(names
+        .zip(samples)
+        .map(|(name, mut s)| {
+            s.sort_unstable();
+            (name, s)
+        })
+        .collect())
+}
+
+/// The nearest-rank percentile of sorted samples: the smallest sample that at least
+/// `per_mille` / 1000 of the samples are at or below. None when there are none.
+pub fn nearest_rank(sorted: &[u64], per_mille: u64) -> Option<u64> {
+    let rank = (sorted.len() as u64 * per_mille).div_ceil(1000).max(1);
+    sorted.get(rank as usize - 1).copied()
+}
+
+/// Writes the run's latency figure, `latency-cdf.png` in the run folder: per hop and end to end,
+/// from loops.csv. Returns its path.
+pub fn run_latency_figure(run_dir: &Path) -> Result<PathBuf> {
+    let series = read_run_latencies(run_dir)?;
+    let path = run_dir.join(RUN_FIGURE);
+    let name = run_dir.canonicalize().ok().and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()));
+    let title = format!("loop latency per hop and end to end · {}", name.as_deref().unwrap_or("run"));
+    cdf(&path, &title, &series)?;
+    Ok(path)
+}
+
+/// A latency as a legend shows it, to three significant digits: "4.12 µs", "20.3 µs", "143 µs",
+/// "8.51 ms".
+pub fn duration_label(ns: u64) -> String {
+    let us = ns as f64 / 1e3;
+    let ms = us / 1e3;
+    match us {
+        _ if us < 9.995 => format!("{us:.2} µs"),
+        _ if us < 99.95 => format!("{us:.1} µs"),
+        _ if us < 999.5 => format!("{us:.0} µs"),
+        _ if ms < 9.995 => format!("{ms:.2} ms"),
+        _ if ms < 99.95 => format!("{ms:.1} ms"),
+        _ => format!("{ms:.0} ms"),
     }
 }
 
-/// A payload size tick label in decimal units, as the log axis ticks at powers of ten:
-/// "100 B", "10 kB", "1 MB".
+/// A tick label on a log axis, whose ticks are 1, 2 or 5 (or any digit) times a power of ten:
+/// as many decimals as the tick needs, "0.05", "0.5", "20", "2000".
+fn tick_label(value: &f64) -> String {
+    let decimals = if *value >= 1.0 { 0 } else { (-value.log10()).ceil() as usize };
+    format!("{value:.decimals$}")
+}
+
+/// A share of the samples as a percentage: "10%", "0.1%", "0.001%".
+fn share_label(share: &f64) -> String {
+    format!("{}%", tick_label(&(share * 100.0)))
+}
+
+/// A payload size tick label in decimal units: "100 B", "10 kB", "1 MB".
 fn bytes_label(bytes: &f64) -> String {
     match *bytes {
         b if b >= 1e6 => format!("{} MB", b / 1e6),
@@ -33,61 +135,177 @@ fn bytes_label(bytes: &f64) -> String {
     }
 }
 
-/// Latency distributions on log-log axes: for each (name, sorted samples in ns), the share of
-/// samples at or above each latency. The tail reads downwards (1 %, 0.1 %, ...) instead of being
-/// squeezed into the top of a linear CDF. A series of one value is a vertical line (a floor).
-pub fn cdf(path: &Path, title: &str, series: &[(String, Vec<u64>)]) -> Result<()> {
-    let root = png(path, (900, 560))?;
-    let us = |ns: u64| (ns as f64 / 1e3).max(0.1);
-    let lo = series.iter().filter_map(|(_, s)| s.first()).map(|v| us(*v)).fold(f64::MAX, f64::min).max(0.1);
-    let hi = series.iter().filter_map(|(_, s)| s.last()).map(|v| us(*v)).fold(1.0, f64::max);
+/// Ticks for a log axis over `lo..hi`: labelled ("bold") at the fewest of powers of ten; 1, 2
+/// and 5 times them; or every digit times them that gives at least four labels, so that labels
+/// never crowd at the top of a decade (plotters labels 10, 20, ... 90, 100 and these overlap),
+/// and a range within one decade still gets labels. Unlabelled grid lines at every digit.
+/// Returns the labelled ticks, the grid lines and where the axis may start: the labelled tick at
+/// or below `lo` when that is near (1, 2, 5: within a factor 2.5), else `lo`.
+fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>, f64) {
+    let decades = lo.log10().floor() as i32 - 1..=hi.log10().ceil() as i32;
+    let ticks = |mantissas: &[u32]| -> Vec<f64> {
+        decades.clone().flat_map(|e| mantissas.iter().map(move |m| f64::from(*m) * 10f64.powi(e))).collect()
+    };
+    let within = |ticks: &[f64]| -> Vec<f64> { ticks.iter().copied().filter(|v| (lo..=hi).contains(v)).collect() };
+    let every_digit = ticks(&[1, 2, 3, 4, 5, 6, 7, 8, 9]);
+    let bold =
+        [ticks(&[1]), ticks(&[1, 2, 5])].into_iter().find(|t| within(t).len() >= 4).unwrap_or(every_digit.clone());
+    let below = bold.iter().copied().filter(|v| *v <= lo).fold(lo, |_, v| v);
+    (within(&bold), within(&every_digit), if lo / below <= 2.5 { below } else { lo })
+}
+
+/// A log axis over `lo..hi` with [`log_ticks`]; with `from_tick`, it starts at the labelled tick
+/// at or below `lo`, so that its first label is at its start.
+fn log_axis(lo: f64, hi: f64, from_tick: bool) -> WithKeyPoints<LogCoord<f64>> {
+    let lo = if from_tick { log_ticks(lo, hi).2 } else { lo };
+    let (bold, light, _) = log_ticks(lo, hi);
+    (lo..hi).log_scale().with_key_points(bold).with_light_points(light)
+}
+
+/// Text sizes of a chart, px.
+#[derive(Clone, Copy)]
+struct Sizes {
+    caption: u32,
+    text: u32,
+}
+
+const LARGE: Sizes = Sizes { caption: 20, text: 15 };
+const SMALL: Sizes = Sizes { caption: 17, text: 13 };
+
+/// The legend's height for `n` series: one line each.
+fn legend_height(n: usize, sizes: Sizes) -> u32 {
+    n as u32 * (sizes.text + 9) + 14
+}
+
+/// One chart of a figure of several: a title and its series.
+pub struct Panel {
+    pub title: String,
+    pub series: Vec<Series>,
+}
+
+/// Latency distributions on log-log axes: for each series, the share of samples at or above each
+/// latency, down to the single slowest (1/N). The tail reads downwards (1 %, 0.1 %, ...) instead
+/// of being squeezed into the top of a linear CDF. A series of one value is a vertical line (a
+/// floor). Below the chart, a legend with each series' p50, p99 and max.
+pub fn cdf(path: &Path, title: &str, series: &[Series]) -> Result<()> {
+    let root = png(path, (900, 520 + legend_height(series.len(), LARGE)))?;
+    draw_cdf(&root, title, series, LARGE)?;
+    root.present().map_err(plot_error)
+}
+
+/// Several [`cdf`] charts in one figure: the first across the whole width, the others below it,
+/// two to a row.
+pub fn cdf_panels(path: &Path, panels: &[Panel]) -> Result<()> {
+    let Some((first, others)) = panels.split_first() else { return Err(anyhow!("a figure of no charts")) };
+    let (width, half) = (1200, 600);
+    let first_height = 540 + legend_height(first.series.len(), LARGE);
+    let rows: Vec<(&[Panel], u32)> = others
+        .chunks(2)
+        .map(|row| (row, 360 + legend_height(row.iter().map(|p| p.series.len()).max().unwrap_or(0), SMALL)))
+        .collect();
+    let root = png(path, (width, first_height + rows.iter().map(|(_, h)| h).sum::<u32>()))?;
+    let (top, mut rest) = root.split_vertically(first_height);
+    draw_cdf(&top, &first.title, &first.series, LARGE)?;
+    for (row, height) in rows {
+        let (this_row, below) = rest.split_vertically(height);
+        let (left, right) = this_row.split_horizontally(half);
+        for (panel, area) in row.iter().zip([left, right]) {
+            draw_cdf(&area, &panel.title, &panel.series, SMALL)?;
+        }
+        rest = below;
+    }
+    root.present().map_err(plot_error)
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+fn draw_cdf(area: &Area, title: &str, series: &[Series], sizes: Sizes) -> Result<()> {
+    let (_, height) = area.dim_in_pixel();
+    let (plot, legend) = area.split_vertically(height - legend_height(series.len(), sizes));
+    let us = |ns: u64| (ns as f64 / 1e3).max(0.01);
+    let lo = series.iter().filter_map(|(_, s)| s.first()).map(|v| us(*v)).fold(f64::MAX, f64::min);
+    let hi = series.iter().filter_map(|(_, s)| s.last()).map(|v| us(*v)).fold(0.0, f64::max);
+    // No samples at all: an empty chart over 1 to 10 µs.
+    let (lo, hi) = if lo <= hi { (lo, hi) } else { (1.0, 10.0) };
     let most = series.iter().map(|(_, s)| s.len()).max().unwrap_or(1).max(10) as f64;
     let floor_share = 0.8 / most;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, (FONT, 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d((lo * 0.8..hi * 1.2).log_scale(), (floor_share..1.0).log_scale())
+    let mut chart = ChartBuilder::on(&plot)
+        .caption(title, (FONT, sizes.caption))
+        .margin(12)
+        .x_label_area_size(sizes.text * 3)
+        .y_label_area_size(sizes.text * 4 + 5)
+        .build_cartesian_2d(log_axis(lo * 0.8, hi * 1.25, true), log_axis(floor_share, 1.0, false))
         .map_err(plot_error)?;
     chart
         .configure_mesh()
         .x_desc("latency, µs (log)")
-        .y_desc("samples at or above (log)")
-        .x_label_formatter(&micros_label)
+        .y_desc("share at or above (log)")
+        .label_style((FONT, sizes.text - 1))
+        .axis_desc_style((FONT, sizes.text))
+        .x_label_formatter(&tick_label)
         .y_label_formatter(&share_label)
         .draw()
         .map_err(plot_error)?;
-    for (i, (name, samples)) in series.iter().enumerate() {
-        if samples.is_empty() {
-            continue;
-        }
-        let colour = colour(i);
+    for (i, (_, samples)) in series.iter().enumerate() {
         let n = samples.len();
-        let points: Vec<(f64, f64)> = if n == 1 {
-            vec![(us(samples[0]), floor_share), (us(samples[0]), 1.0)]
-        } else {
-            // At most 2000 points per curve, and every point of the last 1 % (the tail).
-            let step = n.div_ceil(2000).max(1);
-            let tail = n - n.div_ceil(100);
-            (0..tail).step_by(step).chain(tail..n).map(|j| (us(samples[j]), (n - j) as f64 / n as f64)).collect()
+        let points: Vec<(f64, f64)> = match n {
+            0 => continue,
+            1 => vec![(us(samples[0]), floor_share), (us(samples[0]), 1.0)],
+            // At most 2000 points per curve, and every point of the last 1 % (the tail), drawn
+            // as steps: the share holds until the next sample, where it drops.
+            _ => {
+                let step = n.div_ceil(2000).max(1);
+                let tail = n - n.div_ceil(100);
+                let share = |j: usize| (n - j) as f64 / n as f64;
+                let kept: Vec<usize> = (0..tail).step_by(step).chain(tail..n).collect();
+                let steps =
+                    kept.windows(2).flat_map(|w| [(us(samples[w[1]]), share(w[0])), (us(samples[w[1]]), share(w[1]))]);
+                std::iter::once((us(samples[0]), 1.0)).chain(steps).collect()
+            }
         };
-        chart
-            .draw_series(LineSeries::new(points, colour.stroke_width(2)))
-            .map_err(plot_error)?
-            .label(name.clone())
-            .legend(move |(x, y)| legend_mark(x, y, colour));
+        chart.draw_series(LineSeries::new(points, colour(i).stroke_width(2))).map_err(plot_error)?;
     }
-    chart
-        .configure_series_labels()
-        // Lower right: the curves fall from the top left, so this corner is the emptiest; see
-        // through, for a tail that reaches it.
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.5))
-        .border_style(BLACK)
-        .draw()
-        .map_err(plot_error)?;
-    root.present().map_err(plot_error)
+    let left = plot.get_base_pixel().0 + (sizes.text * 4 + 5) as i32 + 12 - area.get_base_pixel().0;
+    draw_legend(&legend, left, series, sizes)
+}
+
+/// What the legend says of a series after its name.
+fn legend_stats(samples: &[u64]) -> Vec<String> {
+    match samples {
+        [] => vec!["no samples".into()],
+        [one] => vec![duration_label(*one)],
+        _ => [("p50", 500), ("p99", 990), ("max", 1000)]
+            .iter()
+            .filter_map(|(name, per_mille)| {
+                nearest_rank(samples, *per_mille).map(|v| format!("{name} {}", duration_label(v)))
+            })
+            .collect(),
+    }
+}
+
+/// The legend below a chart, in columns: a line in the series' colour, its name, p50, p99, max.
+/// Below the chart rather than on it, where it would hide a tail.
+fn draw_legend(area: &Area, left: i32, series: &[Series], sizes: Sizes) -> Result<()> {
+    let style = (FONT, sizes.text).into_font().color(&BLACK);
+    let rows: Vec<(String, Vec<String>)> = series.iter().map(|(name, s)| (name.clone(), legend_stats(s))).collect();
+    let width = |text: &str| area.estimate_text_size(text, &style).map(|(w, _)| w as i32).map_err(plot_error);
+    let mut columns = vec![left + 30];
+    let name_width =
+        rows.iter().map(|(name, _)| width(name)).collect::<Result<Vec<_>>>()?.into_iter().max().unwrap_or(0);
+    columns.push(columns[0] + name_width + 24);
+    for c in 0..rows.iter().map(|(_, stats)| stats.len()).max().unwrap_or(0) {
+        let cells = rows.iter().filter_map(|(_, stats)| stats.get(c).map(|s| width(s)));
+        let column_width = cells.collect::<Result<Vec<_>>>()?.into_iter().max().unwrap_or(0);
+        columns.push(columns.last().copied().unwrap_or(0) + column_width + 18);
+    }
+    for (i, (name, stats)) in rows.iter().enumerate() {
+        let y = 8 + i as i32 * (sizes.text as i32 + 9);
+        area.draw(&legend_mark(left, y + sizes.text as i32 / 2, colour(i))).map_err(plot_error)?;
+        for (text, x) in std::iter::once(name).chain(stats).zip(&columns) {
+            area.draw_text(text, &style, (*x, y)).map_err(plot_error)?;
+        }
+    }
+    Ok(())
 }
 
 /// Median one-way latency against payload size, log-log: one curve per transport.
@@ -102,14 +320,16 @@ pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(55)
-        .build_cartesian_2d((x_lo * 0.8..x_hi * 1.25).log_scale(), (y_lo.max(0.1) * 0.8..y_hi * 1.25).log_scale())
+        .build_cartesian_2d(log_axis(x_lo * 0.8, x_hi * 1.25, false), log_axis(y_lo.max(0.1) * 0.8, y_hi * 1.25, true))
         .map_err(plot_error)?;
     chart
         .configure_mesh()
         .x_desc("payload (log)")
         .y_desc("latency, µs (log)")
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 15))
         .x_label_formatter(&bytes_label)
-        .y_label_formatter(&micros_label)
+        .y_label_formatter(&tick_label)
         .draw()
         .map_err(plot_error)?;
     for (i, (name, points)) in series.iter().enumerate() {
@@ -125,6 +345,7 @@ pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperLeft)
+        .label_font((FONT, 15))
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()
@@ -138,8 +359,10 @@ mod tests {
 
     #[test]
     fn tick_labels_read_as_numbers_with_units() {
-        assert_eq!(micros_label(&1000.0), "1000");
-        assert_eq!(micros_label(&0.5), "0.5");
+        assert_eq!(tick_label(&1000.0), "1000");
+        assert_eq!(tick_label(&0.5), "0.5");
+        assert_eq!(tick_label(&0.05), "0.05");
+        assert_eq!(tick_label(&(3.0 * 0.1)), "0.3");
         assert_eq!(bytes_label(&64.0), "64 B");
         assert_eq!(bytes_label(&10000.0), "10 kB");
         assert_eq!(bytes_label(&1e6), "1 MB");
@@ -147,5 +370,69 @@ mod tests {
         assert_eq!(share_label(&0.01), "1%");
         assert_eq!(share_label(&0.001), "0.1%");
         assert_eq!(share_label(&0.0001), "0.01%");
+        assert_eq!(share_label(&1e-7), "0.00001%");
+    }
+
+    #[test]
+    fn log_ticks_label_the_fewest_that_give_four() {
+        // Four decades: powers of ten only.
+        assert_eq!(log_ticks(0.8, 12000.0).0, [1.0, 10.0, 100.0, 1000.0, 10000.0]);
+        // Two decades: 1, 2 and 5 times them, never 90 beside 100.
+        assert_eq!(log_ticks(8.0, 500.0).0, [10.0, 20.0, 50.0, 100.0, 200.0, 500.0]);
+        // Within one decade, far below 10 µs: every digit.
+        assert_eq!(
+            log_ticks(0.25, 0.9).0.iter().map(tick_label).collect::<Vec<_>>(),
+            ["0.3", "0.4", "0.5", "0.6", "0.7", "0.8", "0.9"]
+        );
+        assert_eq!(log_ticks(8.0, 500.0).1.len(), 2 + 9 + 5);
+        // The axis then starts at the labelled tick below.
+        assert_eq!(log_ticks(22.4, 1250.0).2, 20.0);
+        assert_eq!(log_ticks(0.8, 12000.0).2, 0.8);
+    }
+
+    #[test]
+    fn durations_keep_three_significant_digits() {
+        assert_eq!(duration_label(431), "0.43 µs");
+        assert_eq!(duration_label(4_126), "4.13 µs");
+        assert_eq!(duration_label(9_996), "10.0 µs");
+        assert_eq!(duration_label(20_303), "20.3 µs");
+        assert_eq!(duration_label(143_359), "143 µs");
+        assert_eq!(duration_label(999_600), "1.00 ms");
+        assert_eq!(duration_label(8_513_516), "8.51 ms");
+        assert_eq!(duration_label(12_345_678), "12.3 ms");
+        assert_eq!(duration_label(1_234_567_890), "1235 ms");
+    }
+
+    #[test]
+    fn nearest_rank_percentiles_are_samples() {
+        let samples: Vec<u64> = (1..=2000).collect();
+        assert_eq!(nearest_rank(&samples, 500), Some(1000));
+        assert_eq!(nearest_rank(&samples, 990), Some(1980));
+        assert_eq!(nearest_rank(&samples, 999), Some(1998));
+        assert_eq!(nearest_rank(&samples, 1000), Some(2000));
+        assert_eq!(nearest_rank(&[7, 9, 30], 500), Some(9));
+        assert_eq!(nearest_rank(&[7, 9, 30], 999), Some(30));
+        assert_eq!(nearest_rank(&[42], 0), Some(42));
+        assert_eq!(nearest_rank(&[], 500), None);
+    }
+
+    #[test]
+    fn hops_come_from_the_stamps_of_loops_csv() {
+        // k, t, 8 stamps, end to end, deadline miss, rejected, tick timing; loop 1 has no record.
+        let text = "k,t_s,a,b,c,d,e,f,g,h,e2e,miss,rej,ts,tw,tp\n\
+                    0,0,1000,1500,1600,2600,2700,4700,4800,9000,8000,0,0,900,950,0\n\
+                    1,0.001,,,,,,,,,,,,1900,1950,1000\n\
+                    2,0.002,3000,3100,3300,3400,3500,3600,3700,3800,800,0,0,2900,2950,1000\n";
+        let series = latencies_from_loops_csv(text).unwrap();
+        let expected: Vec<Series> = vec![
+            ("plant→sensors".into(), vec![100, 500]),
+            ("sensors→estimator".into(), vec![100, 1000]),
+            ("estimator→controller".into(), vec![100, 2000]),
+            ("controller→plant".into(), vec![100, 4200]),
+            ("end to end".into(), vec![800, 8000]),
+        ];
+        assert_eq!(series, expected);
+        assert_eq!(legend_stats(&series[4].1), ["p50 0.80 µs", "p99 8.00 µs", "max 8.00 µs"]);
+        assert!(latencies_from_loops_csv("k\n0,0,1,2,3,4,5,6,7,8,x\n").unwrap_err().to_string().starts_with("line 2:"));
     }
 }

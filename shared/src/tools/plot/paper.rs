@@ -11,8 +11,9 @@ use crate::config::launch::Override;
 use crate::launcher::create_run_dir;
 use crate::launcher::in_process::run_in_process;
 use crate::scenarios;
+use crate::tools::ToolError;
 use crate::tools::plot::colour;
-use crate::tools::plot::run::{Curve, FaultMark, Figure, Line, Panel, PlotError, RunData, TRUTH, series};
+use crate::tools::plot::run::{Curve, FaultMark, Figure, Line, Panel, RunData, TRUTH, series};
 
 /// The scenarios with a paper figure.
 pub const SCENARIOS: [&str; 3] = ["pendulum", "quadcopter", "tiltrotor"];
@@ -55,17 +56,17 @@ impl Case {
         println!("running {} ({}, {} s in lockstep) ...", self.name, scenario.title(), config.duration_s);
         run_in_process(&config, scenario.as_ref(), &dir)?;
         RunData::read(&dir).map_err(|e| match e {
-            PlotError::BadInput(why) => anyhow::anyhow!(why),
-            PlotError::Failed(e) => e,
+            ToolError::BadInput(why) => anyhow::anyhow!(why),
+            ToolError::Failed(e) => e,
         })
     }
 }
 
 /// Runs the experiments behind `scenario`'s paper figure into `out` (a new or empty folder; by
 /// default `runs/<time>-paper-<scenario>`) and draws the figures there. Returns their paths.
-pub fn paper_figures(scenario: &str, out: Option<&Path>) -> Result<Vec<PathBuf>, PlotError> {
+pub fn paper_figures(scenario: &str, out: Option<&Path>) -> Result<Vec<PathBuf>, ToolError> {
     if !SCENARIOS.contains(&scenario) {
-        return Err(PlotError::BadInput(format!(
+        return Err(ToolError::BadInput(format!(
             "--paper {scenario}: no paper figure for it; allowed: {}",
             SCENARIOS.join(", ")
         )));
@@ -73,7 +74,7 @@ pub fn paper_figures(scenario: &str, out: Option<&Path>) -> Result<Vec<PathBuf>,
     let out = match out {
         Some(dir) => {
             if dir.exists() && std::fs::read_dir(dir).map(|mut d| d.next().is_some()).unwrap_or(true) {
-                return Err(PlotError::BadInput(format!(
+                return Err(ToolError::BadInput(format!(
                     "--out {}: exists and is not an empty folder; give a new or empty folder",
                     dir.display()
                 )));

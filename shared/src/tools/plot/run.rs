@@ -21,22 +21,8 @@ use crate::launcher::report::read_summary;
 use crate::model::scenario::Scenario;
 use crate::monitor::layout::Layout;
 use crate::scenarios;
-use crate::tools::plot::{FONT, colour, plot_error, png};
-
-/// Why figures were not drawn.
-#[derive(Debug)]
-pub enum PlotError {
-    /// The folder is not there or not a run folder (exit code 2).
-    BadInput(String),
-    /// Reading or drawing failed.
-    Failed(anyhow::Error),
-}
-
-impl From<anyhow::Error> for PlotError {
-    fn from(e: anyhow::Error) -> Self {
-        PlotError::Failed(e)
-    }
-}
+use crate::tools::plot::{FONT, colour, latency, plot_error, png};
+use crate::tools::{ToolError, check_run_folder};
 
 /// The files of a run folder the figures read.
 const INPUTS: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];
@@ -125,20 +111,15 @@ pub struct RunData {
 }
 
 impl RunData {
-    pub fn read(run_dir: &Path) -> Result<Self, PlotError> {
+    pub fn read(run_dir: &Path) -> Result<Self, ToolError> {
         let shown = run_dir.display();
-        let bad = |why: String| PlotError::BadInput(format!("{shown}: {why}"));
-        if !run_dir.is_dir() {
-            return Err(bad(if run_dir.exists() { "not a folder".into() } else { "no such folder".into() }));
-        }
-        if let Some(missing) = INPUTS.iter().find(|name| !run_dir.join(name).is_file()) {
-            return Err(bad(format!("not a run folder (it has no {missing})")));
-        }
+        let bad = |why: String| ToolError::BadInput(format!("{shown}: {why}"));
+        check_run_folder(run_dir, &INPUTS)?;
         let (config, scenario) =
             scenarios::load_resolved(&run_dir.join("launch.toml")).map_err(|e| bad(e.to_string()))?;
         let layout = Layout::new(&config, scenario.as_ref());
         let columns = Columns::of(&layout);
-        let summary = read_summary(run_dir).map_err(|e| PlotError::BadInput(format!("{e:#}")))?;
+        let summary = read_summary(run_dir).map_err(|e| ToolError::BadInput(format!("{e:#}")))?;
         let read =
             |name: &str| std::fs::read_to_string(run_dir.join(name)).with_context(|| format!("read {shown}/{name}"));
         let trajectory =
@@ -750,9 +731,9 @@ fn tick_period_figure(data: &RunData) -> Option<Figure> {
     })
 }
 
-/// The figures of a run folder, written into it: estimate.png, commands.png, sensors.png and,
-/// in real time, tick-period.png. Returns the paths written.
-pub fn plot_run(run_dir: &Path) -> Result<Vec<PathBuf>, PlotError> {
+/// The figures of a run folder, written into it: estimate.png, commands.png, sensors.png, in real
+/// time tick-period.png, and latency-cdf.png. Returns the paths written.
+pub fn plot_run(run_dir: &Path) -> Result<Vec<PathBuf>, ToolError> {
     let data = RunData::read(run_dir)?;
     let mut written = Vec::new();
     let mut figures = vec![
@@ -771,7 +752,7 @@ pub fn plot_run(run_dir: &Path) -> Result<Vec<PathBuf>, PlotError> {
         figure.draw(&path)?;
         written.push(path);
     }
-    // The latency CDF per hop and end to end (latency-cdf.png) is drawn here, from loops.csv.
+    written.push(latency::run_latency_figure(run_dir)?);
     Ok(written)
 }
 
