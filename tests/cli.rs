@@ -166,7 +166,8 @@ fn bench_quick_writes_every_part() {
     assert!(report["lockstep_loops_per_s"].as_f64().unwrap() > 0.0);
     assert!(report["in_process_loops_per_s"].as_f64().unwrap() > report["lockstep_loops_per_s"].as_f64().unwrap());
     for chart in ["latency-cdf.png", "floor-cdf.png", "payload.png"] {
-        assert_eq!(png_size(&dir.join(chart)), (900, 560), "{chart}");
+        // 900 wide; the CDFs' height grows with their legend's rows (one per curve).
+        assert_eq!(png_size(&dir.join(chart)).0, 900, "{chart}");
     }
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(stdout.contains("÷ floor") && stdout.contains("zero copy"), "{stdout}");

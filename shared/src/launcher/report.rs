@@ -150,6 +150,11 @@ pub fn render(s: &Summary) -> String {
         writeln!(out, "  shared memory: NOT CLEAN, left behind: {}", s.shared_memory.leftover.join(", "))
     };
     let _ = writeln!(out, "  run folder: {}", s.run_dir);
+    let _ = writeln!(
+        out,
+        "  look at it: looplab plot {dir} (figures) · looplab compare {dir} OTHER_RUN · {dir}/run.mcap opens in Foxglove or PlotJuggler",
+        dir = s.run_dir
+    );
     out
 }
 

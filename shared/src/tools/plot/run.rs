@@ -138,6 +138,21 @@ impl RunData {
         &self.trajectory[1]
     }
 
+    /// A figure of this run over simulation time `x`, titled "<scenario>: <what>", with its faults
+    /// marked.
+    fn figure_over_time(&self, what: &str, panels: Vec<Panel>, x: Range<f64>) -> Figure {
+        let title = format!("{}: {what}", self.scenario.title());
+        Figure {
+            title,
+            panels,
+            x,
+            x_desc: "t, s",
+            faults: self.faults.clone(),
+            faults_label: FAULTS_LABEL,
+            caption: None,
+        }
+    }
+
     /// The estimate component of this name, as a column.
     pub fn estimate(&self, name: &str) -> Option<&[f64]> {
         let i = self.layout.estimate.iter().position(|c| c.name == name)?;
@@ -576,15 +591,7 @@ fn estimate_figure(data: &RunData) -> Figure {
         };
         panels.push(Panel::new(title, unit_desc(component), curves));
     }
-    Figure {
-        title: format!("{}: truth against estimate", data.scenario.title()),
-        panels,
-        x: span,
-        x_desc: "t, s",
-        faults: data.faults.clone(),
-        faults_label: FAULTS_LABEL,
-        caption: None,
-    }
+    data.figure_over_time("truth against estimate", panels, span)
 }
 
 /// Each command component over time, with the actuator's limits where the command reaches them.
@@ -611,15 +618,7 @@ fn commands_figure(data: &RunData) -> Figure {
             panel
         })
         .collect();
-    Figure {
-        title: format!("{}: commands", data.scenario.title()),
-        panels,
-        x: span,
-        x_desc: "t, s",
-        faults: data.faults.clone(),
-        faults_label: FAULTS_LABEL,
-        caption: None,
-    }
+    data.figure_over_time("commands", panels, span)
 }
 
 /// The time window of the sensors' figure: 25 samples of the slowest sensor (at least 50 ticks),
@@ -676,15 +675,7 @@ fn sensors_figure(data: &RunData) -> Figure {
     } else {
         String::new()
     };
-    Figure {
-        title: format!("{}: sensors' held values against the truth{zoom}", data.scenario.title()),
-        panels,
-        x: window,
-        x_desc: "t, s",
-        faults: data.faults.clone(),
-        faults_label: FAULTS_LABEL,
-        caption: None,
-    }
+    data.figure_over_time(&format!("sensors' held values against the truth{zoom}"), panels, window)
 }
 
 /// A duration for a title: "10 ms", "0.25 s".
@@ -720,15 +711,7 @@ fn tick_period_figure(data: &RunData) -> Option<Figure> {
         vec![Curve::new("tick period error", error, colour(0), Line::Solid(1))],
     );
     panel.marks = misses;
-    Some(Figure {
-        title: format!("{}: the plant's tick period error (real time)", data.scenario.title()),
-        panels: vec![panel],
-        x: data.span(),
-        x_desc: "t, s",
-        faults: data.faults.clone(),
-        faults_label: FAULTS_LABEL,
-        caption: None,
-    })
+    Some(data.figure_over_time("the plant's tick period error (real time)", vec![panel], data.span()))
 }
 
 /// The figures of a run folder, written into it: estimate.png, commands.png, sensors.png, in real
