@@ -41,6 +41,20 @@ fn screen_when(output: &mut File, parser: &mut vt100::Parser, done: impl Fn(&str
     }
 }
 
+/// The launcher under test: if an assertion fails before `q` ends the run, Ctrl-C's signal stops
+/// it in order, so a failed test leaves no run going.
+struct Launcher(std::process::Child);
+
+impl Drop for Launcher {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            // SAFETY: a signal to our own child, which we have not reaped.
+            unsafe { libc::kill(self.0.id() as libc::pid_t, libc::SIGINT) };
+            let _ = self.0.wait();
+        }
+    }
+}
+
 #[test]
 fn the_dashboard_shows_the_loop_live_and_q_stops_the_run_in_order() {
     let out_dir = fresh_dir("dashboard");
@@ -62,7 +76,7 @@ fn the_dashboard_shows_the_loop_live_and_q_stops_the_run_in_order() {
             Ok(())
         });
     }
-    let mut child = command.spawn().unwrap();
+    let mut launcher = Launcher(command.spawn().unwrap());
     drop(command); // closes our copies of the slave, so the master sees the end of the output
     let mut input = File::from(master);
     let mut output = input.try_clone().unwrap();
@@ -91,12 +105,12 @@ fn the_dashboard_shows_the_loop_live_and_q_stops_the_run_in_order() {
         let row = |l: &str| l.trim_start_matches('│').starts_with(process) && l.contains(" running ");
         assert!(screen.lines().any(row), "{process} is not running:\n{screen}");
     }
-    assert!(screen.contains("theta [rad]: true, estimate") && screen.contains("current [A]: true"), "{screen}");
+    assert!(screen.contains("theta [rad]: true, estimate") && screen.contains("current [A]: command"), "{screen}");
 
     input.write_all(b"q").unwrap();
     // Drain the terminal until the launcher and its children have closed it.
     screen_when(&mut output, &mut parser, |_| false);
-    let status = child.wait().unwrap();
+    let status = launcher.0.wait().unwrap();
     let after = parser.screen().contents();
     assert_eq!(status.code(), Some(0), "q ends the run with 0:\n{after}");
     // The report is printed on the restored terminal, after the dashboard.

@@ -80,9 +80,19 @@ pub struct Header {
     /// "pendulum · realtime · 1000 Hz"
     pub run: String,
     pub loops_planned: u64,
-    /// The key signals' titles ("theta [rad]") and whether each has an estimate, in the order of
-    /// the statuses' points.
-    pub signals: Vec<(String, bool)>,
+    /// The key signals, in the order of the statuses' points.
+    pub signals: Vec<SignalPlot>,
+}
+
+/// One key signal's plot.
+#[derive(Debug, Clone)]
+pub struct SignalPlot {
+    /// "theta [rad]"
+    pub title: String,
+    /// What the signal's own curve is: "true" (a state) or "command".
+    pub curve: &'static str,
+    /// The estimator has an estimate of it, drawn beside.
+    pub estimated: bool,
 }
 
 /// The open dashboard: the terminal is in raw mode on the alternate screen until it closes.
@@ -461,7 +471,9 @@ fn render_events(frame: &mut Frame, area: Rect, view: &View) {
 fn render_signals(frame: &mut Frame, area: Rect, view: &View) {
     let n = view.header.signals.len().max(1) as u32;
     let areas = Layout::horizontal((0..n).map(|_| Constraint::Ratio(1, n))).split(area);
-    for (i, ((title, estimated), points)) in view.header.signals.iter().zip(&view.points).enumerate() {
+    for (i, (SignalPlot { title, curve, estimated }, points)) in
+        view.header.signals.iter().zip(&view.points).enumerate()
+    {
         let truth: Vec<(f64, f64)> = points.iter().filter_map(|&(t, v, _)| Some((t, v?))).collect();
         let estimate: Vec<(f64, f64)> = points.iter().filter_map(|&(t, _, e)| Some((t, e?))).collect();
         let t_end = points.back().map_or(PLOT_SECONDS, |(t, ..)| t.max(PLOT_SECONDS));
@@ -477,7 +489,7 @@ fn render_signals(frame: &mut Frame, area: Rect, view: &View) {
         };
         let mut datasets = vec![
             Dataset::default()
-                .name("true")
+                .name(*curve)
                 .marker(Marker::Braille)
                 .graph_type(GraphType::Line)
                 .style(Color::Cyan)
@@ -499,7 +511,7 @@ fn render_signals(frame: &mut Frame, area: Rect, view: &View) {
             .labels([format!("{:.0}", t_end - PLOT_SECONDS), format!("{t_end:.0}")]);
         let y_axis = Axis::default().bounds([low, high]).labels([format!("{low:.3}"), format!("{high:.3}")]);
         // The legend in the title, where it hides no data.
-        let mut legend = vec![Span::from(format!(" {title}: ")), Span::from("true").fg(Color::Cyan)];
+        let mut legend = vec![Span::from(format!(" {title}: ")), Span::from(*curve).fg(Color::Cyan)];
         if *estimated {
             legend.extend([Span::from(", "), Span::from("estimate").fg(Color::Yellow)]);
         }
@@ -529,7 +541,10 @@ mod tests {
         let mut view = View::new(Header {
             run: "pendulum · realtime · 1000 Hz".into(),
             loops_planned: 2000,
-            signals: vec![("theta [rad]".into(), true), ("current [A]".into(), false)],
+            signals: vec![
+                SignalPlot { title: "theta [rad]".into(), curve: "true", estimated: true },
+                SignalPlot { title: "current [A]".into(), curve: "command", estimated: false },
+            ],
         });
         for (i, p99) in [3_000, 6_000, 12_000].into_iter().enumerate() {
             view.apply(Update::Status(Box::new(MonitorStatus {
@@ -627,6 +642,6 @@ mod tests {
         assert!(lines[0].contains("pendulum · realtime · 1000 Hz · loop 300 / 2000 (15 %) · deadline misses 1"));
         assert!(lines[0].ends_with("q: quit"));
         assert!(lines.iter().any(|l| l.contains("┌ theta [rad]: true, estimate ")));
-        assert!(lines.iter().any(|l| l.contains("┌ current [A]: true ")));
+        assert!(lines.iter().any(|l| l.contains("┌ current [A]: command ")));
     }
 }

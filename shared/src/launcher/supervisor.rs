@@ -29,7 +29,7 @@ use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
 use crate::monitor::layout::Layout;
-use crate::monitor::live::key_signals;
+use crate::monitor::live::{Truth, key_signals};
 use crate::runtime::ipc;
 use crate::runtime::signals::StopFlag;
 
@@ -829,7 +829,14 @@ impl<'a> Supervisor<'a> {
 fn dashboard_header(config: &LaunchConfig, scenario: &dyn Scenario) -> dashboard::Header {
     let signals = key_signals(&Layout::new(config, scenario))
         .into_iter()
-        .map(|s| (format!("{} [{}]", s.name, s.unit), s.estimate.is_some()))
+        .map(|s| dashboard::SignalPlot {
+            title: format!("{} [{}]", s.name, s.unit),
+            curve: match s.truth {
+                Truth::State(_) => "true",
+                Truth::Command(_) => "command",
+            },
+            estimated: s.estimate.is_some(),
+        })
         .collect();
     dashboard::Header {
         run: format!("{} · {} · {} Hz", config.scenario, config.mode.name(), config.rate_hz),
