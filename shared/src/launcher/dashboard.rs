@@ -29,8 +29,8 @@ use crate::launcher::summary::TimelineEntry;
 
 /// How often the screen is drawn.
 const FRAME: Duration = Duration::from_millis(100);
-/// How long a key may wait to be read.
-const KEY_POLL: Duration = Duration::from_millis(20);
+/// How long the drawing thread waits for an update before it looks at `quit` and the clock.
+const UPDATE_WAIT: Duration = Duration::from_millis(20);
 /// Simulated seconds the signal plots show.
 const PLOT_SECONDS: f64 = 10.0;
 /// Statuses each sparkline keeps (wider than any terminal's sparkline column).
@@ -106,6 +106,10 @@ impl Dashboard {
     pub fn open(header: Header, quit: Arc<AtomicBool>) -> Result<Self> {
         let terminal = ratatui::try_init()?;
         let (updates, received) = crossbeam_channel::unbounded();
+        // Keys are read on a thread of their own that nobody joins: a read from a terminal that
+        // went away (its window closed) may block for good, and must not hold up the run's end.
+        let keys_quit = quit.clone();
+        std::thread::Builder::new().name("dashboard keys".into()).spawn(move || read_keys(&keys_quit))?;
         let thread = std::thread::Builder::new()
             .name("dashboard".into())
             .spawn(move || draw_until_closed(terminal, View::new(header), &received, &quit))?;
@@ -152,7 +156,7 @@ fn draw_until_closed(
     let mut cpu = CpuMeter::default();
     let mut last_draw: Option<Instant> = None;
     loop {
-        let closed = match updates.recv_timeout(KEY_POLL) {
+        let closed = match updates.recv_timeout(UPDATE_WAIT) {
             Ok(update) => {
                 view.apply(update);
                 updates.try_iter().for_each(|u| view.apply(u));
@@ -161,24 +165,7 @@ fn draw_until_closed(
             Err(RecvTimeoutError::Timeout) => false,
             Err(RecvTimeoutError::Disconnected) => true,
         };
-        while event::poll(Duration::ZERO)? {
-            if let Event::Key(key) = event::read()?
-                && key.kind == KeyEventKind::Press
-            {
-                match key.code {
-                    KeyCode::Char('q') => {
-                        quit.store(true, Ordering::Relaxed);
-                        view.stopping = true;
-                    }
-                    // Raw mode turns Ctrl-C into a key: make it the signal it would have been.
-                    // SAFETY: raise only sends a signal to this process.
-                    KeyCode::Char('c') if key.modifiers.contains(KeyModifiers::CONTROL) => unsafe {
-                        libc::raise(libc::SIGINT);
-                    },
-                    _ => {}
-                }
-            }
-        }
+        view.stopping |= quit.load(Ordering::Relaxed);
         if closed || last_draw.is_none_or(|t| t.elapsed() >= FRAME) {
             last_draw = Some(Instant::now());
             view.cpu = cpu.sample(&view.processes);
@@ -186,6 +173,25 @@ fn draw_until_closed(
         }
         if closed {
             return Ok(());
+        }
+    }
+}
+
+/// Reads keys until the terminal fails: `q` sets `quit`; Ctrl-C, which raw mode turns into a
+/// key, becomes the signal it would have been.
+fn read_keys(quit: &AtomicBool) {
+    while let Ok(event) = event::read() {
+        let Event::Key(key) = event else { continue };
+        if key.kind != KeyEventKind::Press {
+            continue;
+        }
+        match key.code {
+            KeyCode::Char('q') => quit.store(true, Ordering::Relaxed),
+            // SAFETY: raise only sends a signal to this process.
+            KeyCode::Char('c') if key.modifiers.contains(KeyModifiers::CONTROL) => unsafe {
+                libc::raise(libc::SIGINT);
+            },
+            _ => {}
         }
     }
 }
