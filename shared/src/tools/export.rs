@@ -14,16 +14,13 @@ use crate::monitor::layout::Layout;
 use crate::monitor::sinks::mcap::{Detail, FILE, McapRecording};
 use crate::monitor::sinks::{JoinedLoop, RunSink, loops};
 use crate::scenarios;
-use crate::tools::{ToolError, check_run_folder};
-
-/// The files of a run folder the export reads.
-const INPUTS: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];
+use crate::tools::{RUN_FILES, ToolError, check_run_folder};
 
 /// Writes `run_dir/run.mcap` from the run folder's files; returns its path.
 pub fn write_mcap(run_dir: &Path) -> Result<PathBuf, ToolError> {
     let shown = run_dir.display();
     let bad = |why: String| ToolError::BadInput(format!("{shown}: {why}"));
-    check_run_folder(run_dir, &INPUTS)?;
+    check_run_folder(run_dir, &RUN_FILES)?;
     let (config, scenario) = scenarios::load_resolved(&run_dir.join("launch.toml")).map_err(|e| bad(e.to_string()))?;
     let layout = Layout::new(&config, scenario.as_ref());
     let read = |name: &str| std::fs::read_to_string(run_dir.join(name)).with_context(|| format!("read {shown}/{name}"));

@@ -24,6 +24,9 @@ impl From<anyhow::Error> for ToolError {
     }
 }
 
+/// The files of a finished run folder that export and plot read.
+pub const RUN_FILES: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];
+
 /// A bad-input error for `dir` unless it is a folder holding each of `files`.
 pub fn check_run_folder(dir: &Path, files: &[&str]) -> Result<(), ToolError> {
     let bad = |why: String| Err(ToolError::BadInput(format!("{}: {why}", dir.display())));

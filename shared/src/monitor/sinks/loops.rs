@@ -26,6 +26,18 @@ impl LoopsCsv {
     }
 }
 
+/// Where loops.csv's columns lie, for readers that read it by position: k and t first, then the
+/// loop trace's stamps in order, end to end, deadline miss, rejected, and the tick's scheduled
+/// time, wake-up and period.
+pub mod column {
+    use crate::contract::msg::LoopTrace;
+    pub const FIRST_STAMP: usize = 2;
+    pub const END_TO_END: usize = FIRST_STAMP + LoopTrace::STAMP_NAMES.len();
+    pub const DEADLINE_MISS: usize = END_TO_END + 1;
+    pub const TICK_PERIOD: usize = DEADLINE_MISS + 4;
+    pub const COUNT: usize = TICK_PERIOD + 1;
+}
+
 /// The header of `loops.csv`: every column but `t_s` holds a whole number (or nothing).
 pub fn columns() -> Vec<String> {
     let mut columns = vec!["k".to_string(), column_name("t", "s")];

@@ -8,8 +8,8 @@ use plotters::coord::Shift;
 use plotters::coord::combinators::{BindKeyPoints, LogCoord, WithKeyPoints};
 use plotters::prelude::*;
 
-use crate::contract::msg::LoopTrace;
 use crate::contract::report::HOPS;
+use crate::monitor::sinks::loops::column;
 use crate::tools::plot::{FONT, colour, legend_mark, plot_error, png};
 
 /// A series: its name and its samples in ns, sorted.
@@ -20,11 +20,6 @@ pub const END_TO_END: &str = "end to end";
 
 /// The file a run's latency figure is written to, in the run folder.
 pub const RUN_FIGURE: &str = "latency-cdf.png";
-
-/// In loops.csv, k and t come first, then the loop trace's stamps in order, then end to end.
-/// Read by position: the headers' names may change, the order is the trace's.
-const FIRST_STAMP_COLUMN: usize = 2;
-const END_TO_END_COLUMN: usize = FIRST_STAMP_COLUMN + LoopTrace::STAMP_NAMES.len();
 
 /// The hops from one process to the next (plant→sensors, ...): [`HOPS`] less the stages'
 /// compute time, as (name, the sender's publish stamp, the receiver's receive stamp).
@@ -60,9 +55,9 @@ pub fn latencies_from_loops_csv(text: &str) -> Result<Vec<Series>> {
             }
         };
         // A loop without a record has empty cells.
-        let Some(end_to_end) = number(END_TO_END_COLUMN)? else { continue };
+        let Some(end_to_end) = number(column::END_TO_END)? else { continue };
         for (series, (_, from, to)) in samples.iter_mut().zip(&hops) {
-            let (Some(sent), Some(received)) = (number(FIRST_STAMP_COLUMN + from)?, number(FIRST_STAMP_COLUMN + to)?)
+            let (Some(sent), Some(received)) = (number(column::FIRST_STAMP + from)?, number(column::FIRST_STAMP + to)?)
             else {
                 return Err(anyhow!("line {}: a loop with an end-to-end latency but not every stamp", i + 1));
             };

@@ -16,25 +16,13 @@ use plotters::prelude::*;
 
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::config::schema::Component;
-use crate::contract::msg::LoopTrace;
 use crate::launcher::report::read_summary;
 use crate::model::scenario::Scenario;
 use crate::monitor::layout::Layout;
+use crate::monitor::sinks::loops::column as loops_column;
 use crate::scenarios;
 use crate::tools::plot::{FONT, colour, latency, plot_error, png};
-use crate::tools::{ToolError, check_run_folder};
-
-/// The files of a run folder the figures read.
-const INPUTS: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];
-
-/// Columns of loops.csv by position: k, t, the trace's stamps, end to end, deadline miss,
-/// rejected, then the tick's scheduled time, wake-up and period.
-mod loops_column {
-    use super::LoopTrace;
-    pub const DEADLINE_MISS: usize = 2 + LoopTrace::STAMP_NAMES.len() + 1;
-    pub const TICK_PERIOD: usize = DEADLINE_MISS + 4;
-    pub const COUNT: usize = TICK_PERIOD + 1;
-}
+use crate::tools::{RUN_FILES, ToolError, check_run_folder};
 
 /// Where each vector lies in trajectory.csv's columns.
 #[derive(Debug, Clone, PartialEq)]
@@ -114,7 +102,7 @@ impl RunData {
     pub fn read(run_dir: &Path) -> Result<Self, ToolError> {
         let shown = run_dir.display();
         let bad = |why: String| ToolError::BadInput(format!("{shown}: {why}"));
-        check_run_folder(run_dir, &INPUTS)?;
+        check_run_folder(run_dir, &RUN_FILES)?;
         let (config, scenario) =
             scenarios::load_resolved(&run_dir.join("launch.toml")).map_err(|e| bad(e.to_string()))?;
         let layout = Layout::new(&config, scenario.as_ref());
