@@ -105,6 +105,35 @@ const CASES: &[(&str, &[&str], &str)] = &[
         &["launch/tiltrotor/2-nlpt-2l.toml"],
         "3e80c10dde26ce66c1767cc9c12af40fefaed1a60bca5feb6879de4fe90b1586",
     ),
+    // Added with the flying inverted pendulum (issue 14), recorded on its commit: 2000 loops at 1 kHz.
+    // The default is case (ii); cases 1 and 2 differ only in duration, overridden here.
+    ("launch/fip.toml", &["launch/fip.toml"], "4161872281e8fbe2a8ad84e6cf22bfc3f6b330cc6dd0c8f004a38120a419748e"),
+    ("fip (by name)", &["fip"], "4161872281e8fbe2a8ad84e6cf22bfc3f6b330cc6dd0c8f004a38120a419748e"),
+    (
+        "launch/fip/1-reference.toml",
+        &["launch/fip/1-reference.toml"],
+        "9f285bbbb0295d6922a298ce1f992d0b33c8adfef44186040519a82c28192382",
+    ),
+    (
+        "launch/fip/2-no-disturbance.toml",
+        &["launch/fip/2-no-disturbance.toml"],
+        "9f285bbbb0295d6922a298ce1f992d0b33c8adfef44186040519a82c28192382",
+    ),
+    (
+        "launch/fip/3-constant-disturbance.toml",
+        &["launch/fip/3-constant-disturbance.toml"],
+        "4161872281e8fbe2a8ad84e6cf22bfc3f6b330cc6dd0c8f004a38120a419748e",
+    ),
+    (
+        "launch/fip/4-stochastic-disturbance.toml",
+        &["launch/fip/4-stochastic-disturbance.toml"],
+        "ee0f081f7fb12f120b5defc650f40a2fd9ef8b9086c9e3716bc73fc970862849",
+    ),
+    (
+        "launch/fip/5-experiment.toml",
+        &["launch/fip/5-experiment.toml"],
+        "576e847128c887cb15695b058f632bc0736b06134dcaa4c8a627172edc6e7453",
+    ),
     // In-loop faults in lockstep: applied by the processes by loop index, hence deterministic.
     (
         "pendulum, faults: delay controller, drop sensors, corrupt nan",
@@ -244,4 +273,14 @@ fn tiltrotor_five_processes_give_the_recorded_bytes() {
 #[test]
 fn tiltrotor_in_process_gives_the_same_bytes() {
     check("tiltrotor", true);
+}
+
+#[test]
+fn fip_five_processes_give_the_recorded_bytes() {
+    check("fip", false);
+}
+
+#[test]
+fn fip_in_process_gives_the_same_bytes() {
+    check("fip", true);
 }

@@ -4,6 +4,7 @@
 //! registry; [`resolve`] turns a name or a launch file into a checked configuration and the
 //! scenario it describes.
 
+pub mod fip;
 pub mod pendulum;
 pub mod quadcopter;
 pub mod tiltrotor;
@@ -20,7 +21,7 @@ use crate::config::schema::ScenarioSchema;
 
 use crate::model::scenario::{Scenario, ScenarioEntry};
 
-pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY, tiltrotor::ENTRY];
+pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY, tiltrotor::ENTRY, fip::ENTRY];
 
 /// The built-in scenario of this name, with its default launch file compiled in.
 pub fn builtin(name: &str) -> Option<&'static ScenarioEntry> {

@@ -26,6 +26,7 @@ use self::plant::{Actuation, Model, PlantSection, QuadcopterPlant};
 use self::reference::{Reference, ReferenceSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{not_negative, positive, within_si};
+use crate::model::command_link::ActuationAge;
 use crate::model::reference::Reference as _;
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Row, Scenario, ScenarioEntry, check_substeps,
@@ -372,46 +373,10 @@ struct QuadcopterMetrics {
     z1_before_step: Mean,
     z1_after_step: Mean,
     z1_max_after_step: f64,
-    /// The last loops' (t, command, oldest sample time behind it), to find the loop whose command the
-    /// vehicle is acting on.
-    recent_commands: std::collections::VecDeque<(f64, [f64; INPUTS], f64)>,
-    /// How long the command in effect had been held, and how old the oldest sample behind it
-    /// was, when each period began.
-    command_hold: Mean,
-    command_hold_max: f64,
-    actuation_age: Mean,
-    actuation_age_max: f64,
+    actuation: ActuationAge,
 }
 
-/// Loops kept to match applied commands: longer than any command link's hold.
-const COMMANDS_KEPT: usize = 512;
-
 impl QuadcopterMetrics {
-    /// Finds the loop whose command the actuator applied over the period that ended now (the
-    /// newest one with exactly that command) and records how long it had been held and how old
-    /// its data were when the period began.
-    fn observe_actuation(&mut self, row: &Row) {
-        let began = self.recent_commands.back().map(|(t, _, _)| *t);
-        if let Some(began) = began {
-            let found = self.recent_commands.iter().rev().find(|(_, command, _)| command[..] == row.applied[..INPUTS]);
-            if let Some((computed_at, _, pose_time)) = found {
-                let (hold, age) = (began - computed_at, began - pose_time);
-                self.command_hold.add(hold);
-                self.command_hold_max = self.command_hold_max.max(hold);
-                self.actuation_age.add(age);
-                self.actuation_age_max = self.actuation_age_max.max(age);
-            }
-        }
-        let mut command = [0.0; INPUTS];
-        command.copy_from_slice(&row.command[..INPUTS]);
-        // The oldest sample the command was computed from.
-        let pose_time = row.readings.iter().filter(|r| r.valid != 0).map(|r| r.sample_time).fold(row.t, f64::min);
-        self.recent_commands.push_back((row.t, command, pose_time));
-        if self.recent_commands.len() > COMMANDS_KEPT {
-            self.recent_commands.pop_front();
-        }
-    }
-
     fn step_at(&self) -> Option<f64> {
         self.plant.as_ref().filter(|p| p.mass_step_kg != 0.0).map(|p| p.mass_step_at_s)
     }
@@ -465,7 +430,7 @@ impl Metrics for QuadcopterMetrics {
                 self.z1_max_after_step = self.z1_max_after_step.max(z1);
             }
         }
-        self.observe_actuation(row);
+        self.actuation.observe(row, INPUTS);
         self.mass_recent.push_back((t, self.mass_last));
         while self.mass_recent.front().is_some_and(|(s, _)| *s <= t - MASS_WINDOW_S) {
             self.mass_recent.pop_front();
@@ -504,10 +469,9 @@ impl Metrics for QuadcopterMetrics {
         let b_error = (0..3).map(|i| (xi[1 + i] / xi[0] - b_true[i]).powi(2)).sum::<f64>().sqrt();
         put("disturbance_error_n", Some(b_error));
         put("snr_mean", self.snr_steady.mean());
-        put("command_hold_mean_s", self.command_hold.mean());
-        put("command_hold_max_s", (self.command_hold.n > 0).then_some(self.command_hold_max));
-        put("actuation_data_age_mean_s", self.actuation_age.mean());
-        put("actuation_data_age_max_s", (self.actuation_age.n > 0).then_some(self.actuation_age_max));
+        for (name, value) in self.actuation.metrics() {
+            put(name, Some(value));
+        }
         if self.step_at().is_some() {
             let before = self.mass_before.mean();
             let n = self.mass_recent.len() as f64;

@@ -19,6 +19,7 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
 use super::{INPUTS, STATE_LEN};
+use crate::model::command_link::CommandLink;
 use crate::model::integrate::rk4;
 use crate::model::scenario::Plant;
 
@@ -141,9 +142,7 @@ pub struct QuadcopterPlant {
     /// p, R (row-major), v, ω, m.
     x: [f64; STATE_LEN],
     rng: ChaCha8Rng,
-    /// The command the link last took, and the link slot it was taken in; None after a restart,
-    /// until the next slot.
-    link: Option<(u64, [f64; INPUTS])>,
+    link: CommandLink<INPUTS>,
     applied: [f64; INPUTS],
 }
 
@@ -157,26 +156,8 @@ impl QuadcopterPlant {
         x[15..18].copy_from_slice(&i.rate_rad_s);
         x[18] = section.mass_at(&model, 0.0);
         let rng = ChaCha8Rng::seed_from_u64(seed ^ crate::config::seed::fnv1a("plant"));
-        Self { model, section, x, rng, link: None, applied: [0.0; INPUTS] }
-    }
-
-    /// The command the vehicle acts on over the tick from t: the link's, or the one given.
-    fn through_link(&mut self, t: f64, u: &[f64]) -> [f64; INPUTS] {
-        let mut command = [0.0; INPUTS];
-        command.copy_from_slice(&u[..INPUTS]);
-        let period = self.model.command_period_s;
-        if period <= 0.0 {
-            return command;
-        }
-        // A tiny margin so that a tick that lands on a slot boundary in exact arithmetic does.
-        let slot = ((t + 1e-9) / period).floor() as u64;
-        match self.link {
-            Some((taken, held)) if taken == slot => held,
-            _ => {
-                self.link = Some((slot, command));
-                command
-            }
-        }
+        let link = CommandLink::new(model.command_period_s);
+        Self { model, section, x, rng, link, applied: [0.0; INPUTS] }
     }
 }
 
@@ -220,7 +201,7 @@ impl Plant for QuadcopterPlant {
     }
 
     fn step(&mut self, t: f64, u: &[f64], dt: f64) {
-        let command = self.through_link(t, u);
+        let command = self.link.through(t, u);
         self.applied = command;
         let thrust = command[0];
         let drive = match self.model.actuation {
@@ -251,7 +232,7 @@ impl Plant for QuadcopterPlant {
 
     fn restore(&mut self, state: &[f64]) {
         self.x.copy_from_slice(state);
-        self.link = None;
+        self.link.reset();
     }
 
     fn applied_input(&self) -> Option<&[f64]> {
