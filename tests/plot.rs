@@ -40,6 +40,35 @@ fn a_folder_that_is_not_a_run_is_bad_input() {
     assert_eq!(output.status.code(), Some(2));
     assert_eq!(
         String::from_utf8_lossy(&output.stderr),
-        "error: --paper nosuch: no paper figure for it; allowed: pendulum, quadcopter, tiltrotor\n"
+        "error: --paper nosuch: no paper figure for it; allowed: pendulum, quadcopter, tiltrotor, fip\n"
     );
+}
+
+/// `looplab plot --paper X` for every scenario with a paper figure: the paper's cases run in
+/// lockstep in the process, one run folder each, and each figure is written where it says.
+#[test]
+fn every_paper_figure_is_drawn() {
+    let cases: [(&str, &[&str]); 4] = [
+        ("pendulum", &["paper-003-fig3-angle.png", "paper-003-fig4-flywheel-speed.png"]),
+        ("quadcopter", &["paper-001-fig17-mass-estimate.png"]),
+        ("tiltrotor", &["paper-004-fig4-x-prior-error.png"]),
+        ("fip", &["paper-000-fig2-speed-thrust.png", "paper-000-fig4-disturbance-estimate.png"]),
+    ];
+    std::thread::scope(|s| {
+        for (scenario, figures) in cases {
+            s.spawn(move || {
+                let dir = fresh_dir(&format!("paper-{scenario}"));
+                let output = looplab().args(["plot", "--paper", scenario, "--out"]).arg(&dir).output().unwrap();
+                let stdout = String::from_utf8_lossy(&output.stdout);
+                assert!(output.status.success(), "{scenario}: {stdout}\n{}", String::from_utf8_lossy(&output.stderr));
+                for name in figures {
+                    let path = dir.join(name);
+                    assert!(stdout.contains(&format!("wrote {}", path.display())), "{name} not reported:\n{stdout}");
+                    let (width, height) = png_size(&path);
+                    assert!(width >= 800 && height >= 500, "{name}: {width}×{height}");
+                }
+                std::fs::remove_dir_all(&dir).unwrap();
+            });
+        }
+    });
 }

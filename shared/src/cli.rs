@@ -99,13 +99,15 @@ looplab run --set wait.strategy=adaptive --out runs/adaptive\n  looplab compare 
 --paper runs the paper's launch files in lockstep in this process (one run folder each, under --out) and draws: \
 pendulum: paper 003's Figs. 3 and 4 (angle and flywheel speed without and with bias estimation); \
 quadcopter: paper 001's Fig. 17 (the mass estimate as weight is added); \
-tiltrotor: paper 004's Fig. 4 (the a-priori x error of NLLS-2L and NLPT-2L against the paper's ±3.81 cm)."
+tiltrotor: paper 004's Fig. 4 (the a-priori x error of NLLS-2L and NLPT-2L against the paper's ±3.81 cm); \
+fip: paper 000's Figs. 2 and 4 (the estimated load speed and the thrust in the three disturbance cases, and b̂ \
+against the stochastic b)."
     )]
     Plot {
         /// The run folder (runs/<time>-<scenario>, runs/latest or a run's --out)
         #[arg(required_unless_present = "paper", conflicts_with = "paper")]
         run_dir: Option<PathBuf>,
-        /// Reproduce the paper figure of this scenario instead: pendulum, quadcopter or tiltrotor
+        /// Reproduce the paper figure of this scenario instead: pendulum, quadcopter, tiltrotor or fip
         #[arg(long, value_name = "SCENARIO")]
         paper: Option<String>,
         /// With --paper: the folder for the runs and figures, new or empty (default:

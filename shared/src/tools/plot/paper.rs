@@ -16,7 +16,7 @@ use crate::tools::plot::colour;
 use crate::tools::plot::run::{Curve, FaultMark, Figure, Line, Panel, RunData, TRUTH, series};
 
 /// The scenarios with a paper figure.
-pub const SCENARIOS: [&str; 3] = ["pendulum", "quadcopter", "tiltrotor"];
+pub const SCENARIOS: [&str; 4] = ["pendulum", "quadcopter", "tiltrotor", "fip"];
 
 /// Where a run's launch file comes from.
 enum Target {
@@ -89,7 +89,8 @@ pub fn paper_figures(scenario: &str, out: Option<&Path>) -> Result<Vec<PathBuf>,
     let figures = match scenario {
         "pendulum" => pendulum(&out)?,
         "quadcopter" => quadcopter(&out)?,
-        _ => tiltrotor(&out)?,
+        "tiltrotor" => tiltrotor(&out)?,
+        _ => fip(&out)?,
     };
     let mut written = Vec::new();
     for (name, figure) in figures {
@@ -253,4 +254,81 @@ fn tiltrotor(out: &Path) -> anyhow::Result<Vec<Named>> {
         caption: Some("Figure 4. Position estimation error in x (a priori), the first ten seconds.".into()),
     };
     Ok(vec![("paper-004-fig4-x-prior-error.png", figure)])
+}
+
+/// The norm of three columns, row by row.
+fn norms(columns: [&[f64]; 3]) -> Vec<f64> {
+    (0..columns[0].len()).map(|i| columns.iter().map(|c| c[i] * c[i]).sum::<f64>().sqrt()).collect()
+}
+
+/// Paper 000, Fig. 2 (the estimated load speed and the thrust in the three disturbance cases)
+/// and Fig. 4 (b̂ against the stochastic b), from the cases' launch files (120 s each).
+fn fip(out: &Path) -> anyhow::Result<Vec<Named>> {
+    let cases = [
+        Case {
+            name: "2-no-disturbance",
+            target: Target::File("2-no-disturbance.toml", include_str!("../../../../launch/fip/2-no-disturbance.toml")),
+            overrides: &[],
+        },
+        Case {
+            name: "3-constant-disturbance",
+            target: Target::File(
+                "3-constant-disturbance.toml",
+                include_str!("../../../../launch/fip/3-constant-disturbance.toml"),
+            ),
+            overrides: &[],
+        },
+        Case {
+            name: "4-stochastic-disturbance",
+            target: Target::File(
+                "4-stochastic-disturbance.toml",
+                include_str!("../../../../launch/fip/4-stochastic-disturbance.toml"),
+            ),
+            overrides: &[],
+        },
+    ];
+    let runs = cases.iter().map(|c| c.run(out)).collect::<anyhow::Result<Vec<_>>>()?;
+    let span = runs[0].span();
+    let labels = ["(i) no disturbance", "(ii) constant", "(iii) stochastic"];
+    let (mut speed, mut thrust) = (Vec::new(), Vec::new());
+    for (i, (run, label)) in runs.iter().zip(labels).enumerate() {
+        let column = |name: &str| run.estimate(name).with_context(|| format!("no estimate {name}"));
+        let v = norms([column("load_vx_hat")?, column("load_vy_hat")?, column("load_vz_hat")?]);
+        speed.push(Curve::new(label, series(run.t(), &v), colour(i), Line::Solid(1)));
+        let t = run.command("thrust").context("no thrust command")?;
+        thrust.push(Curve::new(label, series(run.t(), t), colour(i), Line::Solid(1)));
+    }
+    speed.push(Curve::level("0.5 m/s, the reference's speed", 0.5, &span, TRUTH));
+    let fig2 = Figure {
+        title: "Paper 000, Fig. 2, reproduced: the estimated load speed and the thrust (lockstep)".into(),
+        panels: vec![Panel::new("", "estimated load speed, m/s", speed), Panel::new("", "T, N", thrust)],
+        x: span.clone(),
+        x_desc: "t, s",
+        faults: vec![],
+        faults_label: "",
+        caption: Some("Figure 2. Estimated load linear speed and thrust, cases (i)–(iii).".into()),
+    };
+
+    let stochastic = &runs[2];
+    let mut panels = Vec::new();
+    for axis in ["x", "y", "z"] {
+        let truth = stochastic.state(&format!("b_{axis}")).context("no true b")?;
+        let estimate = stochastic.estimate(&format!("b_hat_{axis}")).context("no b̂")?;
+        let curves = vec![
+            Curve::new(format!("b_{axis} estimate"), series(stochastic.t(), estimate), colour(0), Line::Solid(2)),
+            Curve::new(format!("b_{axis} (true)"), series(stochastic.t(), truth), TRUTH, Line::Solid(1)),
+        ];
+        panels.push(Panel::new("", format!("b_{axis}, N"), curves));
+    }
+    let fig4 = Figure {
+        title: "Paper 000, Fig. 4, reproduced: the estimate of b against the stochastic b, case (iii) (lockstep)"
+            .into(),
+        panels,
+        x: span,
+        x_desc: "t, s",
+        faults: vec![],
+        faults_label: "",
+        caption: Some("Figure 4. The disturbance estimate under the stochastic disturbance (71).".into()),
+    };
+    Ok(vec![("paper-000-fig2-speed-thrust.png", fig2), ("paper-000-fig4-disturbance-estimate.png", fig4)])
 }

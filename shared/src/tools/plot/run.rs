@@ -153,6 +153,12 @@ impl RunData {
         Some(&self.trajectory[self.columns.state.start + i])
     }
 
+    /// The command component of this name, as a column.
+    pub fn command(&self, name: &str) -> Option<&[f64]> {
+        let i = self.layout.input.iter().position(|c| c.name == name)?;
+        Some(&self.trajectory[self.columns.command.start + i])
+    }
+
     /// The run's time span, s.
     pub fn span(&self) -> Range<f64> {
         0.0..self.config.duration_s
