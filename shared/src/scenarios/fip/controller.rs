@@ -322,12 +322,10 @@ mod tests {
                 reference: std::array::from_fn(|n| lift(point[n], point[n + 1])),
             };
             let exact = derivative(desired(&g, &m, &flow).omega_d);
-            for axis in 0..3 {
+            for (axis, (dual, hand)) in exact.iter().zip(d.omega_d_dot).enumerate() {
                 assert!(
-                    (exact[axis] - d.omega_d_dot[axis]).abs() < 1e-10 * (1.0 + exact[axis].abs()),
-                    "t {t} axis {axis}: dual {} vs hand {}",
-                    exact[axis],
-                    d.omega_d_dot[axis]
+                    (dual - hand).abs() < 1e-10 * (1.0 + dual.abs()),
+                    "t {t} axis {axis}: dual {dual} vs hand {hand}"
                 );
             }
         }
