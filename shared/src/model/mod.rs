@@ -4,6 +4,7 @@
 pub mod autodiff;
 pub mod command_link;
 pub mod integrate;
+pub mod mean;
 pub mod reference;
 pub mod scenario;
 pub mod sensors;

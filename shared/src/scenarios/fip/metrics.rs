@@ -18,35 +18,11 @@ use std::collections::BTreeMap;
 use super::reference::EllipseReference;
 use super::{INPUTS, layout, state};
 use crate::model::command_link::ActuationAge;
+use crate::model::mean::Mean;
 use crate::model::reference::Reference;
 use crate::model::scenario::{Metrics, Row};
 
 pub const STEADY_FROM_S: f64 = 20.0;
-
-#[derive(Debug, Clone, Copy, Default)]
-struct Mean {
-    sum: f64,
-    sum_sq: f64,
-    n: usize,
-}
-
-impl Mean {
-    fn add(&mut self, x: f64) {
-        self.sum += x;
-        self.sum_sq += x * x;
-        self.n += 1;
-    }
-    fn mean(&self) -> Option<f64> {
-        (self.n > 0).then(|| self.sum / self.n as f64)
-    }
-    fn rms(&self) -> Option<f64> {
-        (self.n > 0).then(|| (self.sum_sq / self.n as f64).sqrt())
-    }
-    fn std(&self) -> Option<f64> {
-        let mean = self.mean()?;
-        Some((self.sum_sq / self.n as f64 - mean * mean).max(0.0).sqrt())
-    }
-}
 
 fn norm(v: &[f64]) -> f64 {
     v.iter().map(|x| x * x).sum::<f64>().sqrt()

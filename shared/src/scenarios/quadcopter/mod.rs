@@ -27,6 +27,7 @@ use self::reference::{Reference, ReferenceSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{not_negative, positive, within_si};
 use crate::model::command_link::ActuationAge;
+use crate::model::mean::Mean;
 use crate::model::reference::Reference as _;
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Row, Scenario, ScenarioEntry, check_substeps,
@@ -319,28 +320,6 @@ impl Scenario for Quadcopter {
             steady_from_s: self.metrics.steady_from_s,
             ..Default::default()
         })
-    }
-}
-
-/// Running sums of one quantity.
-#[derive(Default, Clone, Copy)]
-struct Mean {
-    sum: f64,
-    sum_sq: f64,
-    n: u64,
-}
-
-impl Mean {
-    fn add(&mut self, x: f64) {
-        self.sum += x;
-        self.sum_sq += x * x;
-        self.n += 1;
-    }
-    fn mean(&self) -> Option<f64> {
-        (self.n > 0).then(|| self.sum / self.n as f64)
-    }
-    fn rms(&self) -> Option<f64> {
-        (self.n > 0).then(|| (self.sum_sq / self.n as f64).sqrt())
     }
 }
 
