@@ -59,15 +59,6 @@ impl DisturbanceSection {
             Kind::OrnsteinUhlenbeck => self.ou_initial_n,
         }
     }
-
-    /// The stationary standard deviation of each axis of the Ornstein–Uhlenbeck process with
-    /// held noise, √(g²σ²T_s/(2τ)) (for T_s ≪ τ).
-    pub fn ou_stationary_std(&self) -> [f64; 3] {
-        std::array::from_fn(|i| {
-            let g = self.ou_noise_gain_n[i] * self.ou_noise_std;
-            (g * g * self.ou_noise_sample_s / (2.0 * self.ou_time_constants_s[i])).sqrt()
-        })
-    }
 }
 
 /// b over time, as the plant integrates it.
@@ -133,6 +124,15 @@ impl OverTick {
 pub mod tests {
     use super::*;
 
+    /// The stationary standard deviation of each axis of the Ornstein–Uhlenbeck process with
+    /// held noise, √(g²σ²T_s/(2τ)) (for T_s ≪ τ).
+    fn ou_stationary_std(section: &DisturbanceSection) -> [f64; 3] {
+        std::array::from_fn(|i| {
+            let g = section.ou_noise_gain_n[i] * section.ou_noise_std;
+            (g * g * section.ou_noise_sample_s / (2.0 * section.ou_time_constants_s[i])).sqrt()
+        })
+    }
+
     pub fn paper(kind: Kind) -> DisturbanceSection {
         DisturbanceSection {
             kind,
@@ -150,7 +150,7 @@ pub mod tests {
     #[test]
     fn the_ou_spread_matches_the_formula() {
         let section = paper(Kind::OrnsteinUhlenbeck);
-        let expected = section.ou_stationary_std();
+        let expected = ou_stationary_std(&section);
         for (got, note) in expected.iter().zip([0.078, 0.056, 0.037]) {
             assert!((got - note).abs() < 1e-3, "{got} vs {note}");
         }

@@ -247,10 +247,6 @@ impl Fip {
     pub fn reference(&self) -> EllipseReference {
         EllipseReference::new(self.reference)
     }
-
-    pub fn model(&self) -> Model {
-        self.model
-    }
 }
 
 /// A period in seconds: at least one loop period (0 allowed where `zero_is_every_tick`).
