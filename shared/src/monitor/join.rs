@@ -23,6 +23,18 @@ impl Sample {
             Sample::Loop(s) => (s.header.k, Topic::Loop),
         }
     }
+
+    /// When its sender published it (CLOCK_MONOTONIC, ns; 0 if not stamped). A loop record is
+    /// "published" when the plant took its command.
+    pub fn published_ns(&self) -> u64 {
+        match self {
+            Sample::State(s) => s.header.trace.plant_publish,
+            Sample::Measurements(s) => s.header.trace.sensors_publish,
+            Sample::Estimate(s) => s.header.trace.estimator_publish,
+            Sample::Command(s) => s.header.trace.controller_publish,
+            Sample::Loop(s) => s.header.trace.plant_receive,
+        }
+    }
 }
 
 /// The parts of one loop that have arrived.

@@ -48,7 +48,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Reader<T> {
             n += 1;
             let sample = (self.wrap)(message);
             let (k, topic) = sample.key();
-            watch.saw(topic, k);
+            watch.saw(topic, k, sample.published_ns());
             tx.send(sample).map_err(|_| anyhow!("the monitor's writer stopped"))?;
         }
         Ok(n)

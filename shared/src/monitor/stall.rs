@@ -3,11 +3,19 @@
 //! A process whose newest input is newer than its newest output for longer than the stall
 //! timeout has stopped handling its input (iceoryx2 reports a SIGSTOPped process as alive). A
 //! plant on a clock must also publish every period. Checked each time the monitor drains its
-//! queues, so detection comes within one poll of the timeout.
+//! queues, so detection comes within one poll of the timeout. The wait is dated by the data's
+//! own publish stamps, not by when the monitor saw them: a monitor held up by a busy machine
+//! still detects a stall when it is due.
+
+use std::collections::VecDeque;
 
 use crate::contract::protocol::ChildEvent;
 use crate::contract::role::{Role, Topic};
 use crate::monitor::join::PerTopic;
+
+/// Inputs kept per stage while it does not answer: a second at 4 kHz, far past any stall
+/// timeout's use (only the oldest dates the wait).
+const MAX_UNANSWERED: usize = 4096;
 
 pub struct StallWatch {
     timeout_ns: u64,
@@ -18,8 +26,10 @@ pub struct StallWatch {
     last_tick: u64,
     /// Newest k seen per topic.
     newest: PerTopic<Option<u64>>,
-    /// When the monitor last saw a new state.
+    /// When the newest state was published.
     state_seen_ns: u64,
+    /// Per stage's input topic, the inputs its stage has not answered yet: (k, publish stamp).
+    unanswered: PerTopic<VecDeque<(u64, u64)>>,
     /// Per process of [`Role::LOOP`]: since when its input has waited, and whether it was reported.
     waiting: [Option<u64>; Role::LOOP.len()],
     stalled: [bool; Role::LOOP.len()],
@@ -35,18 +45,36 @@ impl StallWatch {
             last_tick: loops.saturating_sub(1),
             newest: PerTopic::default(),
             state_seen_ns: clock(),
+            unanswered: PerTopic::default(),
             waiting: [None; Role::LOOP.len()],
             stalled: [false; Role::LOOP.len()],
             clock,
         }
     }
 
-    /// A sample of loop `k` arrived on `topic`.
-    pub fn saw(&mut self, topic: Topic, k: u64) {
-        if topic == Topic::State && self.newest[topic].is_none_or(|n| k > n) {
-            self.state_seen_ns = (self.clock)();
+    /// A sample of loop `k` published at `published_ns` (0: not stamped) arrived on `topic`.
+    pub fn saw(&mut self, topic: Topic, k: u64, published_ns: u64) {
+        let published = if published_ns == 0 { (self.clock)() } else { published_ns };
+        let newer = self.newest[topic].is_none_or(|n| k > n);
+        if topic == Topic::State && newer {
+            self.state_seen_ns = published;
         }
         self.newest[topic] = self.newest[topic].max(Some(k));
+        for role in Role::LOOP {
+            let (Some(input), Some(output)) = (role.input(), role.output()) else { continue };
+            if role == Role::Plant {
+                continue;
+            }
+            if topic == input && newer && self.unanswered[input].len() < MAX_UNANSWERED {
+                self.unanswered[input].push_back((k, published));
+            }
+            if topic == output {
+                // A stage's output k answers its input k.
+                while self.unanswered[input].front().is_some_and(|(i, _)| *i <= k) {
+                    self.unanswered[input].pop_front();
+                }
+            }
+        }
     }
 
     /// Whether `role`'s input waits, and since when if the data tells.
@@ -56,8 +84,11 @@ impl StallWatch {
         };
         let (input, output) = (self.newest[input], self.newest[output]);
         if role != Role::Plant {
-            // A stage's output k answers its input k.
-            return (input.is_some_and(|i| output.is_none_or(|o| i > o)), None);
+            // A stage's output k answers its input k; the wait dates from the first input
+            // left unanswered.
+            let waits = input.is_some_and(|i| output.is_none_or(|o| i > o));
+            let since = self.unanswered[role.input().expect("a stage has an input")].front().map(|(_, ns)| *ns);
+            return (waits, since.filter(|_| waits));
         }
         if self.newest[Topic::State].is_some_and(|k| k >= self.last_tick) {
             return (false, None);
@@ -85,7 +116,7 @@ impl StallWatch {
                 continue;
             }
             let since = *self.waiting[i].get_or_insert(since.unwrap_or(now));
-            if !self.stalled[i] && now - since >= self.timeout_ns {
+            if !self.stalled[i] && now.saturating_sub(since) >= self.timeout_ns {
                 self.stalled[i] = true;
                 events.push(ChildEvent::Stall { process: role.name().to_owned(), since_ns: since, detected_ns: now });
             }
@@ -117,7 +148,7 @@ mod tests {
     /// One whole loop k seen by the monitor.
     fn whole_loop(watch: &mut StallWatch, k: u64) {
         for topic in Topic::ALL {
-            watch.saw(topic, k);
+            watch.saw(topic, k, 0);
         }
     }
 
@@ -125,10 +156,10 @@ mod tests {
     fn a_stage_holding_its_input_past_the_timeout_is_reported_once_then_resumes() {
         let (mut watch, now) = watch(None);
         whole_loop(&mut watch, 0);
-        watch.saw(Topic::State, 1);
-        watch.saw(Topic::Measurements, 1);
-        // The estimator has measurements 1 and no estimate 1 from here on.
+        // The estimator has measurements 1 (published at 1010 ms) and no estimate 1 from here on.
         now.set(1010 * MS);
+        watch.saw(Topic::State, 1, 0);
+        watch.saw(Topic::Measurements, 1, 0);
         assert_eq!(watch.check(), []);
         now.set(1059 * MS);
         assert_eq!(watch.check(), []);
@@ -136,9 +167,34 @@ mod tests {
         assert_eq!(watch.check(), [stall("estimator", 1010, 1060)]);
         now.set(1200 * MS);
         assert_eq!(watch.check(), [], "reported once");
-        watch.saw(Topic::Estimate, 1);
+        watch.saw(Topic::Estimate, 1, 0);
         now.set(1201 * MS);
         assert_eq!(watch.check(), [ChildEvent::Resumed { process: "estimator".into(), at_ns: 1201 * MS }]);
+    }
+
+    /// A monitor held up by a busy machine sees the estimate of loop 1 only 40 ms after it was
+    /// published, and no command answers it: the controller's wait dates from the publish
+    /// stamp, so the stall is due (and reported) 50 ms after it, not 50 ms after the monitor
+    /// noticed. The same for a plant on a clock whose last state the monitor saw late.
+    #[test]
+    fn a_late_monitor_dates_the_wait_from_the_publish_stamps() {
+        let (mut watch, now) = watch(None);
+        whole_loop(&mut watch, 0);
+        now.set(1040 * MS);
+        watch.saw(Topic::State, 1, 1000 * MS);
+        watch.saw(Topic::Measurements, 1, 1000 * MS);
+        watch.saw(Topic::Estimate, 1, 1000 * MS);
+        watch.saw(Topic::Estimate, 2, 1001 * MS);
+        assert_eq!(watch.check(), []);
+        now.set(1050 * MS);
+        assert_eq!(watch.check(), [stall("controller", 1000, 1050)]);
+
+        let (mut on_clock, now) = self::watch(Some(MS));
+        now.set(1080 * MS);
+        for topic in Topic::ALL {
+            on_clock.saw(topic, 0, 1000 * MS);
+        }
+        assert_eq!(on_clock.check(), [stall("plant", 1000, 1080)]);
     }
 
     #[test]
@@ -156,14 +212,15 @@ mod tests {
     fn a_plant_on_a_clock_stalls_when_no_state_comes_for_a_period() {
         let (mut watch, now) = watch(Some(MS));
         now.set(1000 * MS);
-        watch.saw(Topic::State, 0);
+        watch.saw(Topic::State, 0, 0);
         // Nothing has been published downstream yet, but the plant must tick every ms.
         now.set(1000 * MS + MS / 2);
         assert_eq!(watch.check(), []);
         now.set(1030 * MS);
         watch.check();
         now.set(1050 * MS);
-        assert_eq!(watch.check(), [stall("plant", 1000, 1050)]);
+        // The sensors have not answered state 0 either, for as long.
+        assert_eq!(watch.check(), [stall("plant", 1000, 1050), stall("sensors", 1000, 1050)]);
     }
 
     #[test]
