@@ -134,6 +134,44 @@ const CASES: &[(&str, &[&str], &str)] = &[
         &["launch/fip/5-experiment.toml"],
         "576e847128c887cb15695b058f632bc0736b06134dcaa4c8a627172edc6e7453",
     ),
+    // Added with the tethered aerial robot (issue 15), recorded on its commit: 2000 loops at 1 kHz.
+    // Cases 1 and 2 differ from the default only after phase 1 (3 s or more).
+    (
+        "launch/tethered.toml",
+        &["launch/tethered.toml"],
+        "bb5cef38d0800ecb3dd97476448ee2649c111529bb23da0a760f5132f0b5396e",
+    ),
+    ("tethered (by name)", &["tethered"], "bb5cef38d0800ecb3dd97476448ee2649c111529bb23da0a760f5132f0b5396e"),
+    (
+        "launch/tethered/1-nominal.toml",
+        &["launch/tethered/1-nominal.toml"],
+        "bb5cef38d0800ecb3dd97476448ee2649c111529bb23da0a760f5132f0b5396e",
+    ),
+    (
+        "launch/tethered/2-durations.toml",
+        &["launch/tethered/2-durations.toml"],
+        "bb5cef38d0800ecb3dd97476448ee2649c111529bb23da0a760f5132f0b5396e",
+    ),
+    (
+        "launch/tethered/3-mass-deviation.toml",
+        &["launch/tethered/3-mass-deviation.toml"],
+        "52a7906709c529944545cf88de9ca8ac3522a707807a4660aa80907c9bef15f4",
+    ),
+    (
+        "launch/tethered/4-general-model.toml",
+        &["launch/tethered/4-general-model.toml"],
+        "9f397703515ab4d8c1ad059a685a0c37d559d537b85d07cd277c4bbc55d79b4a",
+    ),
+    (
+        "launch/tethered/5-motor-lag.toml",
+        &["launch/tethered/5-motor-lag.toml"],
+        "5764076b4aeb1b9732cab6038da83b77562422e304ad0bcd4f53e59fff93c57f",
+    ),
+    (
+        "launch/tethered/6-noise.toml",
+        &["launch/tethered/6-noise.toml"],
+        "7078068ca4d8bb0ca2332797ec7441f33b7ab2e2ae5a81598a33703db9d7d9b2",
+    ),
     // In-loop faults in lockstep: applied by the processes by loop index, hence deterministic.
     (
         "pendulum, faults: delay controller, drop sensors, corrupt nan",
@@ -283,4 +321,14 @@ fn fip_five_processes_give_the_recorded_bytes() {
 #[test]
 fn fip_in_process_gives_the_same_bytes() {
     check("fip", true);
+}
+
+#[test]
+fn tethered_five_processes_give_the_recorded_bytes() {
+    check("tethered", false);
+}
+
+#[test]
+fn tethered_in_process_gives_the_same_bytes() {
+    check("tethered", true);
 }

@@ -138,9 +138,9 @@ struct SweepCli {
     /// The dotted key to vary, as for --set; a number indexes a list (faults.0.delay_ticks)
     #[arg(long, value_name = "KEY")]
     param: String,
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     from: f64,
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     to: f64,
     #[arg(long, default_value_t = 1.0)]
     step: f64,
@@ -152,6 +152,10 @@ struct SweepCli {
     /// Runs at a time
     #[arg(long, default_value_t = 2)]
     jobs: usize,
+    /// A metric of the scenario's summary to print as a column beside each value (for example
+    /// etrack_mean_phase2 or lost). Repeatable
+    #[arg(long = "metric", value_name = "NAME")]
+    metrics: Vec<String>,
     /// Run each value as the five processes over shared memory, as `looplab run` does, instead of
     /// in this process (same trajectories, many times slower); needed for kill and stop faults
     #[arg(long)]
@@ -375,6 +379,7 @@ fn sweep(args: SweepCli) -> ExitCode {
         out: args.out,
         jobs: args.jobs,
         processes: args.processes,
+        metrics: args.metrics,
     })
 }
 

@@ -189,6 +189,11 @@ pub trait Plant {
     fn applied_input(&self) -> Option<&[f64]> {
         None
     }
+    /// What the actuator holds before the first command arrives, for a system that starts in
+    /// motion (a vehicle in flight keeps its motors running). None: zero.
+    fn initial_input(&self) -> Option<&[f64]> {
+        None
+    }
 }
 
 pub trait Estimator {

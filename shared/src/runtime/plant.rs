@@ -72,14 +72,19 @@ pub struct PlantCore {
 impl PlantCore {
     pub fn new(config: &LaunchConfig, scenario: &dyn Scenario, incarnation: u32) -> Self {
         let supervision = &config.supervision;
+        let plant = scenario.plant();
+        let mut held = [0.0; MAX_INPUT];
+        if let Some(u) = plant.initial_input() {
+            held[..u.len()].copy_from_slice(u);
+        }
         Self {
-            plant: scenario.plant(),
+            plant,
             limits: scenario.input_limits(),
             dt: config.dt(),
             incarnation,
             schedule: None,
-            held: [0.0; MAX_INPUT],
-            applied: [0.0; MAX_INPUT],
+            held,
+            applied: held,
             held_arrived: 0,
             // At most an hour (checked at load): well within u64 nanoseconds.
             command_timeout_ns: (supervision.command_timeout_s * 1e9) as u64,

@@ -7,6 +7,7 @@
 pub mod fip;
 pub mod pendulum;
 pub mod quadcopter;
+pub mod tethered;
 pub mod tiltrotor;
 
 #[cfg(test)]
@@ -21,7 +22,7 @@ use crate::config::schema::ScenarioSchema;
 
 use crate::model::scenario::{Scenario, ScenarioEntry};
 
-pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY, tiltrotor::ENTRY, fip::ENTRY];
+pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY, tiltrotor::ENTRY, fip::ENTRY, tethered::ENTRY];
 
 /// The built-in scenario of this name, with its default launch file compiled in.
 pub fn builtin(name: &str) -> Option<&'static ScenarioEntry> {

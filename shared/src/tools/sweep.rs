@@ -42,6 +42,8 @@ pub struct SweepArgs {
     pub jobs: usize,
     /// Run each value as the five processes instead of in this process.
     pub processes: bool,
+    /// Metrics to print beside each value.
+    pub metrics: Vec<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -94,7 +96,8 @@ const MAX_SWEEP_VALUES: usize = 1000;
 /// The swept values, from `from` to `to` inclusive.
 fn values(from: f64, to: f64, step: f64) -> Vec<f64> {
     let n = ((to - from) / step + 1e-9).floor() as i64;
-    (0..=n.max(0)).map(|i| from + i as f64 * step).collect()
+    // Rounded to 12 decimals, so that 0.05 is not printed (and set) as 0.05000000000000002.
+    (0..=n.max(0)).map(|i| ((from + i as f64 * step) * 1e12).round() / 1e12).collect()
 }
 
 /// The index of the fault a `faults.N.…` key belongs to.
@@ -196,7 +199,13 @@ pub fn run(args: SweepArgs) -> ExitCode {
     let theory = if controller_delay { scenario.delay_margin(config) } else { None };
     let report =
         SweepReport { scenario: config.scenario.clone(), param: args.param.clone(), points, first_unstable, theory };
-    print!("{}", render(&report));
+    print!("{}", render(&report, &args.metrics));
+    for name in &args.metrics {
+        if report.points.iter().all(|p| !p.metrics.contains_key(name)) {
+            let known: Vec<&str> = report.points[0].metrics.keys().map(String::as_str).collect();
+            eprintln!("warning: no run reported a metric {name}; the runs' metrics are {}", known.join(", "));
+        }
+    }
     let path = out.join("sweep.json");
     let written = serde_json::to_string_pretty(&report)
         .map_err(anyhow::Error::from)
@@ -294,20 +303,39 @@ fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>)
     }
 }
 
-fn render(r: &SweepReport) -> String {
+/// A metric's column: at least as wide as its name.
+fn metric_width(name: &str) -> usize {
+    name.chars().count().max(10)
+}
+
+fn render(r: &SweepReport, metrics: &[String]) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "\nLoopLab sweep · {} · {} (lockstep)", r.scenario, r.param);
-    let _ = writeln!(out, "  {:>10}  {:<9}{:>12}{:>14}  within limits", "value", "verdict", "growth", "worst error");
+    let _ = write!(out, "  {:>10}  {:<9}{:>12}{:>14}  within limits", "value", "verdict", "growth", "worst error");
+    for name in metrics {
+        let _ = write!(out, "  {name:>width$}", width = metric_width(name));
+    }
+    let _ = writeln!(out);
     for p in &r.points {
-        let _ = writeln!(
-            out,
-            "  {:>10}  {:<9}{:>12}{:>14}  {}",
+        let mut line = String::new();
+        let _ = write!(
+            line,
+            "  {:>10}  {:<9}{:>12}{:>14}  {:<13}",
             value_text(p.value),
             p.verdict,
             p.growth.map_or("-".into(), |g| format!("{g:.3}")),
             p.worst_error.map_or("-".into(), |e| format!("{e:.5}")),
             p.within_limits.map_or("-", |w| if w { "yes" } else { "NO" })
         );
+        for name in metrics {
+            let value = p.metrics.get(name).map_or("-".into(), |v| format!("{v:.5}"));
+            let _ = write!(line, "  {value:>width$}", width = metric_width(name));
+        }
+        let _ = writeln!(out, "{}", line.trim_end());
+    }
+    if r.points.iter().all(|p| p.verdict == Verdict::NoFault) {
+        let _ = writeln!(out, "\n  no fault to judge the loop by: the metrics above say what each value did");
+        return out;
     }
     let _ = writeln!(
         out,
@@ -353,6 +381,7 @@ mod tests {
     fn swept_values_include_both_ends() {
         assert_eq!(values(0.0, 3.0, 1.0), [0.0, 1.0, 2.0, 3.0]);
         assert_eq!(values(0.0, 0.3, 0.1).len(), 4);
+        assert_eq!(values(-0.1, 0.1, 0.05), [-0.1, -0.05, 0.0, 0.05, 0.1]);
         assert_eq!(swept_fault("faults.2.delay_ticks"), Some(2));
         assert_eq!(swept_fault("sensors.encoder.bias"), None);
         assert_eq!(value_text(31.0), "31");
