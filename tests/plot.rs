@@ -40,7 +40,7 @@ fn a_folder_that_is_not_a_run_is_bad_input() {
     assert_eq!(output.status.code(), Some(2));
     assert_eq!(
         String::from_utf8_lossy(&output.stderr),
-        "error: --paper nosuch: no paper figure for it; allowed: pendulum, quadcopter, tiltrotor, fip\n"
+        "error: --paper nosuch: no paper figure for it; allowed: pendulum, quadcopter, tiltrotor, fip, tethered\n"
     );
 }
 
@@ -53,6 +53,7 @@ fn every_paper_figure_is_drawn() {
         ("quadcopter", &["paper-001-fig17-mass-estimate.png"]),
         ("tiltrotor", &["paper-004-fig4-x-prior-error.png"]),
         ("fip", &["paper-000-fig2-speed-thrust.png", "paper-000-fig4-disturbance-estimate.png"]),
+        ("tethered", &["paper-002-fig8-noise.png"]),
     ];
     std::thread::scope(|s| {
         for (scenario, figures) in cases {

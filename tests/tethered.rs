@@ -38,6 +38,42 @@ fn the_nominal_loop_converges_and_settles_at_the_flatness_equilibria() {
     }
 }
 
+/// The sign of η (section V-D). Started on the wrong branch (x̂₁ = x₁ − π) without the ground
+/// prior, the loop moves, the branches' prediction errors part, and the selector takes the
+/// true branch once, within a second, and keeps it; the vehicle stays up. Held on the wrong
+/// branch, the vehicle is lost. Started at an exact equilibrium, both errors are zero and,
+/// without hysteresis, the selector flips on rounding to the wrong branch and back (the note's
+/// chatter); the hysteresis removes it.
+#[test]
+fn the_selector_resolves_the_sign_of_eta() {
+    let no_prior = "estimator.ground_prior=false";
+    let r = run_in_process(
+        "tethered-minus",
+        &[&case("1-nominal"), "--set", "estimator.initial_branch=\"minus\"", "--set", no_prior],
+    );
+    assert_eq!(r.metric("active_branch_switches"), 1.0);
+    assert_eq!(r.metric("lost"), 0.0);
+    assert!(r.metric("observer_converged_s") < 1.0, "{}", r.metric("observer_converged_s"));
+    let t = r.trajectory();
+    let (time, branch) = (t.col("t_s"), t.col("est.active_branch"));
+    let switched = time[branch.iter().position(|b| *b > 0.0).unwrap()];
+    assert!(switched > 0.0 && switched < 1.0, "the true branch took over at {switched} s");
+
+    let held = run_in_process("tethered-held", &[&case("1-nominal"), "--set", "estimator.selector=\"minus\""]);
+    assert_eq!(held.metric("lost"), 1.0, "the wrong branch kept the vehicle up");
+
+    let at_rest = ["plant.initial_offset_rad=[0.0, 0.0]", no_prior];
+    for (hysteresis, switches) in [("0.0", 2.0), ("0.05", 0.0)] {
+        let h = format!("estimator.selector_hysteresis_m_s2={hysteresis}");
+        let r = run_in_process(
+            "tethered-tie",
+            &[&case("1-nominal"), "--duration", "2", "--set", at_rest[0], "--set", at_rest[1], "--set", &h],
+        );
+        assert_eq!(r.metric("active_branch_switches"), switches, "hysteresis {hysteresis}");
+        assert_eq!(r.metric("lost"), 0.0);
+    }
+}
+
 /// Case 2: the faster the transition (7 → 5 → 3 s), the larger the error in phase 2, for both
 /// controllers (section VI-B); neither loses the vehicle.
 #[test]

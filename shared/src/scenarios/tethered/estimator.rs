@@ -42,6 +42,8 @@ pub struct EstimatorSection {
     /// Never select a branch that puts the vehicle below the ground (x̂₁ ∉ (0, π)) while the
     /// other does not.
     pub ground_prior: bool,
+    /// The branch the prediction-error selector starts from.
+    pub initial_branch: Branch,
     /// |ẑ₂| ≤ this, rad/s, and |ẑ₃| ≤ acceleration bound, rad/s²: against peaking.
     pub rate_bound_rad_s: f64,
     pub acceleration_bound_rad_s2: f64,
@@ -54,6 +56,15 @@ pub enum Selector {
     /// Section V-D: the branch with the smaller filtered prediction error.
     PredictionError,
     /// Always the branch η_s = +η (f_L > 0, a taut cable).
+    Plus,
+    Minus,
+}
+
+/// One sign of η.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, strum::Display)]
+#[serde(rename_all = "lowercase")]
+#[strum(serialize_all = "lowercase")]
+pub enum Branch {
     Plus,
     Minus,
 }
@@ -88,7 +99,7 @@ fn wrap(angle: f64) -> f64 {
 
 /// One sign's observer.
 #[derive(Debug, Clone, Copy)]
-struct Branch {
+struct BranchObserver {
     sign: f64,
     z: Vector3<f64>,
     /// x̂₁, x̂₂, x̂₃ from (24).
@@ -122,7 +133,7 @@ pub struct HighGainObserver {
     section: EstimatorSection,
     inputs: Inputs,
     gains: [f64; 3],
-    branches: [Branch; 2],
+    branches: [BranchObserver; 2],
     active: usize,
     last: Option<Sample>,
     /// The printed (15): a_z's thrust term a₂u₁ instead of u₁/m_R (tests only).
@@ -134,8 +145,10 @@ impl HighGainObserver {
         let a = coefficients_of_roots(&section.roots);
         let e = section.epsilon;
         let gains = [a[2] / e, a[1] / (e * e), a[0] / (e * e * e)];
-        let branch = |sign| Branch { sign, z: Vector3::zeros(), x: [0.0; 3], prediction_error: 0.0 };
-        let active = if section.selector == Selector::Minus { 1 } else { 0 };
+        let branch = |sign| BranchObserver { sign, z: Vector3::zeros(), x: [0.0; 3], prediction_error: 0.0 };
+        let minus = section.selector == Selector::Minus
+            || (section.selector == Selector::PredictionError && section.initial_branch == Branch::Minus);
+        let active = usize::from(minus);
         Self {
             model,
             section,
@@ -192,7 +205,7 @@ impl HighGainObserver {
             return;
         }
         let other = 1 - self.active;
-        let above_ground = |b: &Branch| b.x[0] > 0.0 && b.x[0] < PI;
+        let above_ground = |b: &BranchObserver| b.x[0] > 0.0 && b.x[0] < PI;
         let (a, o) = (&self.branches[self.active], &self.branches[other]);
         if self.section.ground_prior && above_ground(a) != above_ground(o) {
             if above_ground(o) {

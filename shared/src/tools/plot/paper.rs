@@ -10,13 +10,14 @@ use anyhow::Context as _;
 use crate::config::launch::Override;
 use crate::launcher::create_run_dir;
 use crate::launcher::in_process::run_in_process;
+use crate::model::reference::Reference as _;
 use crate::scenarios;
 use crate::tools::ToolError;
 use crate::tools::plot::colour;
 use crate::tools::plot::run::{Curve, FaultMark, Figure, Line, Panel, RunData, TRUTH, series};
 
 /// The scenarios with a paper figure.
-pub const SCENARIOS: [&str; 4] = ["pendulum", "quadcopter", "tiltrotor", "fip"];
+pub const SCENARIOS: [&str; 5] = ["pendulum", "quadcopter", "tiltrotor", "fip", "tethered"];
 
 /// Where a run's launch file comes from.
 enum Target {
@@ -90,7 +91,8 @@ pub fn paper_figures(scenario: &str, out: Option<&Path>) -> Result<Vec<PathBuf>,
         "pendulum" => pendulum(&out)?,
         "quadcopter" => quadcopter(&out)?,
         "tiltrotor" => tiltrotor(&out)?,
-        _ => fip(&out)?,
+        "fip" => fip(&out)?,
+        _ => tethered(&out)?,
     };
     let mut written = Vec::new();
     for (name, figure) in figures {
@@ -331,4 +333,49 @@ fn fip(out: &Path) -> anyhow::Result<Vec<Named>> {
         caption: Some("Figure 4. The disturbance estimate under the stochastic disturbance (71).".into()),
     };
     Ok(vec![("paper-000-fig2-speed-thrust.png", fig2), ("paper-000-fig4-disturbance-estimate.png", fig4)])
+}
+
+/// Paper 002, Fig. 8: Γb with a noisy IMU and reduced gains (launch/tethered/6-noise.toml):
+/// the outputs ϕ and f_L against their references and the observer's estimates, and the
+/// uncontrolled attitude ϑ.
+fn tethered(out: &Path) -> anyhow::Result<Vec<Named>> {
+    let case = Case {
+        name: "6-noise",
+        target: Target::File("6-noise.toml", include_str!("../../../../launch/tethered/6-noise.toml")),
+        overrides: &[],
+    };
+    let run = case.run(out)?;
+    let mut reference = crate::scenarios::tethered::Tethered::from_config(&run.config)?.reference();
+    let t = run.t();
+    let desired: Vec<_> = t.iter().map(|&t| reference.at(t)).collect();
+    let state = |name: &str| run.state(name).with_context(|| format!("no state {name}"));
+    let estimate = |name: &str| run.estimate(name).with_context(|| format!("no estimate {name}"));
+    let degrees = |values: &[f64]| values.iter().map(|v| v.to_degrees()).collect::<Vec<_>>();
+    let phi_desired: Vec<f64> = desired.iter().map(|d| d.phi[0].to_degrees()).collect();
+    let force_desired: Vec<f64> = desired.iter().map(|d| d.second[0]).collect();
+    let panel = |y_desc: &str, truth: Vec<f64>, estimate: Vec<f64>, wanted: Option<Vec<f64>>| {
+        let mut curves = vec![
+            Curve::new("estimate", series(t, &estimate), colour(0), Line::Solid(1)),
+            Curve::new("true", series(t, &truth), TRUTH, Line::Solid(2)),
+        ];
+        if let Some(wanted) = wanted {
+            curves.push(Curve::new("reference", series(t, &wanted), colour(1), Line::Dashed));
+        }
+        Panel::new("", y_desc, curves)
+    };
+    let panels = vec![
+        panel("ϕ, degrees", degrees(state("phi")?), degrees(estimate("phi")?), Some(phi_desired)),
+        panel("f_L, N", state("link_force")?.to_vec(), estimate("link_force")?.to_vec(), Some(force_desired)),
+        panel("ϑ, degrees", degrees(state("theta")?), degrees(estimate("theta")?), None),
+    ];
+    let fig8 = Figure {
+        title: "Paper 002, Fig. 8, reproduced: Γb with a noisy IMU, ε = 0.5 and halved poles (lockstep)".into(),
+        panels,
+        x: run.span(),
+        x_desc: "t, s",
+        faults: vec![],
+        faults_label: "",
+        caption: Some("Figure 8. Controller Γb: noisy measurements.".into()),
+    };
+    Ok(vec![("paper-002-fig8-noise.png", fig8)])
 }
