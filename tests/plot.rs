@@ -48,7 +48,7 @@ fn a_folder_that_is_not_a_run_is_bad_input() {
 /// lockstep in the process, one run folder each, and each figure is written where it says.
 #[test]
 fn every_paper_figure_is_drawn() {
-    let cases: [(&str, &[&str]); 4] = [
+    let cases: [(&str, &[&str]); 5] = [
         ("pendulum", &["paper-003-fig3-angle.png", "paper-003-fig4-flywheel-speed.png"]),
         ("quadcopter", &["paper-001-fig17-mass-estimate.png"]),
         ("tiltrotor", &["paper-004-fig4-x-prior-error.png"]),

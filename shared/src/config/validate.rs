@@ -47,6 +47,16 @@ pub fn within_si(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchEr
     within(c, key, value, MAX_SI, "SI units")
 }
 
+/// Every element of `values` checked by `check` under `key.i` (the index as `--set` names it).
+pub fn each(
+    c: &LaunchConfig,
+    key: &str,
+    values: &[f64],
+    check: impl Fn(&LaunchConfig, &str, f64) -> Result<(), LaunchError>,
+) -> Result<(), LaunchError> {
+    values.iter().enumerate().try_for_each(|(i, v)| check(c, &format!("{key}.{i}"), *v))
+}
+
 /// An error unless `value` is in `range`; `what` names the unit ("integration steps per loop").
 pub fn in_range<T: PartialOrd + Display>(
     c: &LaunchConfig,

@@ -27,7 +27,7 @@ use self::params::Model;
 use self::plant::{FipPlant, PlantSection};
 use self::reference::{EllipseReference, ReferenceSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
-use crate::config::validate::{in_range, not_negative, positive, within, within_si};
+use crate::config::validate::{each, in_range, not_negative, positive, within, within_si};
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Scenario, ScenarioEntry, check_substeps,
 };
@@ -136,16 +136,6 @@ pub struct Fip {
 
 fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
     Ok(Box::new(Fip::from_config(c)?))
-}
-
-/// Every element of `values` checked by `check` under `key.i`.
-fn each(
-    c: &LaunchConfig,
-    key: &str,
-    values: &[f64],
-    check: fn(&LaunchConfig, &str, f64) -> Result<(), LaunchError>,
-) -> Result<(), LaunchError> {
-    values.iter().enumerate().try_for_each(|(i, v)| check(c, &format!("{key}.{i}"), *v))
 }
 
 impl Fip {

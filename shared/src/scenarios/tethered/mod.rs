@@ -26,7 +26,7 @@ use self::params::{Equilibrium, Model};
 use self::plant::{Body, PlantSection, TetheredPlant};
 use self::reference::{ReferenceSection, TetheredReference};
 use crate::config::launch::{LaunchConfig, LaunchError};
-use crate::config::validate::{in_range, not_negative, positive, within, within_si};
+use crate::config::validate::{each, in_range, not_negative, positive, within, within_si};
 use crate::model::reference::Reference;
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, Scenario, ScenarioEntry, check_substeps,
@@ -136,16 +136,6 @@ pub struct Tethered {
 
 fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
     Ok(Box::new(Tethered::from_config(c)?))
-}
-
-/// Every element of `values` checked by `check` under `key.i`.
-fn each<const N: usize>(
-    c: &LaunchConfig,
-    key: &str,
-    values: &[f64; N],
-    check: impl Fn(&LaunchConfig, &str, f64) -> Result<(), LaunchError>,
-) -> Result<(), LaunchError> {
-    values.iter().enumerate().try_for_each(|(i, v)| check(c, &format!("{key}.{i}"), *v))
 }
 
 /// A pole (or an observer root): real, negative, at most 1000 in magnitude.
