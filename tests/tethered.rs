@@ -262,6 +262,18 @@ fn the_nominal_case_runs_in_real_time() {
     }
 }
 
+/// A killed estimator restarts from its predecessor's observer state (a high-gain observer
+/// started afresh in flight peaks, and the vehicle was lost): the kill is detected, the stage
+/// restarted, and e_track stays within its limit.
+#[test]
+fn a_killed_estimator_resumes_its_observer() {
+    let r = run("tethered-kill", &["tethered", "--duration", "8", "--fault", "kill estimator at 5s"]);
+    assert_eq!(r.metric("lost"), 0.0, "{}", r.stdout());
+    let fault = &r.summary().faults[0];
+    assert!(fault.restarted_after_ms.is_some(), "{}", r.stdout());
+    assert!(fault.effect.as_ref().is_some_and(|e| e.within_limits), "{}", r.stdout());
+}
+
 #[test]
 fn bad_tethered_settings_name_the_key() {
     for (set, expected) in [

@@ -96,8 +96,11 @@ const MAX_SWEEP_VALUES: usize = 1000;
 /// The swept values, from `from` to `to` inclusive.
 fn values(from: f64, to: f64, step: f64) -> Vec<f64> {
     let n = ((to - from) / step + 1e-9).floor() as i64;
-    // Rounded to 12 decimals, so that 0.05 is not printed (and set) as 0.05000000000000002.
-    (0..=n.max(0)).map(|i| ((from + i as f64 * step) * 1e12).round() / 1e12).collect()
+    // Rounded to 12 significant digits, so that 0.05 is not printed (and set) as
+    // 0.05000000000000002.
+    (0..=n.max(0))
+        .map(|i| format!("{:.11e}", from + i as f64 * step).parse().expect("a formatted number parses"))
+        .collect()
 }
 
 /// The index of the fault a `faults.N.…` key belongs to.
@@ -382,6 +385,7 @@ mod tests {
         assert_eq!(values(0.0, 3.0, 1.0), [0.0, 1.0, 2.0, 3.0]);
         assert_eq!(values(0.0, 0.3, 0.1).len(), 4);
         assert_eq!(values(-0.1, 0.1, 0.05), [-0.1, -0.05, 0.0, 0.05, 0.1]);
+        assert_eq!(values(1e-14, 3e-14, 1e-14), [1e-14, 2e-14, 3e-14]);
         assert_eq!(swept_fault("faults.2.delay_ticks"), Some(2));
         assert_eq!(swept_fault("sensors.encoder.bias"), None);
         assert_eq!(value_text(31.0), "31");
