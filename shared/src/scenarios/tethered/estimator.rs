@@ -92,7 +92,8 @@ pub fn coefficients_of_roots(roots: &[f64]) -> Vec<f64> {
     p
 }
 
-fn wrap(angle: f64) -> f64 {
+/// The angle in (−π, π].
+pub fn wrap(angle: f64) -> f64 {
     let a = (angle + PI).rem_euclid(2.0 * PI) - PI;
     if a == -PI { PI } else { a }
 }

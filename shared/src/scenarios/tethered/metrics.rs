@@ -16,6 +16,7 @@
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
+use super::estimator::wrap;
 use super::reference::TetheredReference;
 use super::{layout, state};
 use crate::model::mean::Mean;
@@ -24,10 +25,6 @@ use crate::model::scenario::{Metrics, Row};
 
 /// The observer counts as converged within this of the true angles, rad (the bar).
 pub const CONVERGED_RAD: f64 = 1e-3;
-
-fn angle_error(a: f64, b: f64) -> f64 {
-    (a - b + PI).rem_euclid(2.0 * PI) - PI
-}
 
 pub struct TetheredMetrics {
     reference: TetheredReference,
@@ -98,8 +95,7 @@ impl Metrics for TetheredMetrics {
             self.etrack_max_phase3 = self.etrack_max_phase3.max(etrack);
         }
 
-        let errors =
-            [angle_error(e[layout::PHI], x[state::PHI]).abs(), angle_error(e[layout::THETA], x[state::THETA]).abs()];
+        let errors = [wrap(e[layout::PHI] - x[state::PHI]).abs(), wrap(e[layout::THETA] - x[state::THETA]).abs()];
         // NaN counts as off.
         if !errors.iter().all(|err| *err < CONVERGED_RAD) {
             self.last_unconverged_s = Some(t);
