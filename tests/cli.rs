@@ -142,16 +142,34 @@ fn bench_quick_writes_every_part() {
         assert!(report["floor_one_way_us"][mode]["n"].as_u64().unwrap() >= 1000, "{mode}");
     }
     let names: Vec<&str> = report["loops"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    let skipped: Vec<&str> = report["skipped"].as_array().unwrap().iter().map(|s| s.as_str().unwrap()).collect();
+    let cpus = report["machine"]["cpus"].as_u64().unwrap();
     for expected in [
         "looplab block",
         "looplab spin",
+        "looplab spin, pinned",
         "looplab adaptive",
         "looplab adaptive, pinned",
         "looplab adaptive 10 kHz",
         "looplab adaptive, monitor stopped",
         "unix socket + bincode (hand-written)",
     ] {
-        assert!(names.contains(&expected), "{expected} missing from {names:?}");
+        // Spinning needs a CPU per process of the loop; without them the part is named as skipped.
+        let ran = names.contains(&expected);
+        let said_skipped = skipped.iter().any(|s| s.starts_with(&format!("{expected}: needs 5 CPUs")));
+        assert_eq!((ran, said_skipped), (cpus >= 5 || !expected.contains("spin"), !ran), "{expected}: {names:?}");
+    }
+    // The physical floor and the hop's anatomy (this machine has two CPUs at least).
+    assert!(cpus >= 2);
+    let raw = &report["floor_raw_one_way_ns"];
+    assert!(raw["n"].as_u64().unwrap() >= 1000 && raw["p50"].as_f64().unwrap() > 0.0, "{raw}");
+    assert!(report["physical_limit_us"].as_f64().unwrap() > 4.0 * raw["p50"].as_f64().unwrap() / 1e3);
+    let anatomy = report["hop_anatomy"].as_array().unwrap();
+    assert_eq!(anatomy.len(), 3);
+    for row in anatomy {
+        for step in ["deliver", "wake", "seen", "take", "copy", "release"] {
+            assert!(row["steps_us"][step]["n"].as_u64().unwrap() >= 500, "{step}: {row}");
+        }
     }
     let baseline = report["loops"]
         .as_array()
@@ -163,14 +181,20 @@ fn bench_quick_writes_every_part() {
     assert!(baseline["end_to_end_us"]["n"].as_u64().unwrap() >= 990);
     let sizes: Vec<u64> = report["payload"].as_array().unwrap().iter().map(|p| p["bytes"].as_u64().unwrap()).collect();
     assert_eq!(sizes, (0..9).map(|i| 64u64 << (2 * i)).collect::<Vec<_>>());
-    assert!(report["lockstep_loops_per_s"].as_f64().unwrap() > 0.0);
-    assert!(report["in_process_loops_per_s"].as_f64().unwrap() > report["lockstep_loops_per_s"].as_f64().unwrap());
+    let auto = report["lockstep_auto"].as_str().unwrap();
+    assert_eq!(auto, if cpus >= 5 { "poll" } else { "block" });
+    for method in ["poll", "block"] {
+        let rate = report["lockstep_by_method"][method].as_f64().unwrap();
+        assert!(rate > 0.0 && rate < report["in_process_loops_per_s"].as_f64().unwrap(), "{method}: {rate}");
+    }
+    assert_eq!(report["lockstep_loops_per_s"], report["lockstep_by_method"][auto]);
     for chart in ["latency-cdf.png", "floor-cdf.png", "payload.png"] {
         // 900 wide; the CDFs' height grows with their legend's rows (one per curve).
         assert_eq!(png_size(&dir.join(chart)).0, 900, "{chart}");
     }
     let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(stdout.contains("÷ floor") && stdout.contains("zero copy"), "{stdout}");
+    assert!(stdout.contains("÷ limit") && stdout.contains("zero copy") && stdout.contains("hop anatomy"), "{stdout}");
+    assert!(stdout.contains(&format!("{cpus} CPUs")), "{stdout}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

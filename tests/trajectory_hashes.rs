@@ -172,6 +172,33 @@ const CASES: &[(&str, &[&str], &str)] = &[
         &["launch/tethered/6-noise.toml"],
         "7078068ca4d8bb0ca2332797ec7441f33b7ab2e2ae5a81598a33703db9d7d9b2",
     ),
+    // Lockstep polls or blocks (`wait.lockstep`, auto picks by the CPUs): how a process waits
+    // never changes what the loop computes.
+    (
+        "pendulum, lockstep polling",
+        &["pendulum", "--set", "wait.lockstep=poll"],
+        "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d",
+    ),
+    (
+        "pendulum, lockstep blocking",
+        &["pendulum", "--set", "wait.lockstep=block"],
+        "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d",
+    ),
+    (
+        "pendulum, lockstep polling, faults: delay controller, drop sensors, corrupt nan",
+        &[
+            "pendulum",
+            "--set",
+            "wait.lockstep=poll",
+            "--fault",
+            "delay controller by 3 ticks at 0.5s for 0.2s",
+            "--fault",
+            "drop sensors 20% at 0.8s for 0.3s",
+            "--fault",
+            "corrupt controller nan at 1.2s for 50ms",
+        ],
+        "c3f26b40252948db8fa59e00da87a0138d2ef8abdb866590c039b3927494a82e",
+    ),
     // In-loop faults in lockstep: applied by the processes by loop index, hence deterministic.
     (
         "pendulum, faults: delay controller, drop sensors, corrupt nan",

@@ -228,6 +228,20 @@ impl LaunchConfig {
         }
     }
 
+    /// The configuration with `wait.lockstep = "auto"` decided for a machine with `cpus` CPUs
+    /// (`WaitSettings::decided_for`), in the settings and in the document the run keeps.
+    pub fn with_wait_decided(&self, cpus: usize) -> Self {
+        let mut decided = self.clone();
+        decided.wait = self.wait.decided_for(cpus);
+        let lockstep: &str = decided.wait.lockstep.into();
+        if let toml::Value::Table(wait) =
+            decided.document.entry("wait").or_insert_with(|| toml::Value::Table(toml::Table::new()))
+        {
+            wait.insert("lockstep".into(), toml::Value::String(lockstep.into()));
+        }
+        decided
+    }
+
     /// The resolved document as TOML text, for the run folder.
     pub fn to_toml(&self) -> String {
         toml::to_string(&self.document).expect("a TOML table always serialises")
@@ -766,7 +780,8 @@ fn check_supervision(s: &Supervision, c: &LaunchConfig) -> Result<(), LaunchErro
 }
 
 fn check_wait(w: &WaitSettings, config: &LaunchConfig) -> Result<(), LaunchError> {
-    for (key, value) in [("wait.lead_us", w.lead_us), ("wait.spin_cap_us", w.spin_cap_us)] {
+    for (key, value) in [("wait.lead_us", Some(w.lead_us)), ("wait.spin_cap_us", w.spin_cap_us)] {
+        let Some(value) = value else { continue };
         if !(value.is_finite() && (0.0..=MAX_WAIT_US).contains(&value)) {
             return Err(config.error(key, format!("must be 0 to {MAX_WAIT_US} µs (a second), got {value}")));
         }

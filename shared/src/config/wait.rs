@@ -7,10 +7,16 @@
 //!   The process learns the plant's schedule and how long after a tick its input arrives, sleeps
 //!   on an absolute timer until `lead_us` before that, less how late its sleeps typically end
 //!   (learnt: a halted vCPU takes tens of µs to wake, a busy one a few), then polls, yielding the
-//!   CPU to whichever process has work, until the input is there; after `spin_cap_us` without
-//!   it, it blocks.
-//!   The wake-up from a halted vCPU then happens before the input arrives instead of after.
-//!   In lockstep there is no schedule to learn, and it blocks.
+//!   CPU to whichever process has work, until the input is there. An input that comes early
+//!   ends the sleep (it waits on the input's wake-up with the timer as its deadline), and one that
+//!   comes late is polled for up to `spin_cap_us` (default: one loop period) past its due time, so
+//!   that neither costs a halted-vCPU wake-up. Only an input missing for that long (its writer died
+//!   or stalls) makes it block, and it goes on blocking until inputs come again.
+//!   In lockstep there is no schedule to learn: see `lockstep`.
+//!
+//! Lockstep has no schedule, so each hop either blocks or polls (`lockstep`): polling needs a
+//! CPU per loop process, and `auto` polls when the machine has one for each process of the loop,
+//! the monitor's included.
 
 use serde::{Deserialize, Serialize};
 
@@ -31,6 +37,22 @@ impl Strategy {
     }
 }
 
+/// How the loop's processes wait in lockstep.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr)]
+#[serde(rename_all = "lowercase")]
+#[strum(serialize_all = "lowercase")]
+pub enum LockstepWait {
+    /// Poll when the machine has a CPU for every process of the loop, else block.
+    Auto,
+    /// Poll, yielding the CPU between looks, whatever the machine.
+    Poll,
+    /// Block in the WaitSet until the input's wake-up.
+    Block,
+}
+
+/// CPUs `LockstepWait::Auto` needs to poll: one per process of the loop, the monitor's included.
+pub const LOCKSTEP_POLL_MIN_CPUS: usize = Role::ALL.len();
+
 /// The longest `lead_us` and `spin_cap_us`, µs: a second, far beyond any loop period worth
 /// polling through.
 pub const MAX_WAIT_US: f64 = 1e6;
@@ -47,12 +69,15 @@ pub struct WaitSettings {
     /// Adaptive: wake up this long before the input is due, on top of how late this process's
     /// sleeps typically end (learnt), µs.
     pub lead_us: f64,
-    /// Adaptive: poll at most this long past the due time before blocking, µs.
-    pub spin_cap_us: f64,
+    /// Adaptive: poll at most this long past the due time before blocking, µs; absent, one loop
+    /// period.
+    pub spin_cap_us: Option<f64>,
     /// Pin the loop processes to CPUs so that consecutive stages sit on different CPUs (plant,
     /// sensors, estimator, controller on CPUs 0, 1, 2, 3, modulo the CPUs there are): each hop's
     /// reader then waits on another CPU than its writer's.
     pub pin: bool,
+    /// Lockstep: poll or block for each hop (`auto`: poll when there is a CPU per process).
+    pub lockstep: LockstepWait,
 }
 
 impl Default for WaitSettings {
@@ -64,8 +89,9 @@ impl Default for WaitSettings {
             estimator: None,
             controller: None,
             lead_us: 5.0,
-            spin_cap_us: 200.0,
+            spin_cap_us: None,
             pin: false,
+            lockstep: LockstepWait::Auto,
         }
     }
 }
@@ -80,6 +106,23 @@ impl WaitSettings {
             Role::Monitor => None,
         };
         own.unwrap_or(self.strategy)
+    }
+
+    /// `lockstep = "auto"` decided for a machine with `cpus` CPUs: the launcher writes it so into
+    /// the run's launch.toml, so that every process of the run waits, and wakes its reader, the
+    /// same way, and the run says which was used.
+    pub fn decided_for(&self, cpus: usize) -> Self {
+        let lockstep = if self.lockstep_polls(cpus) { LockstepWait::Poll } else { LockstepWait::Block };
+        Self { lockstep, ..self.clone() }
+    }
+
+    /// Whether lockstep polls on a machine with `cpus` CPUs.
+    pub fn lockstep_polls(&self, cpus: usize) -> bool {
+        match self.lockstep {
+            LockstepWait::Auto => cpus >= LOCKSTEP_POLL_MIN_CPUS,
+            LockstepWait::Poll => true,
+            LockstepWait::Block => false,
+        }
     }
 }
 

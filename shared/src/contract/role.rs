@@ -76,6 +76,11 @@ impl Role {
         }
     }
 
+    /// The loop process that waits on `topic` (none waits on the loop records).
+    pub fn reading(topic: Topic) -> Option<Role> {
+        Role::ALL.into_iter().find(|r| r.input() == Some(topic))
+    }
+
     /// The loop topic it publishes.
     pub fn output(self) -> Option<Topic> {
         match self {

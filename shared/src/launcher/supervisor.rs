@@ -75,7 +75,8 @@ pub fn run_with(
     run_dir: &Path,
     view: LiveView,
 ) -> Result<(Summary, Outcome)> {
-    Supervisor::run(config, scenario, binaries, run_dir, view)
+    let decided = config.with_wait_decided(crate::runtime::wait::available_cpus());
+    Supervisor::run(&decided, scenario, binaries, run_dir, view)
 }
 
 /// A process of the loop across its restarts.

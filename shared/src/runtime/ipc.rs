@@ -13,6 +13,7 @@
 //!   every loop of a deterministic run), for at most [`LOCKSTEP_BACKPRESSURE_LIMIT`], after which
 //!   the sample is dropped for that reader and counted.
 
+use std::cell::Cell;
 use std::collections::BTreeSet;
 use std::fmt::Debug;
 use std::path::PathBuf;
@@ -29,9 +30,13 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
 
 use crate::config::launch::Mode;
+use crate::contract::clock::now_ns;
+use crate::runtime::reader_state::ReaderState;
 use crate::runtime::signals::StopFlag;
+use crate::runtime::wait::sleep_until;
 
 /// Samples the monitor can fall behind by before it loses any (real-time mode); at 1 kHz that
 /// is a second of slack.
@@ -150,6 +155,13 @@ impl Ipc {
         })
     }
 
+    /// Whether `topic`'s reader may be asleep, shared by the reader and the writer.
+    fn reader_state(&self, topic: Topic) -> Result<ReaderState> {
+        let folder = run_folder(&self.run_id);
+        check_private(&folder)?;
+        ReaderState::open(&folder, topic)
+    }
+
     /// A publisher that, if `wake` is set, also wakes the topic's readers after each sample.
     pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(
         &self,
@@ -174,31 +186,34 @@ impl Ipc {
             .create()
             .map_err(|e| anyhow!("cannot create the {} publisher: {e:?}", topic.name()))?;
         let notifier = if wake {
-            Some(
-                self.event(topic)?
-                    .notifier_builder()
-                    .create()
-                    .map_err(|e| anyhow!("cannot create the {} notifier: {e:?}", topic.name()))?,
-            )
+            let notifier = self
+                .event(topic)?
+                .notifier_builder()
+                .create()
+                .map_err(|e| anyhow!("cannot create the {} notifier: {e:?}", topic.name()))?;
+            Some((notifier, self.reader_state(topic)?))
         } else {
             None
         };
         Ok(TopicPublisher { topic, publisher, notifier, counters })
     }
 
-    /// A reader for the next stage: a one-sample buffer (the newest wins in real-time mode)
-    /// and a listener that wakes it.
+    /// A reader for the next stage: a one-sample buffer (the newest wins in real-time mode),
+    /// and if it `listens` (its process ever blocks), a listener that wakes it.
     pub fn stage_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(
         &self,
         topic: Topic,
+        listens: bool,
     ) -> Result<TopicSubscriber<T>> {
         let mut subscriber = self.subscriber_with_buffer::<T>(topic, 1)?;
-        subscriber.listener = Some(
-            self.event(topic)?
+        if listens {
+            let listener = self
+                .event(topic)?
                 .listener_builder()
                 .create()
-                .map_err(|e| anyhow!("cannot create the {} listener: {e:?}", topic.name()))?,
-        );
+                .map_err(|e| anyhow!("cannot create the {} listener: {e:?}", topic.name()))?;
+            subscriber.listener = Some((listener, self.reader_state(topic)?));
+        }
         Ok(subscriber)
     }
 
@@ -222,7 +237,7 @@ impl Ipc {
             .buffer_size(buffer)
             .create()
             .map_err(|e| anyhow!("cannot create the {} subscriber: {e:?}", topic.name()))?;
-        Ok(TopicSubscriber { topic, service, subscriber, listener: None })
+        Ok(TopicSubscriber { topic, service, subscriber, listener: None, slept: Cell::new(false) })
     }
 }
 
@@ -241,19 +256,34 @@ struct BackpressureCounters {
 pub struct TopicPublisher<T: Debug + ZeroCopySend + 'static> {
     topic: Topic,
     publisher: Publisher<ipc::Service, T, ()>,
-    notifier: Option<Notifier<ipc::Service>>,
+    /// The notifier, and whether the reader may be asleep (it is woken only then).
+    notifier: Option<(Notifier<ipc::Service>, ReaderState)>,
     counters: Arc<BackpressureCounters>,
 }
 
 impl<T: Debug + ZeroCopySend + Copy + 'static> TopicPublisher<T> {
     /// Writes `value` into shared memory, delivers it, and wakes the readers.
     pub fn send(&self, value: &T) -> Result<()> {
+        self.deliver(value)?;
+        self.wake()
+    }
+
+    /// Writes `value` into a loan and delivers it to every reader, waking none.
+    pub fn deliver(&self, value: &T) -> Result<()> {
         let sample = self.publisher.loan_uninit().with_context(|| format!("loan on {}", self.topic.name()))?;
         sample.write_payload(*value).send().with_context(|| format!("send on {}", self.topic.name()))?;
         if self.counters.waiting.swap(false, Ordering::Relaxed) {
             self.counters.waited.fetch_add(1, Ordering::Relaxed);
         }
-        if let Some(notifier) = &self.notifier {
+        Ok(())
+    }
+
+    /// Wakes the topic's reader, if this publisher wakes it (it ever blocks) and it may be
+    /// asleep now: a polling reader sees the sample itself, and the syscall is saved.
+    pub fn wake(&self) -> Result<()> {
+        if let Some((notifier, reader)) = &self.notifier
+            && reader.needs_waking()
+        {
             notifier.notify().with_context(|| format!("notify on {}", self.topic.name()))?;
         }
         Ok(())
@@ -270,7 +300,10 @@ pub struct TopicSubscriber<T: Debug + ZeroCopySend + 'static> {
     topic: Topic,
     service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
     subscriber: Subscriber<ipc::Service, T, ()>,
-    listener: Option<Listener<ipc::Service>>,
+    /// The listener that wakes it, and the mark that tells the writer when it may sleep.
+    listener: Option<(Listener<ipc::Service>, ReaderState)>,
+    /// It has slept since it last consumed its wake-ups (only then can any be pending).
+    slept: Cell<bool>,
 }
 
 impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
@@ -296,20 +329,22 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
         Ok(self.subscriber.receive().context("receive")?.map(|sample| *sample))
     }
 
-    /// The next queued sample. Once the queue is empty it consumes the pending wake-ups and
-    /// looks once more, so that a sample landing later leaves a wake-up behind and a blocking
-    /// wait cannot miss it; consuming them after the data keeps that syscall off the latency.
-    /// `cleared` starts false for each drain.
-    pub fn next(&self, cleared: &mut bool) -> Result<Option<T>> {
-        if let Some(sample) = self.receive()? {
+    /// The next queued sample, in place in shared memory: its chunk goes back to the writer
+    /// when the sample is dropped, so a stage reads only what it uses and returns the chunk
+    /// after it has published, off the hop's path. Once the queue is empty it consumes the
+    /// pending wake-ups and looks once more, so that a sample landing later leaves a wake-up
+    /// behind and a blocking wait cannot miss it; consuming them after the data keeps that
+    /// syscall off the latency. `cleared` starts false for each drain.
+    pub fn next(&self, cleared: &mut bool) -> Result<Option<Sample<ipc::Service, T, ()>>> {
+        if let Some(sample) = self.subscriber.receive().context("receive")? {
             return Ok(Some(sample));
         }
-        if *cleared {
+        if *cleared || !self.slept.get() {
             return Ok(None);
         }
         self.clear_wakeups()?;
         *cleared = true;
-        self.receive()
+        self.subscriber.receive().context("receive")
     }
 
     /// Whether a sample is queued (without taking it).
@@ -318,16 +353,60 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
     }
 
     pub fn listener(&self) -> Option<&Listener<ipc::Service>> {
-        self.listener.as_ref()
+        self.listener.as_ref().map(|(listener, _)| listener)
+    }
+
+    /// Sleeps until this reader's next wake-up or `deadline_ns`, whichever comes first.
+    pub fn doze_until(&self, deadline_ns: u64) -> Result<()> {
+        match &self.listener {
+            Some((listener, _)) => self.asleep(|| doze(listener, deadline_ns)),
+            None => {
+                sleep_until(deadline_ns);
+                Ok(())
+            }
+        }
+    }
+
+    /// Runs `sleep` (a doze, or a block in the WaitSet) marked asleep, so that the writer wakes
+    /// this reader; skips it if a sample came in the meantime.
+    pub fn asleep(&self, sleep: impl FnOnce() -> Result<()>) -> Result<()> {
+        let Some((_, state)) = &self.listener else { return sleep() };
+        state.asleep();
+        self.slept.set(true);
+        if !self.has_samples()? {
+            sleep()?;
+        }
+        state.polling();
+        Ok(())
     }
 
     /// Consumes pending wake-ups, so that the next wait blocks until new data.
     pub fn clear_wakeups(&self) -> Result<()> {
-        if let Some(listener) = &self.listener {
+        if let Some((listener, _)) = &self.listener {
             listener.try_wait(|_| {}).map_err(|e| anyhow!("listener: {e:?}"))?;
         }
+        self.slept.set(false);
         Ok(())
     }
+}
+
+/// Sleeps until the listener's next wake-up or `deadline_ns` (CLOCK_MONOTONIC), whichever comes
+/// first, then consumes the wake-ups: a timed sleep that the input's arrival ends early.
+pub fn doze(listener: &Listener<ipc::Service>, deadline_ns: u64) -> Result<()> {
+    let left = deadline_ns.saturating_sub(now_ns());
+    if left > 0 {
+        let timeout = libc::timespec {
+            tv_sec: (left / 1_000_000_000) as libc::time_t,
+            tv_nsec: (left % 1_000_000_000) as libc::c_long,
+        };
+        // SAFETY: the descriptor belongs to the listener, alive for the call.
+        let fd = unsafe { listener.file_descriptor().native_handle() };
+        let mut pfd = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
+        // SAFETY: one valid pollfd and timeout; a signal ends the sleep early, which is harmless.
+        unsafe { libc::ppoll(&mut pfd, 1, &timeout, std::ptr::null()) };
+    }
+    listener.try_wait(|_| {}).map_err(|e| anyhow!("listener: {e:?}"))?;
+    Ok(())
 }
 
 /// iceoryx2's shared-memory folder on Linux (fixed when iceoryx2 is built); a tmpfs.

@@ -6,6 +6,7 @@ pub mod faults;
 pub mod in_process;
 pub mod ipc;
 pub mod plant;
+pub mod reader_state;
 pub mod relay;
 pub mod signals;
 pub mod snapshot;

@@ -27,10 +27,10 @@ use crate::contract::msg::*;
 use crate::contract::protocol::{ChildEvent, PlantReport};
 use crate::contract::role::{Role, Topic};
 use crate::model::scenario::Scenario;
-use crate::runtime::child::{Context, emit, wait, wait_for_line, waitset};
+use crate::runtime::child::{Context, WAIT_SLICE, emit, wait, wait_for_line, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
-use crate::runtime::wait::{ArrivalModel, Waiter};
+use crate::runtime::wait::{ArrivalModel, Waiter, method_of};
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.
@@ -293,20 +293,26 @@ impl PlantProcess {
 }
 
 pub fn run(context: &Context) -> Result<ChildEvent> {
-    let commands: TopicSubscriber<Command> = context.ipc.stage_subscriber(Topic::Command)?;
+    let (wait_settings, realtime) = (&context.config.wait, context.config.mode == Mode::Realtime);
+    let listens = method_of(wait_settings, Role::Plant, realtime).blocks();
+    let commands: TopicSubscriber<Command> = context.ipc.stage_subscriber(Topic::Command, listens)?;
+    let wake_sensors = method_of(wait_settings, Role::Sensors, realtime).blocks();
     let supervision = &context.config.supervision;
     let mut p = PlantProcess {
         core: PlantCore::new(&context.config, context.scenario.as_ref(), context.incarnation),
-        state_out: context.ipc.publisher(Topic::State, true)?,
+        state_out: context.ipc.publisher(Topic::State, wake_sensors)?,
         loop_out: context.ipc.publisher(Topic::Loop, false)?,
         snapshot: Snapshot::open(&context.run_id, Role::Plant.name())?,
     };
     let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.core.restore(&s)).is_some();
     p.report.restored_at = restored.then_some(p.k);
     let ws = waitset()?;
-    let _wake = ws
-        .attach_notification(commands.listener().expect("stage subscribers have a listener"))
-        .map_err(|e| anyhow!("cannot attach the command listener: {e:?}"))?;
+    let _wake = match commands.listener() {
+        Some(listener) => {
+            Some(ws.attach_notification(listener).map_err(|e| anyhow!("cannot attach the command listener: {e:?}"))?)
+        }
+        None => None,
+    };
     commands.connect(&context.stop)?;
     emit(&ChildEvent::Ready)?;
     if !wait_for_line(&context.stop, "start")? {
@@ -330,6 +336,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
             let stall_limit = Duration::from_secs_f64(supervision.lockstep_stall_s);
             emit(&ChildEvent::Started { start_ns: now_ns(), period_ns: 0, k: p.k })?;
             p.save();
+            let mut waiter = Waiter::new(&context.config.wait, Role::Plant, false, 0);
             'ticks: while p.k < loops && !context.stop.requested() {
                 if pauses.contains(&p.k) {
                     emit(&ChildEvent::Paused { k: p.k })?;
@@ -349,7 +356,13 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                         p.report.stalled_at = Some(p.k);
                         break 'ticks;
                     }
-                    wait(&ws)?;
+                    waiter.wait(
+                        None,
+                        now_ns() + WAIT_SLICE.as_nanos() as u64,
+                        || commands.has_samples(),
+                        |until| commands.doze_until(until),
+                        || commands.asleep(|| wait(&ws)),
+                    )?;
                     p.drain(&commands)?;
                 }
                 p.advance();
@@ -381,7 +394,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                 let first = TickTiming { scheduled_ns: start_ns + p.k * period_ns, wake_ns: woke, period_ns: 0 };
                 p.publish_state(first)?;
             }
-            let mut waiter = Waiter::new(&context.config.wait, Role::Plant, true);
+            let mut waiter = Waiter::new(&context.config.wait, Role::Plant, true, period_ns);
             while p.k < loops && !context.stop.requested() {
                 // Next: command k, if its state went out and it is not in yet, else the tick.
                 let next_tick = start_ns + (p.k + 1) * period_ns;
@@ -391,7 +404,8 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                     Some(command_due.unwrap_or(next_tick)),
                     next_tick,
                     || Ok(commands.has_samples()? || now_ns() >= next_tick),
-                    || wait(&ws),
+                    |until| commands.doze_until(until),
+                    || commands.asleep(|| wait(&ws)),
                 )?;
                 let woke = now_ns();
                 p.drain(&commands)?;
@@ -422,7 +436,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
             // Record the last commands even when they come late.
             let grace_end = now_ns() + LATE_COMMAND_GRACE.as_nanos() as u64;
             while p.report.commands < p.report.published && now_ns() < grace_end && !context.stop.requested() {
-                wait(&ws)?;
+                commands.asleep(|| wait(&ws))?;
                 p.drain(&commands)?;
             }
         }

@@ -15,17 +15,24 @@ use crate::runtime::child::{Context, WAIT_SLICE, wait, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
-use crate::runtime::wait::{ArrivalModel, Waiter};
+use crate::runtime::wait::{ArrivalModel, Waiter, method_of};
 
 /// Runs `task` as the process of `role` until a stop is requested.
 fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {
     let (input, output) = (role.input().expect("a stage has an input"), role.output().expect("and an output"));
-    let subscriber: TopicSubscriber<T::In> = context.ipc.stage_subscriber(input)?;
-    let publisher: TopicPublisher<T::Out> = context.ipc.publisher(output, true)?;
+    let (wait_settings, realtime) = (&context.config.wait, context.config.mode == Mode::Realtime);
+    let method = method_of(wait_settings, role, realtime);
+    let subscriber: TopicSubscriber<T::In> = context.ipc.stage_subscriber(input, method.blocks())?;
+    let reader = Role::reading(output).expect("every stage's output has a reader");
+    let publisher: TopicPublisher<T::Out> =
+        context.ipc.publisher(output, method_of(wait_settings, reader, realtime).blocks())?;
     let ws = waitset()?;
-    let _wake = ws
-        .attach_notification(subscriber.listener().expect("stage subscribers have a listener"))
-        .map_err(|e| anyhow!("cannot attach the {input} listener: {e:?}"))?;
+    let _wake = match subscriber.listener() {
+        Some(listener) => {
+            Some(ws.attach_notification(listener).map_err(|e| anyhow!("cannot attach the {input} listener: {e:?}"))?)
+        }
+        None => None,
+    };
     // The frozen state of the task survives a restart in the run's snapshot folder.
     let mut kept: Option<Snapshot<Calibration>> =
         if T::FREEZES { Some(Snapshot::open(&context.run_id, role.name())?) } else { None };
@@ -39,29 +46,39 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
     emit(&ChildEvent::Ready)?;
 
     let mut last_k: Option<u64> = None;
-    let realtime = context.config.mode == Mode::Realtime;
-    let mut waiter = Waiter::new(&context.config.wait, role, realtime);
-    let mut arrivals = ArrivalModel::new((context.config.dt() * 1e9).round() as u64);
+    let period_ns = (context.config.dt() * 1e9).round() as u64;
+    let mut waiter = Waiter::new(wait_settings, role, realtime, period_ns);
+    let mut arrivals = ArrivalModel::new(period_ns);
     while !context.stop.requested() {
         let due = last_k.and_then(|k| arrivals.due(k + 1));
         let slice_end = now_ns() + WAIT_SLICE.as_nanos() as u64;
-        waiter.wait(due, slice_end, || subscriber.has_samples(), || wait(&ws))?;
+        waiter.wait(
+            due,
+            slice_end,
+            || subscriber.has_samples(),
+            |until| subscriber.doze_until(until),
+            || subscriber.asleep(|| wait(&ws)),
+        )?;
         let mut cleared = false;
         while let Some(sample) = subscriber.next(&mut cleared)? {
             let received = now_ns();
-            let header = *sample.header();
+            let input: &T::In = &sample;
+            let header = *input.header();
             arrivals.observe(header.k, header.trace.plant_publish, received);
-            let handled = runner.handle(&sample);
-            if let (Some(kept), Some(frozen)) = (kept.as_mut(), runner.task.freeze()) {
-                kept.write(&frozen);
-            }
+            let handled = runner.handle(input);
             if let Some(hold) = handled.hold {
                 std::thread::sleep(hold);
             }
-            let Some(mut out) = handled.output else { continue };
-            out.header_mut().trace.stamp(role, received, now_ns());
-            publisher.send(&out)?;
-            last_k = Some(header.k);
+            if let Some(mut out) = handled.output {
+                out.header_mut().trace.stamp(role, received, now_ns());
+                publisher.send(&out)?;
+                last_k = Some(header.k);
+            }
+            // After the send, off the hop's path: the input's chunk goes back, the state is kept.
+            drop(sample);
+            if let (Some(kept), Some(frozen)) = (kept.as_mut(), runner.task.freeze()) {
+                kept.write(&frozen);
+            }
         }
     }
     let mut report = runner.report;

@@ -38,7 +38,7 @@ fn pin_in_loop_order(role: Role) {
     let Some(place) = role.slot() else {
         return;
     };
-    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cpus = available_cpus();
     // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET writes inside it.
     unsafe {
         let mut set: libc::cpu_set_t = std::mem::zeroed();
@@ -89,16 +89,59 @@ impl ArrivalModel {
     }
 }
 
-/// Waits for input with the process's strategy. `ready` says whether input is there;
-/// `block` waits in the WaitSet (for the input or the next timer).
+/// How a waiter waits: a real-time strategy, or lockstep's poll.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    Block,
+    Spin,
+    Adaptive,
+    /// Lockstep: look, yield the CPU, look again.
+    Poll,
+}
+
+impl Method {
+    /// Whether a process waiting this way ever blocks: only then does its writer need to wake it
+    /// (a poller sees the sample itself, and both notify syscalls are saved).
+    pub fn blocks(self) -> bool {
+        matches!(self, Method::Block | Method::Adaptive)
+    }
+}
+
+/// How `role` waits: its own strategy in real time, lockstep's poll or block otherwise.
+pub fn method_of(settings: &WaitSettings, role: Role, realtime: bool) -> Method {
+    if realtime {
+        settings.for_process(role).into()
+    } else if settings.lockstep_polls(available_cpus()) {
+        Method::Poll
+    } else {
+        Method::Block
+    }
+}
+
+impl From<Strategy> for Method {
+    fn from(strategy: Strategy) -> Self {
+        match strategy {
+            Strategy::Block => Method::Block,
+            Strategy::Spin => Method::Spin,
+            Strategy::Adaptive => Method::Adaptive,
+        }
+    }
+}
+
+/// Waits for input with the process's method. `ready` says whether input is there; `doze`
+/// sleeps until the input's wake-up or a deadline, whichever comes first; `block` waits in the
+/// WaitSet (for the input or the next timer).
 pub struct Waiter {
-    pub strategy: Strategy,
+    pub method: Method,
     lead_ns: u64,
     cap_ns: u64,
     pub counts: WaitCounts,
     /// How late the last sleeps woke up, ns: a halted vCPU takes tens of µs to wake, a busy
     /// one a few; the sleep is cut short by what this process typically needs.
     oversleeps: VecDeque<u64>,
+    /// Adaptive: the last wait polled its whole cap without input (its writer died, stalls or
+    /// the run ends), so waits block until an input comes again rather than poll for nothing.
+    silent: bool,
 }
 
 impl Waiter {
@@ -113,64 +156,87 @@ impl Waiter {
         recent[recent.len() * 3 / 4]
     }
 
-    /// The waiter of a loop process: its own strategy (adaptive blocks in lockstep, which has
-    /// no schedule to learn), pinned to its core if the settings say so.
-    pub fn new(settings: &WaitSettings, role: Role, realtime: bool) -> Self {
-        let strategy = match settings.for_process(role) {
-            Strategy::Adaptive if !realtime => Strategy::Block,
-            s => s,
-        };
+    /// The waiter of a loop process: its own strategy in real time, lockstep's poll or block
+    /// (`wait.lockstep`) otherwise, pinned to its core if the settings say so. `period_ns` is
+    /// the loop's period.
+    pub fn new(settings: &WaitSettings, role: Role, realtime: bool, period_ns: u64) -> Self {
+        let method = method_of(settings, role, realtime);
         if settings.pin {
             pin_in_loop_order(role);
         }
-        Self::with_strategy(settings, strategy)
+        Self::with_method(settings, method, period_ns)
     }
 
-    /// A waiter with the given strategy and the settings' lead and cap (the bench's ends).
-    pub fn with_strategy(settings: &WaitSettings, strategy: Strategy) -> Self {
-        if strategy == Strategy::Adaptive {
+    /// A waiter with the given method and the settings' lead and cap (the bench's ends).
+    pub fn with_method(settings: &WaitSettings, method: Method, period_ns: u64) -> Self {
+        if method == Method::Adaptive {
             tighten_timer_slack();
         }
         Self {
-            strategy,
+            method,
             // At most MAX_WAIT_US (checked at load): well within u64 nanoseconds.
             lead_ns: (settings.lead_us * 1e3) as u64,
-            cap_ns: (settings.spin_cap_us * 1e3) as u64,
+            cap_ns: settings.spin_cap_us.map_or(period_ns, |us| (us * 1e3) as u64),
             counts: WaitCounts::default(),
             oversleeps: VecDeque::with_capacity(OVERSLEEP_WINDOW),
+            silent: false,
         }
     }
 
-    /// Waits until `ready()`, `until_ns` (for spin; block and adaptive leave that to the
-    /// WaitSet's timers), or `block` returns.
+    /// Waits until `ready()`, `slice_end_ns` (for spin and poll; block and adaptive leave that
+    /// to the WaitSet's timers), or `block` returns.
     pub fn wait(
         &mut self,
         due_ns: Option<u64>,
         slice_end_ns: u64,
         mut ready: impl FnMut() -> Result<bool>,
-        block: impl FnOnce() -> Result<()>,
+        mut doze: impl FnMut(u64) -> Result<()>,
+        mut block: impl FnMut() -> Result<()>,
     ) -> Result<()> {
-        match self.strategy {
-            Strategy::Block => block(),
-            Strategy::Spin => {
+        match self.method {
+            Method::Block => block(),
+            Method::Spin => {
                 while !ready()? && now_ns() < slice_end_ns {
                     std::hint::spin_loop();
                 }
                 Ok(())
             }
-            Strategy::Adaptive => {
+            Method::Poll => {
+                while !ready()? && now_ns() < slice_end_ns {
+                    // SAFETY: sched_yield has no preconditions.
+                    unsafe { libc::sched_yield() };
+                }
+                Ok(())
+            }
+            Method::Adaptive => {
                 let Some(due) = due_ns else { return block() };
                 if ready()? {
                     return Ok(());
                 }
-                let wake_at = due.saturating_sub(self.lead_ns + self.typical_oversleep());
-                if wake_at > now_ns() {
-                    sleep_until(wake_at);
-                    if self.oversleeps.len() == OVERSLEEP_WINDOW {
-                        self.oversleeps.pop_front();
-                    }
-                    self.oversleeps.push_back(now_ns() - wake_at);
+                if self.silent {
+                    block()?;
+                    self.silent = !ready()?;
+                    return Ok(());
                 }
+                // Doze until shortly before the input is due; an input that comes earlier ends
+                // the doze with its wake-up.
+                let wake_at = due.saturating_sub(self.lead_ns + self.typical_oversleep());
+                while now_ns() < wake_at {
+                    doze(wake_at)?;
+                    let woke = now_ns();
+                    if ready()? {
+                        self.counts.caught += 1;
+                        return Ok(());
+                    }
+                    if woke >= wake_at {
+                        if self.oversleeps.len() == OVERSLEEP_WINDOW {
+                            self.oversleeps.pop_front();
+                        }
+                        self.oversleeps.push_back(woke - wake_at);
+                    }
+                }
+                // Then poll, yielding the CPU to whichever process has work. A late input is
+                // polled for (a blocking wake-up of a halted vCPU costs more than the polling).
                 let give_up = due.max(now_ns()) + self.cap_ns;
                 while now_ns() < give_up {
                     if ready()? {
@@ -181,10 +247,18 @@ impl Waiter {
                     unsafe { libc::sched_yield() };
                 }
                 self.counts.blocked += 1;
-                block()
+                self.silent = true;
+                block()?;
+                self.silent = !ready()?;
+                Ok(())
             }
         }
     }
+}
+
+/// The CPUs this process may run on.
+pub fn available_cpus() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
 #[cfg(test)]
@@ -204,9 +278,78 @@ mod tests {
     }
 
     #[test]
-    fn lockstep_blocks_whatever_the_strategy() {
-        let s = WaitSettings { strategy: Strategy::Adaptive, ..Default::default() };
-        assert_eq!(Waiter::new(&s, Role::Sensors, true).strategy, Strategy::Adaptive);
-        assert_eq!(Waiter::new(&s, Role::Sensors, false).strategy, Strategy::Block);
+    fn lockstep_polls_or_blocks_by_its_own_key() {
+        use crate::config::wait::LockstepWait;
+        let mut s = WaitSettings { strategy: Strategy::Adaptive, ..Default::default() };
+        assert_eq!(Waiter::new(&s, Role::Sensors, true, 1_000_000).method, Method::Adaptive);
+        s.lockstep = LockstepWait::Poll;
+        assert_eq!(Waiter::new(&s, Role::Sensors, false, 1_000_000).method, Method::Poll);
+        s.lockstep = LockstepWait::Block;
+        assert_eq!(Waiter::new(&s, Role::Sensors, false, 1_000_000).method, Method::Block);
+        s.lockstep = LockstepWait::Auto;
+        let auto = Waiter::new(&s, Role::Sensors, false, 1_000_000).method;
+        assert_eq!(auto == Method::Poll, available_cpus() >= crate::config::wait::LOCKSTEP_POLL_MIN_CPUS);
+    }
+
+    /// An input that arrives while the process dozes ends the doze; one that is late is polled
+    /// for, and only one that stays away for the whole cap makes the waiter block, after which it
+    /// blocks until inputs come again. (Times far from now, or a cap of zero, keep the test free
+    /// of the clock.)
+    #[test]
+    fn adaptive_catches_early_and_late_inputs_and_blocks_only_when_silent() {
+        use std::cell::Cell;
+        const HOUR: u64 = 3_600_000_000_000;
+        // What the waiter did: blocks, looks, dozes; `arrive` sets whether input is there.
+        let (blocks, looks, dozes, here) = (Cell::new(0), Cell::new(0), Cell::new(0), Cell::new(false));
+        let ready = || {
+            looks.set(looks.get() + 1);
+            Ok(here.get())
+        };
+        let block = || {
+            blocks.set(blocks.get() + 1);
+            Ok(())
+        };
+        let doze_brings_input = |_| {
+            dozes.set(dozes.get() + 1);
+            here.set(true);
+            Ok(())
+        };
+        let reset = || {
+            here.set(false);
+            looks.set(0);
+        };
+
+        let patient = WaitSettings { spin_cap_us: Some(3.6e9), ..Default::default() };
+        let mut w = Waiter::with_method(&patient, Method::Adaptive, 1_000_000);
+        // Early: the doze ends with the input's wake-up.
+        w.wait(Some(now_ns() + HOUR), u64::MAX, ready, doze_brings_input, block).unwrap();
+        assert_eq!((w.counts.caught, blocks.get(), dozes.get()), (1, 0, 1));
+        // Late: due already, there on the 100th look.
+        reset();
+        let late = || {
+            looks.set(looks.get() + 1);
+            Ok(looks.get() >= 100)
+        };
+        w.wait(Some(now_ns()), u64::MAX, late, |_| Ok(()), block).unwrap();
+        assert_eq!((w.counts.caught, w.counts.blocked, blocks.get(), looks.get()), (2, 0, 0, 100));
+
+        // Missing for the whole cap: a block; while silent, every wait blocks at once.
+        reset();
+        let impatient = WaitSettings { spin_cap_us: Some(0.0), ..Default::default() };
+        let mut w = Waiter::with_method(&impatient, Method::Adaptive, 1_000_000);
+        w.wait(Some(now_ns()), u64::MAX, ready, |_| Ok(()), block).unwrap();
+        assert_eq!((w.counts.blocked, blocks.get()), (1, 1));
+        reset();
+        w.wait(Some(now_ns() + HOUR), u64::MAX, ready, |_| panic!("no doze while silent"), block).unwrap();
+        assert_eq!((blocks.get(), looks.get()), (2, 2));
+        // An input that comes ends the silence: the next wait dozes again.
+        let block_brings_input = || {
+            here.set(true);
+            Ok(())
+        };
+        w.wait(Some(now_ns()), u64::MAX, ready, |_| Ok(()), block_brings_input).unwrap();
+        reset();
+        w.wait(Some(now_ns() + HOUR), u64::MAX, ready, doze_brings_input, || panic!("not silent")).unwrap();
+        assert_eq!(dozes.get(), 2);
     }
 }

@@ -2,17 +2,27 @@
 //! what one would write by hand, measured in one invocation with the parts interleaved (each
 //! round runs every part once) so that drift on a shared machine hits them alike.
 //!
-//! 1. The floor: a two-process iceoryx2 ping-pong with the loop's message size, per wait mode.
+//! 1. The floors: the physical one (one cache line passed between two pinned processes, the
+//!    least any hop can cost here), and a two-process iceoryx2 ping-pong with the loop's message
+//!    size, per wait mode. The loop's physical limit is four physical hops plus the stages' own
+//!    compute time.
+//!    Where a hop's time goes: the loop's own ports timed step by step (`anatomy`).
 //! 2. The LoopLab loop (pendulum, real time, 1 kHz, monitor running) per wait mode, and the
 //!    adaptive mode at 10 kHz.
 //! 3. The baseline: the same four-stage loop over Unix sockets with bincode, blocking reads.
 //! 4. The monitor's cost: its CPU next to the loop's, and the loop with the monitor stopped.
 //! 5. Zero copy: one-way latency against payload size, iceoryx2 against the Unix socket.
-//! 6. Lockstep speed against the same four stages called in one process (the ceiling).
+//! 6. Lockstep speed, polling and blocking, against the same four stages called in one process
+//!    (the ceiling).
 //! 7. The machine: CPUs, kernel, load, and the timer's own wake-up error at 1 kHz.
+//!
+//! A part that needs more CPUs than the machine has (spinning needs one per spinning process) is
+//! skipped and named as such.
 
+pub mod anatomy;
 pub mod codec;
 pub mod pingpong;
+pub mod raw_floor;
 pub mod restarts;
 pub mod uds_loop;
 
@@ -26,7 +36,7 @@ use serde::Serialize;
 
 use self::pingpong::Transport;
 use crate::config::launch::Override;
-use crate::config::wait::Strategy;
+use crate::config::wait::{LockstepWait, Strategy, WaitSettings};
 use crate::contract::clock::{TickTimer, now_ns};
 use crate::contract::msg::PlantState;
 use crate::contract::role::Role;
@@ -65,11 +75,16 @@ pub struct Dist {
 }
 
 impl Dist {
+    /// The distribution of nanosecond values, in µs.
     fn of(sorted: &[u64]) -> Self {
+        Self::scaled(sorted, 1e-3)
+    }
+
+    fn scaled(sorted: &[u64], unit: f64) -> Self {
         if sorted.is_empty() {
             return Self::default();
         }
-        let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize] as f64 / 1e3;
+        let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize] as f64 * unit;
         Self { n: sorted.len(), p50: at(0.5), p90: at(0.9), p99: at(0.99), p999: at(0.999), max: at(1.0) }
     }
 }
@@ -83,6 +98,8 @@ pub struct LoopBench {
     pub end_to_end_us: Dist,
     /// plant→sensors, sensors→estimator, estimator→controller, controller→plant.
     pub hops_us: [Dist; 4],
+    /// Per loop, the three stages' own time, receive to publish, summed.
+    pub stage_compute_us: Dist,
     /// Per process, percent of one core.
     pub cpu_percent: BTreeMap<String, f64>,
     /// Of the loop's processes (the monitor apart).
@@ -114,12 +131,27 @@ pub struct BenchReport {
     pub quick: bool,
     pub rounds: usize,
     pub machine: Machine,
+    /// The parts not run, each with why (too few CPUs).
+    pub skipped: Vec<String>,
+    /// The physical floor: one cache line passed between two processes pinned to two CPUs,
+    /// paced at 1 kHz, one way, in ns (the same percentiles as the other floors).
+    pub floor_raw_one_way_ns: Option<Dist>,
     /// One-way iceoryx2 hop with the loop's message size (PlantState), paced at 1 kHz.
     pub floor_one_way_us: BTreeMap<String, Dist>,
+    /// The loop's physical limit: 4 × the raw floor's p50 plus the stages' compute time (the
+    /// least median among the 1 kHz configurations), µs.
+    pub physical_limit_us: Option<f64>,
     pub message_bytes: usize,
+    /// A hop through the loop's ports, step by step (needs 2 CPUs).
+    pub hop_anatomy: Vec<anatomy::AnatomyRow>,
     pub loops: Vec<LoopBench>,
     pub payload: Vec<PayloadPoint>,
+    /// Through the five processes, with the method `lockstep = "auto"` picks on this machine.
     pub lockstep_loops_per_s: f64,
+    /// The method auto picks here: poll or block.
+    pub lockstep_auto: String,
+    /// Through the five processes, per method.
+    pub lockstep_by_method: BTreeMap<String, f64>,
     pub in_process_loops_per_s: f64,
     pub wall_time_s: f64,
 }
@@ -219,6 +251,7 @@ impl LoopAccumulator {
         let cpu_percent: BTreeMap<String, f64> =
             self.cpu_s.iter().map(|(role, v)| (role.name().to_owned(), percent(*v))).collect();
         let loop_cpu_percent = self.cpu_s.iter().filter(|(role, _)| role.in_loop()).map(|(_, v)| percent(*v)).sum();
+        let compute = self.traces.iter().map(|s| (s[2] + s[4] + s[6]).saturating_sub(s[1] + s[3] + s[5])).collect();
         LoopBench {
             name: name.into(),
             rate_hz,
@@ -226,6 +259,7 @@ impl LoopAccumulator {
             deadline_misses: self.misses,
             end_to_end_us: Dist::of(&e2e),
             hops_us: [hop(0, 1), hop(2, 3), hop(4, 5), hop(6, 7)],
+            stage_compute_us: Dist::of(&sorted(compute)),
             cpu_percent,
             loop_cpu_percent,
             e2e,
@@ -245,7 +279,14 @@ struct LoopConfig {
     pin: bool,
 }
 
-const LOOP_CONFIGS: [LoopConfig; 6] = [
+impl LoopConfig {
+    /// Spinning takes a CPU per loop process, and the monitor needs one of its own.
+    fn needs_cpus(&self) -> usize {
+        if self.strategy == Strategy::Spin { Role::ALL.len() } else { 1 }
+    }
+}
+
+const LOOP_CONFIGS: [LoopConfig; 7] = [
     LoopConfig {
         name: "looplab block",
         label: "block",
@@ -261,6 +302,14 @@ const LOOP_CONFIGS: [LoopConfig; 6] = [
         rate_hz: 1000.0,
         stop_monitor: false,
         pin: false,
+    },
+    LoopConfig {
+        name: "looplab spin, pinned",
+        label: "spin-pinned",
+        strategy: Strategy::Spin,
+        rate_hz: 1000.0,
+        stop_monitor: false,
+        pin: true,
     },
     LoopConfig {
         name: "looplab adaptive",
@@ -327,6 +376,20 @@ fn looplab_run(out: &Path, c: &LoopConfig, seconds: f64, binaries: &Binaries) ->
     Ok((summary, dir))
 }
 
+/// Loops per second of a lockstep run of the pendulum through the five processes, with the given
+/// `wait.lockstep`.
+fn lockstep_run(out: &Path, method: &str, seconds: f64, binaries: &Binaries) -> Result<f64> {
+    let sets = ["mode=lockstep".to_string(), format!("duration_s={seconds:?}"), format!("wait.lockstep={method}")];
+    let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
+    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
+    let dir = crate::launcher::create_run_dir(Some(&out.join(format!("lockstep-{method}"))), "pendulum")?;
+    let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
+    if outcome == Outcome::Interrupted {
+        return Err(Interrupted.into());
+    }
+    Ok(summary.loops_per_s)
+}
+
 /// The in-process twin (`runtime::in_process`: the same plant core, stage runners and tasks in
 /// one thread, nothing recorded): the ceiling of lockstep speed.
 fn in_process_loops_per_s(loops: u64, stop: &StopFlag) -> Result<f64> {
@@ -379,7 +442,24 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     eprintln!("looplab bench: {rounds} round(s) of {segment} s per loop configuration; writing {}", out.display());
 
     let machine = machine(if quick { 500 } else { 3000 })?;
+    let cpus = machine.cpus;
+    let mut skipped = Vec::new();
+    let floor_modes: Vec<Strategy> = MODES.into_iter().filter(|m| *m != Strategy::Spin || cpus >= 2).collect();
+    if cpus < 2 {
+        skipped.push("the raw floor and the spinning ping-pong: need 2 CPUs".to_owned());
+    }
+    let loop_configs: Vec<&LoopConfig> = LOOP_CONFIGS
+        .iter()
+        .filter(|c| {
+            let enough = cpus >= c.needs_cpus();
+            if !enough {
+                skipped.push(format!("{}: needs {} CPUs", c.name, c.needs_cpus()));
+            }
+            enough
+        })
+        .collect();
     let floor_rounds = if quick { 500 } else { 2000 };
+    let mut raw_floor = Vec::new();
     let mut floor: BTreeMap<String, Vec<u64>> = BTreeMap::new();
     let mut ours: BTreeMap<&'static str, LoopAccumulator> = BTreeMap::new();
     let mut baseline = LoopAccumulator::default();
@@ -387,12 +467,16 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let progress = crate::tools::sweep::progress_bar(rounds as u64 + 2, "parts");
     for round in 0..rounds {
         progress.suspend(|| eprintln!("  round {} of {rounds}", round + 1));
-        for mode in MODES {
+        if cpus >= 2 {
+            raw_floor.extend(raw_floor::measure(&exe, run_id, 1_000_000, floor_rounds)?);
+            check(&stop)?;
+        }
+        for &mode in &floor_modes {
             let series = pingpong::ping(&setup, Transport::Iox, mode, message_bytes, floor_rounds, 1_000_000)?;
             floor.entry(mode.name().into()).or_default().extend(series.one_way_ns);
             check(&stop)?;
         }
-        for c in &LOOP_CONFIGS {
+        for c in &loop_configs {
             let (summary, dir) = looplab_run(&out, c, segment, &binaries)?;
             ours.entry(c.name).or_default().add_run(&summary, &dir)?;
         }
@@ -409,6 +493,14 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
         progress.inc(1);
     }
 
+    let hop_anatomy = if cpus >= 2 {
+        progress.suspend(|| eprintln!("  hop anatomy"));
+        anatomy::measure(run_id, floor_rounds)?
+    } else {
+        skipped.push("the hop anatomy: needs 2 CPUs".to_owned());
+        Vec::new()
+    };
+    check(&stop)?;
     progress.suspend(|| eprintln!("  payload sweep"));
     let sizes: Vec<usize> = (0..9).map(|i| 64usize << (2 * i)).collect();
     let samples = if quick { 40 } else { 300 };
@@ -427,30 +519,43 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     progress.inc(1);
     progress.suspend(|| eprintln!("  lockstep speed"));
     let lockstep_seconds = if quick { 3.0 } else { 20.0 };
-    let sets = ["mode=lockstep".to_string(), format!("duration_s={lockstep_seconds:?}")];
-    let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
-    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
-    let dir = crate::launcher::create_run_dir(Some(&out.join("lockstep")), "pendulum")?;
-    let (lockstep, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), &binaries, &dir, true)?;
-    if outcome == Outcome::Interrupted {
-        return Err(Interrupted.into());
+    let auto = if WaitSettings::default().lockstep_polls(cpus) { LockstepWait::Poll } else { LockstepWait::Block };
+    let mut lockstep_by_method = BTreeMap::new();
+    for method in [LockstepWait::Poll, LockstepWait::Block] {
+        let name: &'static str = method.into();
+        lockstep_by_method.insert(name.to_owned(), lockstep_run(&out, name, lockstep_seconds, &binaries)?);
     }
     let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 }, &stop)?;
     progress.finish_and_clear();
 
     let mut loops: Vec<LoopBench> =
         LOOP_CONFIGS.iter().filter_map(|c| ours.remove(c.name).map(|acc| acc.finish(c.name, c.rate_hz))).collect();
+    let floor_raw_one_way_ns = (!raw_floor.is_empty()).then(|| Dist::scaled(&sorted(raw_floor), 1.0));
+    // The least median compute of the 1 kHz configurations: the stages at their quickest.
+    let compute = loops
+        .iter()
+        .filter(|l| l.rate_hz == 1000.0 && l.loops > 0)
+        .map(|l| l.stage_compute_us.p50)
+        .fold(f64::INFINITY, f64::min);
+    let physical_limit_us =
+        floor_raw_one_way_ns.as_ref().filter(|_| compute.is_finite()).map(|raw| 4.0 * raw.p50 / 1e3 + compute);
     loops.push(baseline.finish("unix socket + bincode (hand-written)", 1000.0));
     let report = BenchReport {
         started_at: chrono::Utc::now().to_rfc3339(),
         quick,
         rounds,
         machine,
+        skipped,
+        floor_raw_one_way_ns,
+        physical_limit_us,
         floor_one_way_us: floor.iter().map(|(k, v)| (k.clone(), Dist::of(&sorted(v.clone())))).collect(),
         message_bytes,
+        hop_anatomy,
         loops,
         payload,
-        lockstep_loops_per_s: lockstep.loops_per_s,
+        lockstep_loops_per_s: lockstep_by_method.get(<&str>::from(auto)).copied().unwrap_or(f64::NAN),
+        lockstep_auto: <&str>::from(auto).to_owned(),
+        lockstep_by_method,
         in_process_loops_per_s: in_process,
         wall_time_s: began.elapsed().as_secs_f64(),
     };
@@ -492,25 +597,69 @@ fn render(r: &BenchReport) -> String {
     );
     let t = &m.timer_wake_error_us;
     let _ = writeln!(s, "  timer wake-up error at 1 kHz (µs): p50 {:.1}, p99 {:.1}, max {:.1}", t.p50, t.p99, t.max);
-    let _ = writeln!(s, "\n  floor: one-way iceoryx2 hop, {} B, paced at 1 kHz (µs)", r.message_bytes);
-    let _ = writeln!(s, "    {:<10}{:>8}{:>9}{:>9}{:>9}", "mode", "p50", "p90", "p99", "p99.9");
+    for part in &r.skipped {
+        let _ = writeln!(s, "  skipped (this machine has {} CPUs): {part}", m.cpus);
+    }
+    let _ = writeln!(s, "\n  floors: one-way hop, paced at 1 kHz (µs)");
+    let _ = writeln!(s, "    {:<34}{:>8}{:>9}{:>9}{:>9}", "hop", "p50", "p90", "p99", "p99.9");
+    if let Some(d) = &r.floor_raw_one_way_ns {
+        let raw = "one cache line, pinned (physical)";
+        let _ = writeln!(
+            s,
+            "    {raw:<34}{:>8.2}{:>9.2}{:>9.2}{:>9.2}",
+            d.p50 / 1e3,
+            d.p90 / 1e3,
+            d.p99 / 1e3,
+            d.p999 / 1e3
+        );
+    }
     for (mode, d) in &r.floor_one_way_us {
-        let _ = writeln!(s, "    {mode:<10}{:>8.2}{:>9.2}{:>9.2}{:>9.2}", d.p50, d.p90, d.p99, d.p999);
+        let name = format!("iceoryx2, {} B, {mode}", r.message_bytes);
+        let _ = writeln!(s, "    {name:<34}{:>8.2}{:>9.2}{:>9.2}{:>9.2}", d.p50, d.p90, d.p99, d.p999);
+    }
+    if !r.hop_anatomy.is_empty() {
+        let _ =
+            writeln!(s, "\n  hop anatomy: the loop's ports, pinned writer → spinning pinned reader, 1 kHz (p50, µs)");
+        let _ = write!(s, "    {:<36}", "variant");
+        for step in anatomy::STEPS {
+            let _ = write!(s, "{step:>9}");
+        }
+        let _ = writeln!(s, "{:>9}{:>9}", "before", "now");
+        for row in &r.hop_anatomy {
+            let _ = write!(s, "    {:<36}", format!("{} ({} B)", row.variant, row.message_bytes));
+            for step in anatomy::STEPS {
+                let _ = write!(s, "{:>9.2}", row.steps_us[step].p50);
+            }
+            let _ = writeln!(s, "{:>9.2}{:>9.2}", row.hop_before_us.p50, row.hop_now_us.p50);
+        }
+        let _ = writeln!(
+            s,
+            "    seen from the start of deliver; before = to release (copied out, released before the stage ran); now = to take"
+        );
     }
     let floor4 = r.floor_one_way_us.get("spin").map_or(f64::NAN, |d| 4.0 * d.p50);
     let baseline = r.loops.iter().find(|l| l.name.starts_with("unix")).map_or(f64::NAN, |l| l.end_to_end_us.p50);
+    let limit = r.physical_limit_us.unwrap_or(f64::NAN);
     let _ = writeln!(s, "\n  loop: end to end (µs); floor = 4 spin hops = {floor4:.2} µs");
+    if let (Some(raw), Some(limit)) = (&r.floor_raw_one_way_ns, r.physical_limit_us) {
+        let _ = writeln!(
+            s,
+            "  physical limit = 4 raw hops ({:.2} µs) + the stages' compute ({:.2} µs) = {limit:.2} µs",
+            4.0 * raw.p50 / 1e3,
+            limit - 4.0 * raw.p50 / 1e3
+        );
+    }
     let _ = writeln!(
         s,
-        "    {:<36}{:>8}{:>9}{:>9}{:>9}{:>10}{:>9}{:>10}{:>10}",
-        "configuration", "p50", "p99", "p99.9", "max", "misses", "CPU %", "÷ floor", "÷ socket"
+        "    {:<36}{:>8}{:>9}{:>9}{:>9}{:>10}{:>9}{:>10}{:>10}{:>10}",
+        "configuration", "p50", "p99", "p99.9", "max", "misses", "CPU %", "÷ floor", "÷ limit", "÷ socket"
     );
     for l in &r.loops {
         let e = &l.end_to_end_us;
         let misses = format!("{:.2}%", 100.0 * l.deadline_misses as f64 / l.loops.max(1) as f64);
         let _ = writeln!(
             s,
-            "    {:<36}{:>8.1}{:>9.1}{:>9.1}{:>9.1}{:>10}{:>9.1}{:>10.1}{:>10.2}",
+            "    {:<36}{:>8.1}{:>9.1}{:>9.1}{:>9.1}{:>10}{:>9.1}{:>10.1}{:>10.1}{:>10.2}",
             l.name,
             e.p50,
             e.p99,
@@ -519,13 +668,21 @@ fn render(r: &BenchReport) -> String {
             misses,
             l.loop_cpu_percent,
             e.p50 / floor4,
+            e.p50 / limit,
             e.p50 / baseline
         );
     }
-    let _ = writeln!(s, "    hops p50 (µs): plant→sensors, sensors→estimator, estimator→controller, controller→plant");
+    let _ = writeln!(
+        s,
+        "    p50 (µs): hops plant→sensors, sensors→estimator, estimator→controller, controller→plant; stages' compute"
+    );
     for l in &r.loops {
         let h = &l.hops_us;
-        let _ = writeln!(s, "    {:<36}{:>8.1}{:>8.1}{:>8.1}{:>8.1}", l.name, h[0].p50, h[1].p50, h[2].p50, h[3].p50);
+        let _ = writeln!(
+            s,
+            "    {:<36}{:>8.1}{:>8.1}{:>8.1}{:>8.1}{:>10.1}",
+            l.name, h[0].p50, h[1].p50, h[2].p50, h[3].p50, l.stage_compute_us.p50
+        );
     }
     if let Some(monitor) =
         r.loops.iter().find(|l| l.name == "looplab adaptive").and_then(|l| l.cpu_percent.get(Role::Monitor.name()))
@@ -544,13 +701,12 @@ fn render(r: &BenchReport) -> String {
             p.unix_socket_us.p50 / p.iceoryx2_us.p50
         );
     }
-    let _ = writeln!(
-        s,
-        "\n  lockstep: {:.0} loops/s through the five processes; {:.0} loops/s in one process (ceiling), ratio {:.3}",
-        r.lockstep_loops_per_s,
-        r.in_process_loops_per_s,
-        r.lockstep_loops_per_s / r.in_process_loops_per_s
-    );
+    let _ = writeln!(s, "\n  lockstep, loops/s: {:.0} in one process (the ceiling)", r.in_process_loops_per_s);
+    for (method, rate) in &r.lockstep_by_method {
+        let auto = if *method == r.lockstep_auto { ", what auto picks here" } else { "" };
+        let ratio = rate / r.in_process_loops_per_s;
+        let _ = writeln!(s, "    {method:<6}{rate:>10.0} through the five processes (÷ ceiling {ratio:.3}){auto}");
+    }
     let _ = writeln!(s, "  wall time {:.0} s", r.wall_time_s);
     s
 }

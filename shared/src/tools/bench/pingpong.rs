@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use super::codec;
 use crate::config::wait::{Strategy, WaitSettings};
 use crate::contract::clock::now_ns;
-use crate::runtime::ipc::{retry, run_config};
+use crate::runtime::ipc::{doze, retry, run_config};
 use crate::runtime::wait::{ArrivalModel, Waiter, sleep_until};
 
 /// Bytes at the start of every message: sequence, ping sent, echo received, echo sent.
@@ -39,6 +39,8 @@ const SLICE: Duration = Duration::from_millis(100);
 pub enum Transport {
     Iox,
     Uds,
+    /// One cache line in shared memory, both ends pinned (`super::raw_floor`).
+    Raw,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -55,6 +57,9 @@ pub struct EchoArgs {
     pub max_bytes: usize,
     #[arg(long)]
     pub socket: Option<PathBuf>,
+    /// Raw: the CPU the echo pins itself to.
+    #[arg(long, default_value_t = 1)]
+    pub cpu: usize,
 }
 
 fn write_stamps(bytes: &mut [u8], stamps: [u64; 4]) {
@@ -136,6 +141,7 @@ impl IoxEnd {
             due,
             slice_end,
             || self.subscriber.has_samples().map_err(|e| anyhow!("{e:?}")),
+            |until| doze(&self.listener, until),
             || self.listener.timed_wait(|_| {}, SLICE).map(|_| ()).map_err(|e| anyhow!("listener: {e:?}")),
         )?;
         let sample = self.subscriber.receive().map_err(|e| anyhow!("receive: {e:?}"))?;
@@ -171,10 +177,11 @@ fn read_frame(stream: &mut UnixStream, buffer: &mut Vec<u8>) -> Result<Frame> {
 /// The child's side: answers every ping until the end marker.
 pub fn echo_main(args: &EchoArgs) -> Result<()> {
     match args.transport {
+        Transport::Raw => super::raw_floor::echo_main(&args.run_id, args.cpu),
         Transport::Iox => {
             let end = IoxEnd::open(&args.run_id, "pong", "ping", args.max_bytes)?;
             let settings = WaitSettings { strategy: args.mode, ..Default::default() };
-            let mut waiter = Waiter::with_strategy(&settings, settings.strategy);
+            let mut waiter = Waiter::with_method(&settings, args.mode.into(), args.period_ns);
             let mut arrivals = ArrivalModel::new(args.period_ns.max(1));
             let mut last: Option<u64> = None;
             println!("ready");
@@ -263,7 +270,7 @@ pub fn ping(
             let mut ready = String::new();
             std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.take().expect("piped")), &mut ready)?;
             let settings = WaitSettings { strategy: mode, ..Default::default() };
-            let mut waiter = Waiter::with_strategy(&settings, settings.strategy);
+            let mut waiter = Waiter::with_method(&settings, mode.into(), period_ns);
             let mut arrivals = ArrivalModel::new(period_ns.max(1));
             // iceoryx2 connects lazily: make sure both directions are up before the first ping.
             use iceoryx2::port::update_connections::UpdateConnections;
@@ -329,6 +336,7 @@ pub fn ping(
             child.wait()?;
             let _ = std::fs::remove_file(&socket);
         }
+        Transport::Raw => return Err(anyhow!("the raw floor has its own ping: raw_floor::measure")),
     }
     if stop.requested() {
         return Err(crate::runtime::signals::Interrupted.into());
