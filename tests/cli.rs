@@ -165,7 +165,7 @@ fn bench_quick_writes_every_part() {
     assert!(raw["n"].as_u64().unwrap() >= 1000 && raw["p50"].as_f64().unwrap() > 0.0, "{raw}");
     assert!(report["physical_limit_us"].as_f64().unwrap() > 4.0 * raw["p50"].as_f64().unwrap() / 1e3);
     let anatomy = report["hop_anatomy"].as_array().unwrap();
-    assert_eq!(anatomy.len(), 3);
+    assert_eq!(anatomy.len(), 4);
     for row in anatomy {
         for step in ["deliver", "wake", "seen", "take", "copy", "release"] {
             assert!(row["steps_us"][step]["n"].as_u64().unwrap() >= 500, "{step}: {row}");

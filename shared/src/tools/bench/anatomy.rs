@@ -56,16 +56,28 @@ struct ReaderStamps {
     released: AtomicU64,
 }
 
-/// Runs the three variants, `rounds` hops each, in the bench's run `run_id`.
+/// The loop's period, ns: between two messages the writer sleeps, as a 1 kHz plant does.
+const PACED: u64 = 1_000_000;
+
+/// Runs the variants, `rounds` hops each, in the bench's run `run_id`: paced at 1 kHz, and back
+/// to back (caches warm, the CPUs never idle).
 pub fn measure(run_id: &str, rounds: usize) -> Result<Vec<AnatomyRow>> {
     Ok(vec![
-        variant::<PlantState>(run_id, "state, monitor reading", Topic::State, true, rounds)?,
-        variant::<PlantState>(run_id, "state, no monitor", Topic::State, false, rounds)?,
-        variant::<Measurements>(run_id, "measurements, monitor reading", Topic::Measurements, true, rounds)?,
+        variant::<PlantState>(run_id, "state, monitor reading", Topic::State, true, PACED, rounds)?,
+        variant::<PlantState>(run_id, "state, no monitor", Topic::State, false, PACED, rounds)?,
+        variant::<Measurements>(run_id, "measurements, monitor reading", Topic::Measurements, true, PACED, rounds)?,
+        variant::<PlantState>(run_id, "state, monitor reading, back to back", Topic::State, true, 0, rounds)?,
     ])
 }
 
-fn variant<T: Message>(run_id: &str, name: &str, topic: Topic, monitor: bool, rounds: usize) -> Result<AnatomyRow> {
+fn variant<T: Message>(
+    run_id: &str,
+    name: &str,
+    topic: Topic,
+    monitor: bool,
+    period: u64,
+    rounds: usize,
+) -> Result<AnatomyRow> {
     let (near, far) = two_cpus().ok_or_else(|| anyhow!("the hop anatomy needs two CPUs"))?;
     let stamps = Arc::new(ReaderStamps::default());
     let done = Arc::new(AtomicBool::new(false));
@@ -75,7 +87,7 @@ fn variant<T: Message>(run_id: &str, name: &str, topic: Topic, monitor: bool, ro
         std::thread::spawn(move || read::<T>(&run_id, far, topic, &stamps, &done, &ready))
     };
     let before = pin_to(near);
-    let written = write::<T>(run_id, topic, monitor, rounds, &stamps, &ready);
+    let written = write::<T>(run_id, topic, monitor, period, rounds, &stamps, &ready);
     restore(&before);
     done.store(true, Ordering::Relaxed);
     let read = reader.join().map_err(|_| anyhow!("the anatomy's reader panicked"))?;
@@ -100,11 +112,12 @@ fn variant<T: Message>(run_id: &str, name: &str, topic: Topic, monitor: bool, ro
     })
 }
 
-/// The writer: one message per period, timed step by step; returns per hop the six steps, ns.
+/// The writer: one message per period (0: back to back), timed step by step; returns per hop the six steps, ns.
 fn write<T: Message>(
     run_id: &str,
     topic: Topic,
     monitor: bool,
+    period: u64,
     rounds: usize,
     stamps: &ReaderStamps,
     ready: &AtomicBool,
@@ -121,10 +134,11 @@ fn write<T: Message>(
     }
     let warm_up = (rounds / 10).clamp(5, 200) as u64;
     let mut steps = Vec::with_capacity(rounds);
-    let period = 1_000_000;
     let first = now_ns() + 10_000_000;
     for k in 1..=warm_up + rounds as u64 {
-        sleep_until(first + k * period);
+        if period > 0 {
+            sleep_until(first + k * period);
+        }
         let mut message = T::default();
         message.header_mut().k = k;
         let start = now_ns();

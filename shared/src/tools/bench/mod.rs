@@ -619,14 +619,14 @@ fn render(r: &BenchReport) -> String {
     }
     if !r.hop_anatomy.is_empty() {
         let _ =
-            writeln!(s, "\n  hop anatomy: the loop's ports, pinned writer → spinning pinned reader, 1 kHz (p50, µs)");
-        let _ = write!(s, "    {:<36}", "variant");
+            writeln!(s, "\n  hop anatomy: the loop's ports, pinned writer → spinning pinned reader (p50, µs)");
+        let _ = write!(s, "    {:<46}", "variant");
         for step in anatomy::STEPS {
             let _ = write!(s, "{step:>9}");
         }
         let _ = writeln!(s, "{:>9}{:>9}", "before", "now");
         for row in &r.hop_anatomy {
-            let _ = write!(s, "    {:<36}", format!("{} ({} B)", row.variant, row.message_bytes));
+            let _ = write!(s, "    {:<46}", format!("{} ({} B)", row.variant, row.message_bytes));
             for step in anatomy::STEPS {
                 let _ = write!(s, "{:>9.2}", row.steps_us[step].p50);
             }
