@@ -36,7 +36,7 @@ use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::runtime::reader_state::ReaderState;
 use crate::runtime::signals::StopFlag;
-use crate::runtime::wait::sleep_until;
+use crate::runtime::wait::{sleep_until, timespec};
 
 /// Samples the monitor can fall behind by before it loses any (real-time mode); at 1 kHz that
 /// is a second of slack.
@@ -395,10 +395,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
 pub fn doze(listener: &Listener<ipc::Service>, deadline_ns: u64) -> Result<()> {
     let left = deadline_ns.saturating_sub(now_ns());
     if left > 0 {
-        let timeout = libc::timespec {
-            tv_sec: (left / 1_000_000_000) as libc::time_t,
-            tv_nsec: (left % 1_000_000_000) as libc::c_long,
-        };
+        let timeout = timespec(left);
         // SAFETY: the descriptor belongs to the listener, alive for the call.
         let fd = unsafe { listener.file_descriptor().native_handle() };
         let mut pfd = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };

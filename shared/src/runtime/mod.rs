@@ -8,6 +8,7 @@ pub mod ipc;
 pub mod plant;
 pub mod reader_state;
 pub mod relay;
+pub mod shared_file;
 pub mod signals;
 pub mod snapshot;
 pub mod task;

@@ -13,9 +13,10 @@
 use std::path::Path;
 use std::sync::atomic::{AtomicU32, Ordering, fence};
 
-use anyhow::{Context as _, Result, anyhow};
+use anyhow::Result;
 
 use crate::contract::role::Topic;
+use crate::runtime::shared_file::{self, Open};
 
 const ASLEEP: u32 = 0;
 const POLLING: u32 = 1;
@@ -27,35 +28,8 @@ pub struct ReaderState {
 impl ReaderState {
     /// Opens (or creates) the state of `topic`'s reader in the run's private `folder`.
     pub fn open(folder: &Path, topic: Topic) -> Result<Self> {
-        use std::os::fd::AsRawFd;
-        use std::os::unix::fs::OpenOptionsExt;
         let path = folder.join(format!("{}.reader", topic.name()));
-        let file = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .mode(0o600)
-            .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-            .open(&path)
-            .with_context(|| format!("open {}", path.display()))?;
-        let size = std::mem::size_of::<AtomicU32>();
-        file.set_len(size as u64).with_context(|| format!("size {}", path.display()))?;
-        // SAFETY: a shared mapping of a file sized to hold the word, only ever accessed
-        // atomically, and mapped for the life of `ReaderState`.
-        let ptr = unsafe {
-            libc::mmap(
-                std::ptr::null_mut(),
-                size,
-                libc::PROT_READ | libc::PROT_WRITE,
-                libc::MAP_SHARED,
-                file.as_raw_fd(),
-                0,
-            )
-        };
-        if ptr == libc::MAP_FAILED {
-            return Err(anyhow!("cannot map {}: {}", path.display(), std::io::Error::last_os_error()));
-        }
+        let ptr = shared_file::map(&path, std::mem::size_of::<AtomicU32>(), Open::OrCreate)?;
         Ok(Self { word: ptr.cast() })
     }
 
@@ -85,7 +59,7 @@ impl ReaderState {
 impl Drop for ReaderState {
     fn drop(&mut self) {
         // SAFETY: unmaps what `open` mapped.
-        unsafe { libc::munmap(self.word as *mut libc::c_void, std::mem::size_of::<AtomicU32>()) };
+        unsafe { shared_file::unmap(self.word as *mut libc::c_void, std::mem::size_of::<AtomicU32>()) };
     }
 }
 

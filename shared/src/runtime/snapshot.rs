@@ -7,7 +7,9 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context as _, Result, anyhow};
+use anyhow::Result;
+
+use crate::runtime::shared_file::{self, Open};
 
 fn path(run_id: &str, process: &str) -> Result<PathBuf> {
     let folder = crate::runtime::ipc::run_folder(run_id);
@@ -32,36 +34,8 @@ pub struct Snapshot<T> {
 impl<T: Copy> Snapshot<T> {
     /// Opens (or creates) the snapshot of `process` in run `run_id`.
     pub fn open(run_id: &str, process: &str) -> Result<Self> {
-        use std::os::fd::AsRawFd;
-        use std::os::unix::fs::OpenOptionsExt;
-        let path = &path(run_id, process)?;
-        // Never through a symbolic link, and the owner's alone.
-        let file = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .mode(0o600)
-            .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-            .open(path)
-            .with_context(|| format!("open {}", path.display()))?;
-        let size = std::mem::size_of::<[Slot<T>; 2]>();
-        file.set_len(size as u64).with_context(|| format!("size {}", path.display()))?;
-        // SAFETY: a shared mapping of a file we sized to hold the slots; only one process at a
-        // time writes it, and it stays mapped for the life of `Snapshot`.
-        let ptr = unsafe {
-            libc::mmap(
-                std::ptr::null_mut(),
-                size,
-                libc::PROT_READ | libc::PROT_WRITE,
-                libc::MAP_SHARED,
-                file.as_raw_fd(),
-                0,
-            )
-        };
-        if ptr == libc::MAP_FAILED {
-            return Err(anyhow!("cannot map {}: {}", path.display(), std::io::Error::last_os_error()));
-        }
+        // Only one process at a time writes it; it stays mapped for the life of `Snapshot`.
+        let ptr = shared_file::map(&path(run_id, process)?, std::mem::size_of::<[Slot<T>; 2]>(), Open::OrCreate)?;
         let mut snapshot = Self { slots: ptr.cast(), sequence: 0 };
         snapshot.sequence = snapshot.newest().map_or(0, |(seq, _)| seq);
         Ok(snapshot)
@@ -99,7 +73,7 @@ impl<T: Copy> Snapshot<T> {
 impl<T> Drop for Snapshot<T> {
     fn drop(&mut self) {
         // SAFETY: unmaps what `open` mapped.
-        unsafe { libc::munmap(self.slots.cast(), std::mem::size_of::<[Slot<T>; 2]>()) };
+        unsafe { shared_file::unmap(self.slots.cast(), std::mem::size_of::<[Slot<T>; 2]>()) };
     }
 }
 

@@ -16,12 +16,14 @@ const WINDOW: usize = 64;
 /// Sleeps remembered to learn how late this process wakes.
 const OVERSLEEP_WINDOW: usize = 32;
 
+/// `ns` nanoseconds as a timespec.
+pub fn timespec(ns: u64) -> libc::timespec {
+    libc::timespec { tv_sec: (ns / 1_000_000_000) as libc::time_t, tv_nsec: (ns % 1_000_000_000) as libc::c_long }
+}
+
 /// Sleeps until an absolute CLOCK_MONOTONIC time.
 pub fn sleep_until(deadline_ns: u64) {
-    let ts = libc::timespec {
-        tv_sec: (deadline_ns / 1_000_000_000) as libc::time_t,
-        tv_nsec: (deadline_ns % 1_000_000_000) as libc::c_long,
-    };
+    let ts = timespec(deadline_ns);
     // SAFETY: a valid timespec; an interrupted sleep just returns early, which is harmless.
     unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
 }

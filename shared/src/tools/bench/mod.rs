@@ -618,8 +618,7 @@ fn render(r: &BenchReport) -> String {
         let _ = writeln!(s, "    {name:<34}{:>8.2}{:>9.2}{:>9.2}{:>9.2}", d.p50, d.p90, d.p99, d.p999);
     }
     if !r.hop_anatomy.is_empty() {
-        let _ =
-            writeln!(s, "\n  hop anatomy: the loop's ports, pinned writer → spinning pinned reader (p50, µs)");
+        let _ = writeln!(s, "\n  hop anatomy: the loop's ports, pinned writer → spinning pinned reader (p50, µs)");
         let _ = write!(s, "    {:<46}", "variant");
         for step in anatomy::STEPS {
             let _ = write!(s, "{step:>9}");

@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, anyhow, bail};
 
 use crate::contract::clock::now_ns;
+use crate::runtime::shared_file::{self, Open};
 use crate::runtime::signals::StopFlag;
 use crate::runtime::wait::sleep_until;
 
@@ -46,35 +47,9 @@ struct Mapping {
 
 impl Mapping {
     fn map(path: &Path, create: bool) -> Result<Self> {
-        use std::os::unix::fs::OpenOptionsExt;
-        let file = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create_new(create)
-            .mode(0o600)
-            .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-            .open(path)
-            .with_context(|| format!("open {}", path.display()))?;
-        let len = std::mem::size_of::<Lines>();
-        if create {
-            file.set_len(len as u64)?;
-        }
-        // SAFETY: a shared mapping of a file we opened, as long as Lines; the kernel zero-fills
-        // it, which is a valid Lines (all counters zero).
-        let ptr = unsafe {
-            libc::mmap(
-                std::ptr::null_mut(),
-                len,
-                libc::PROT_READ | libc::PROT_WRITE,
-                libc::MAP_SHARED,
-                std::os::fd::AsRawFd::as_raw_fd(&file),
-                0,
-            )
-        };
-        if ptr == libc::MAP_FAILED {
-            return Err(anyhow!("mmap {}: {}", path.display(), std::io::Error::last_os_error()));
-        }
-        Ok(Self { lines: ptr.cast() })
+        let open = if create { Open::New } else { Open::Existing };
+        // Zero-filled when new: a valid Lines, every counter zero.
+        Ok(Self { lines: shared_file::map(path, std::mem::size_of::<Lines>(), open)?.cast() })
     }
 
     fn lines(&self) -> &Lines {
@@ -86,7 +61,7 @@ impl Mapping {
 impl Drop for Mapping {
     fn drop(&mut self) {
         // SAFETY: unmaps what `map` mapped.
-        unsafe { libc::munmap(self.lines as *mut libc::c_void, std::mem::size_of::<Lines>()) };
+        unsafe { shared_file::unmap(self.lines as *mut libc::c_void, std::mem::size_of::<Lines>()) };
     }
 }
 
