@@ -50,8 +50,9 @@ pub enum LockstepWait {
     Block,
 }
 
-/// CPUs `LockstepWait::Auto` needs to poll: one per process of the loop, the monitor's included.
-pub const LOCKSTEP_POLL_MIN_CPUS: usize = Role::ALL.len();
+/// CPUs that every process of the loop polling needs: one each, the monitor's included (lockstep's
+/// `auto` polls only with them, and the bench spins only with them).
+pub const CPUS_TO_POLL: usize = Role::ALL.len();
 
 /// The longest `lead_us` and `spin_cap_us`, µs: a second, far beyond any loop period worth
 /// polling through.
@@ -119,7 +120,7 @@ impl WaitSettings {
     /// Whether lockstep polls on a machine with `cpus` CPUs.
     pub fn lockstep_polls(&self, cpus: usize) -> bool {
         match self.lockstep {
-            LockstepWait::Auto => cpus >= LOCKSTEP_POLL_MIN_CPUS,
+            LockstepWait::Auto => cpus >= CPUS_TO_POLL,
             LockstepWait::Poll => true,
             LockstepWait::Block => false,
         }

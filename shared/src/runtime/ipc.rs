@@ -31,6 +31,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
+use iceoryx2::waitset::{WaitSet, WaitSetGuard};
 
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
@@ -354,6 +355,17 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
 
     pub fn listener(&self) -> Option<&Listener<ipc::Service>> {
         self.listener.as_ref().map(|(listener, _)| listener)
+    }
+
+    /// Attaches this reader's listener, if it has one, to the process's WaitSet.
+    pub fn attach_to<'w, 'a>(
+        &'a self,
+        ws: &'w WaitSet<ipc::Service>,
+    ) -> Result<Option<WaitSetGuard<'w, 'a, ipc::Service>>> {
+        self.listener()
+            .map(|listener| ws.attach_notification(listener))
+            .transpose()
+            .map_err(|e| anyhow!("cannot attach the {} listener: {e:?}", self.topic.name()))
     }
 
     /// Sleeps until this reader's next wake-up or `deadline_ns`, whichever comes first.

@@ -30,7 +30,7 @@ use crate::model::scenario::Scenario;
 use crate::runtime::child::{Context, WAIT_SLICE, emit, wait, wait_for_line, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
-use crate::runtime::wait::{ArrivalModel, Waiter, method_of};
+use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks};
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.
@@ -294,25 +294,19 @@ impl PlantProcess {
 
 pub fn run(context: &Context) -> Result<ChildEvent> {
     let (wait_settings, realtime) = (&context.config.wait, context.config.mode == Mode::Realtime);
-    let listens = method_of(wait_settings, Role::Plant, realtime).blocks();
+    let listens = reader_blocks(wait_settings, Topic::Command, realtime);
     let commands: TopicSubscriber<Command> = context.ipc.stage_subscriber(Topic::Command, listens)?;
-    let wake_sensors = method_of(wait_settings, Role::Sensors, realtime).blocks();
     let supervision = &context.config.supervision;
     let mut p = PlantProcess {
         core: PlantCore::new(&context.config, context.scenario.as_ref(), context.incarnation),
-        state_out: context.ipc.publisher(Topic::State, wake_sensors)?,
+        state_out: context.ipc.publisher(Topic::State, reader_blocks(wait_settings, Topic::State, realtime))?,
         loop_out: context.ipc.publisher(Topic::Loop, false)?,
         snapshot: Snapshot::open(&context.run_id, Role::Plant.name())?,
     };
     let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.core.restore(&s)).is_some();
     p.report.restored_at = restored.then_some(p.k);
     let ws = waitset()?;
-    let _wake = match commands.listener() {
-        Some(listener) => {
-            Some(ws.attach_notification(listener).map_err(|e| anyhow!("cannot attach the command listener: {e:?}"))?)
-        }
-        None => None,
-    };
+    let _wake = commands.attach_to(&ws)?;
     commands.connect(&context.stop)?;
     emit(&ChildEvent::Ready)?;
     if !wait_for_line(&context.stop, "start")? {

@@ -2,7 +2,7 @@
 //! loop trace and publish. The sensors, estimator and controller processes are this loop around
 //! their task.
 
-use anyhow::{Result, anyhow};
+use anyhow::Result;
 
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
@@ -15,24 +15,18 @@ use crate::runtime::child::{Context, WAIT_SLICE, wait, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
-use crate::runtime::wait::{ArrivalModel, Waiter, method_of};
+use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks};
 
 /// Runs `task` as the process of `role` until a stop is requested.
 fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {
     let (input, output) = (role.input().expect("a stage has an input"), role.output().expect("and an output"));
     let (wait_settings, realtime) = (&context.config.wait, context.config.mode == Mode::Realtime);
-    let method = method_of(wait_settings, role, realtime);
-    let subscriber: TopicSubscriber<T::In> = context.ipc.stage_subscriber(input, method.blocks())?;
-    let reader = Role::reading(output).expect("every stage's output has a reader");
+    let subscriber: TopicSubscriber<T::In> =
+        context.ipc.stage_subscriber(input, reader_blocks(wait_settings, input, realtime))?;
     let publisher: TopicPublisher<T::Out> =
-        context.ipc.publisher(output, method_of(wait_settings, reader, realtime).blocks())?;
+        context.ipc.publisher(output, reader_blocks(wait_settings, output, realtime))?;
     let ws = waitset()?;
-    let _wake = match subscriber.listener() {
-        Some(listener) => {
-            Some(ws.attach_notification(listener).map_err(|e| anyhow!("cannot attach the {input} listener: {e:?}"))?)
-        }
-        None => None,
-    };
+    let _wake = subscriber.attach_to(&ws)?;
     // The frozen state of the task survives a restart in the run's snapshot folder.
     let mut kept: Option<Snapshot<Calibration>> =
         if T::FREEZES { Some(Snapshot::open(&context.run_id, role.name())?) } else { None };

@@ -8,7 +8,7 @@ use anyhow::Result;
 use crate::config::wait::{Strategy, WaitSettings};
 use crate::contract::clock::now_ns;
 use crate::contract::protocol::WaitCounts;
-use crate::contract::role::Role;
+use crate::contract::role::{Role, Topic};
 
 /// Observations kept to estimate how soon after a tick the input arrives.
 const WINDOW: usize = 64;
@@ -120,6 +120,12 @@ pub fn method_of(settings: &WaitSettings, role: Role, realtime: bool) -> Method 
     }
 }
 
+/// Whether the loop process that waits on `topic` ever blocks: then it listens for wake-ups and
+/// its writer sends them.
+pub fn reader_blocks(settings: &WaitSettings, topic: Topic, realtime: bool) -> bool {
+    Role::reading(topic).is_some_and(|reader| method_of(settings, reader, realtime).blocks())
+}
+
 impl From<Strategy> for Method {
     fn from(strategy: Strategy) -> Self {
         match strategy {
@@ -215,46 +221,55 @@ impl Waiter {
                 if ready()? {
                     return Ok(());
                 }
-                if self.silent {
-                    block()?;
-                    self.silent = !ready()?;
-                    return Ok(());
-                }
-                // Doze until shortly before the input is due; an input that comes earlier ends
-                // the doze with its wake-up.
-                let wake_at = due.saturating_sub(self.lead_ns + self.typical_oversleep());
-                while now_ns() < wake_at {
-                    doze(wake_at)?;
-                    let woke = now_ns();
-                    if ready()? {
+                if !self.silent {
+                    if self.doze_then_poll(due, &mut ready, &mut doze)? {
                         self.counts.caught += 1;
                         return Ok(());
                     }
-                    if woke >= wake_at {
-                        if self.oversleeps.len() == OVERSLEEP_WINDOW {
-                            self.oversleeps.pop_front();
-                        }
-                        self.oversleeps.push_back(woke - wake_at);
-                    }
+                    // Polled the whole cap for nothing: the writer is silent.
+                    self.counts.blocked += 1;
+                    self.silent = true;
                 }
-                // Then poll, yielding the CPU to whichever process has work. A late input is
-                // polled for (a blocking wake-up of a halted vCPU costs more than the polling).
-                let give_up = due.max(now_ns()) + self.cap_ns;
-                while now_ns() < give_up {
-                    if ready()? {
-                        self.counts.caught += 1;
-                        return Ok(());
-                    }
-                    // SAFETY: sched_yield has no preconditions.
-                    unsafe { libc::sched_yield() };
-                }
-                self.counts.blocked += 1;
-                self.silent = true;
                 block()?;
                 self.silent = !ready()?;
                 Ok(())
             }
         }
+    }
+
+    /// Adaptive: dozes until shortly before the input is due (an input that comes earlier ends
+    /// the doze with its wake-up), then polls, yielding the CPU to whichever process has work,
+    /// until the cap past the due time. A late input is polled for: a blocking wake-up of a
+    /// halted vCPU costs more than the polling. Returns whether the input came.
+    fn doze_then_poll(
+        &mut self,
+        due: u64,
+        ready: &mut impl FnMut() -> Result<bool>,
+        doze: &mut impl FnMut(u64) -> Result<()>,
+    ) -> Result<bool> {
+        let wake_at = due.saturating_sub(self.lead_ns + self.typical_oversleep());
+        while now_ns() < wake_at {
+            doze(wake_at)?;
+            let woke = now_ns();
+            if ready()? {
+                return Ok(true);
+            }
+            if woke >= wake_at {
+                if self.oversleeps.len() == OVERSLEEP_WINDOW {
+                    self.oversleeps.pop_front();
+                }
+                self.oversleeps.push_back(woke - wake_at);
+            }
+        }
+        let give_up = due.max(now_ns()) + self.cap_ns;
+        while now_ns() < give_up {
+            if ready()? {
+                return Ok(true);
+            }
+            // SAFETY: sched_yield has no preconditions.
+            unsafe { libc::sched_yield() };
+        }
+        Ok(false)
     }
 }
 
@@ -290,7 +305,7 @@ mod tests {
         assert_eq!(Waiter::new(&s, Role::Sensors, false, 1_000_000).method, Method::Block);
         s.lockstep = LockstepWait::Auto;
         let auto = Waiter::new(&s, Role::Sensors, false, 1_000_000).method;
-        assert_eq!(auto == Method::Poll, available_cpus() >= crate::config::wait::LOCKSTEP_POLL_MIN_CPUS);
+        assert_eq!(auto == Method::Poll, available_cpus() >= crate::config::wait::CPUS_TO_POLL);
     }
 
     /// An input that arrives while the process dozes ends the doze; one that is late is polled

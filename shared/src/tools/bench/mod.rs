@@ -36,7 +36,7 @@ use serde::Serialize;
 
 use self::pingpong::Transport;
 use crate::config::launch::Override;
-use crate::config::wait::{LockstepWait, Strategy, WaitSettings};
+use crate::config::wait::{CPUS_TO_POLL, LockstepWait, Strategy, WaitSettings};
 use crate::contract::clock::{TickTimer, now_ns};
 use crate::contract::msg::PlantState;
 use crate::contract::role::Role;
@@ -282,7 +282,7 @@ struct LoopConfig {
 impl LoopConfig {
     /// Spinning takes a CPU per loop process, and the monitor needs one of its own.
     fn needs_cpus(&self) -> usize {
-        if self.strategy == Strategy::Spin { Role::ALL.len() } else { 1 }
+        if self.strategy == Strategy::Spin { CPUS_TO_POLL } else { 1 }
     }
 }
 
