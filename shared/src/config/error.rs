@@ -4,8 +4,8 @@
 use std::fmt;
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-pub const COMMON_KEYS: [&str; 9] =
-    ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision", "wait"];
+pub const COMMON_KEYS: [&str; 10] =
+    ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision", "wait", "hosts"];
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LaunchError {

@@ -38,6 +38,10 @@ pub enum FaultKind {
     Corrupt,
 }
 
+/// Every process, the bridges included (they run only when a stage is on another host).
+const KILLABLE: [Role; 7] =
+    [Role::Plant, Role::Sensors, Role::Estimator, Role::Controller, Role::Monitor, Role::Bridge, Role::BridgeRemote];
+
 impl FaultKind {
     pub fn name(self) -> &'static str {
         self.into()
@@ -46,7 +50,7 @@ impl FaultKind {
     /// The processes this kind of fault can be injected into.
     pub fn targets(self) -> &'static [Role] {
         match self {
-            FaultKind::Kill | FaultKind::Stop => &Role::ALL,
+            FaultKind::Kill | FaultKind::Stop => &KILLABLE,
             FaultKind::Delay | FaultKind::Drop => &Role::STAGES,
             FaultKind::Corrupt => &[Role::Controller],
         }
@@ -271,6 +275,8 @@ pub struct Supervision {
     pub estimator: ProcessPolicy,
     pub controller: ProcessPolicy,
     pub monitor: ProcessPolicy,
+    /// Both bridges' (when a stage runs on another host).
+    pub bridge: ProcessPolicy,
 }
 
 impl Default for Supervision {
@@ -289,6 +295,7 @@ impl Default for Supervision {
             estimator: ProcessPolicy::default(),
             controller: ProcessPolicy::default(),
             monitor: ProcessPolicy::default(),
+            bridge: ProcessPolicy::default(),
         }
     }
 }
@@ -319,6 +326,7 @@ impl Supervision {
             Role::Estimator => &self.estimator,
             Role::Controller => &self.controller,
             Role::Monitor => &self.monitor,
+            Role::Bridge | Role::BridgeRemote => &self.bridge,
         }
     }
 }

@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::faults::{
     FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, Supervision,
 };
+use crate::config::hosts::Hosts;
 use crate::config::schema::{ScenarioSchema, SignalLayout};
 use crate::config::wait::MAX_WAIT_US;
 use crate::config::wait::WaitSettings;
@@ -118,6 +119,9 @@ struct CommonKeys {
     supervision: Supervision,
     #[serde(default)]
     wait: WaitSettings,
+    /// Read by `Hosts::parse`, for errors that name the key.
+    #[serde(default)]
+    hosts: toml::Table,
 }
 
 /// A checked launch configuration: the keys every scenario shares, plus the scenario's own
@@ -136,6 +140,8 @@ pub struct LaunchConfig {
     pub supervision: Supervision,
     /// How each loop process waits for its input.
     pub wait: WaitSettings,
+    /// Stages placed on another host (none: the whole loop runs here).
+    pub hosts: Hosts,
     /// The whole resolved document, as written to the run folder.
     pub document: toml::Table,
     /// The scenario it was checked against.
@@ -424,6 +430,7 @@ fn from_document(
         }
     }
     let common: CommonKeys = deserialize_at(&origins, "", toml::Value::Table(common_table))?;
+    let hosts = Hosts::parse(&common.hosts, |key, message| origins.error(key, message))?;
 
     let config = LaunchConfig {
         scenario: common.scenario,
@@ -435,6 +442,7 @@ fn from_document(
         faults: common.faults,
         supervision: common.supervision,
         wait: common.wait,
+        hosts,
         document,
         schema: schema.clone(),
         origins,
@@ -680,6 +688,12 @@ fn check_fault(f: &FaultSpec, c: &LaunchConfig, key: &str) -> Result<(), LaunchE
         return Err(c.error(
             &field("process"),
             format!("a {} fault cannot target \"{}\"; allowed: {}", f.kind.name(), f.process, allowed.join(", ")),
+        ));
+    }
+    if Role::BRIDGES.iter().any(|r| r.name() == f.process) && c.hosts.remote().is_none() {
+        return Err(c.error(
+            &field("process"),
+            format!("no {} runs: no stage is placed on another host (hosts.<stage> = \"<host>\")", f.process),
         ));
     }
     if !(f.at_s.is_finite() && f.at_s >= 0.0 && f.at_s < c.duration_s) {

@@ -3,6 +3,7 @@
 
 pub mod error;
 pub mod faults;
+pub mod hosts;
 pub mod launch;
 pub mod schema;
 pub mod seed;

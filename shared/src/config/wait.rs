@@ -104,7 +104,7 @@ impl WaitSettings {
             Role::Sensors => self.sensors,
             Role::Estimator => self.estimator,
             Role::Controller => self.controller,
-            Role::Monitor => None,
+            Role::Monitor | Role::Bridge | Role::BridgeRemote => None,
         };
         own.unwrap_or(self.strategy)
     }

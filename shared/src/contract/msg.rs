@@ -58,7 +58,9 @@ impl LoopTrace {
             Role::Sensors => (&mut self.sensors_receive, &mut self.sensors_publish),
             Role::Estimator => (&mut self.estimator_receive, &mut self.estimator_publish),
             Role::Controller => (&mut self.controller_receive, &mut self.controller_publish),
-            Role::Plant | Role::Monitor => unreachable!("only the stages stamp a receive and a publish"),
+            Role::Plant | Role::Monitor | Role::Bridge | Role::BridgeRemote => {
+                unreachable!("only the stages stamp a receive and a publish")
+            }
         };
         *r = received;
         *p = published;

@@ -60,6 +60,7 @@ pub enum ChildEvent {
     Status(Box<MonitorStatus>),
     PlantReport(PlantReport),
     StageReport(StageReport),
+    BridgeReport(BridgeReport),
     MonitorReport(Box<crate::contract::report::MonitorReport>),
 }
 
@@ -161,4 +162,50 @@ pub struct WaitCounts {
     pub caught: u64,
     /// Waits that gave up polling and blocked.
     pub blocked: u64,
+}
+
+/// What a bridge carried over the link, per crossing topic, and what the link did.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct BridgeReport {
+    /// By topic name.
+    pub topics: std::collections::BTreeMap<String, CrossingCounts>,
+    pub link: LinkCounts,
+    /// Files of the run still in shared memory on its host once it cleaned up there (the
+    /// remote bridge, the last process of the run on its host).
+    pub leftover: Vec<String>,
+}
+
+/// One crossing topic, as one bridge saw it.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct CrossingCounts {
+    /// Frames read from shared memory and sent over the link.
+    pub sent: u64,
+    /// Sends the link refused (congestion, no peer); those frames are lost.
+    pub send_errors: u64,
+    /// Frames received from the link and published into shared memory.
+    pub received: u64,
+    /// Times a received frame's loop number jumped ahead of the previous one's + 1.
+    pub gaps: u64,
+    /// Loops missed in those gaps.
+    pub missing: u64,
+    /// Received frames of the wrong size (a peer of another build), dropped.
+    pub malformed: u64,
+}
+
+/// The link to the other host's bridge, as one bridge saw it (its own CLOCK_MONOTONIC).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct LinkCounts {
+    /// Times the peer appeared; more than one means it reconnected.
+    pub connects: u64,
+    /// Times it was lost (its session closed, or its lease ran out).
+    pub losses: u64,
+    /// Each time without the peer after it was first seen.
+    pub outages: Vec<Outage>,
+}
+
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct Outage {
+    pub lost_ns: u64,
+    /// None: still lost when the bridge ended.
+    pub back_ns: Option<u64>,
 }

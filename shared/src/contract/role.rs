@@ -25,14 +25,19 @@ use serde::{Deserialize, Serialize};
     strum::EnumString,
     schemars::JsonSchema,
 )]
-#[serde(rename_all = "lowercase")]
-#[strum(serialize_all = "lowercase")]
+#[serde(rename_all = "kebab-case")]
+#[strum(serialize_all = "kebab-case")]
 pub enum Role {
     Plant,
     Sensors,
     Estimator,
     Controller,
     Monitor,
+    /// Carries the topics that cross to another host, on this host (runs only when a launch
+    /// file places a stage on another host).
+    Bridge,
+    /// Its counterpart on the other host.
+    BridgeRemote,
 }
 
 impl Role {
@@ -46,16 +51,19 @@ impl Role {
     /// Readers before writers, so that no sample is sent before its reader exists.
     pub const START_ORDER: [Role; 5] = [Role::Monitor, Role::Controller, Role::Estimator, Role::Sensors, Role::Plant];
     pub const STOP_ORDER: [Role; 5] = Role::ALL;
+    /// The bridges, in start order: the remote one listens, this host's connects to it.
+    pub const BRIDGES: [Role; 2] = [Role::BridgeRemote, Role::Bridge];
 
     /// The name of the process, its binary and its log file.
     pub fn name(self) -> &'static str {
         self.into()
     }
 
-    /// Its slot in `Header::incarnations`; the monitor handles no loop data and has none.
+    /// Its slot in `Header::incarnations`; the monitor and the bridges handle no loop data of
+    /// their own and have none.
     pub fn slot(self) -> Option<usize> {
         match self {
-            Role::Monitor => None,
+            Role::Monitor | Role::Bridge | Role::BridgeRemote => None,
             stage => Some(stage as usize),
         }
     }
@@ -72,7 +80,7 @@ impl Role {
             Role::Sensors => Some(Topic::State),
             Role::Estimator => Some(Topic::Measurements),
             Role::Controller => Some(Topic::Estimate),
-            Role::Monitor => None,
+            Role::Monitor | Role::Bridge | Role::BridgeRemote => None,
         }
     }
 
@@ -88,13 +96,13 @@ impl Role {
             Role::Sensors => Some(Topic::Measurements),
             Role::Estimator => Some(Topic::Estimate),
             Role::Controller => Some(Topic::Command),
-            Role::Monitor => None,
+            Role::Monitor | Role::Bridge | Role::BridgeRemote => None,
         }
     }
 }
 
 /// One iceoryx2 publish–subscribe service of a run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, strum::IntoStaticStr, strum::Display)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, strum::IntoStaticStr, strum::Display)]
 #[strum(serialize_all = "lowercase")]
 pub enum Topic {
     /// plant → sensors, monitor
@@ -124,7 +132,7 @@ mod tests {
 
     #[test]
     fn text_is_the_same_everywhere() {
-        for role in Role::ALL {
+        for role in Role::ALL.into_iter().chain(Role::BRIDGES) {
             let serde = serde_json::to_value(role).unwrap();
             assert_eq!(serde.as_str(), Some(role.name()));
             assert_eq!(role.to_string(), role.name());
@@ -132,6 +140,7 @@ mod tests {
             assert_eq!(clap::ValueEnum::to_possible_value(&role).unwrap().get_name(), role.name());
         }
         assert_eq!(Topic::Measurements.name(), "measurements");
+        assert_eq!(Role::BridgeRemote.name(), "bridge-remote");
     }
 
     #[test]

@@ -21,7 +21,10 @@ pub type Binaries = BTreeMap<Role, PathBuf>;
 /// The loop process's binary, beside the launcher: `looplab-<role>`, so that an installed
 /// LoopLab cannot shadow a system tool (lm-sensors has a `sensors`).
 pub fn binary_name(role: Role) -> String {
-    format!("looplab-{}", role.name())
+    match role {
+        Role::Bridge | Role::BridgeRemote => "looplab-bridge".into(),
+        _ => format!("looplab-{}", role.name()),
+    }
 }
 
 pub fn locate_binaries() -> Result<Binaries> {
@@ -43,23 +46,51 @@ pub fn locate_binaries() -> Result<Binaries> {
     Ok(found)
 }
 
-/// `cargo run` builds only the binary it runs. When we were started by it, ask the same cargo
-/// to build the loop binaries too, with the same profile and target folder, so that they are
-/// never missing or stale.
-fn build_siblings_under_cargo(exe_dir: &Path) -> Result<()> {
+/// The bridge's binary, beside the launcher's, for a run with a stage on another host. It is a
+/// package of its own (zenoh is built only for it), so under `cargo run` it is built now.
+pub fn locate_bridge() -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("cannot find the looplab executable")?;
+    let dir = exe.parent().ok_or_else(|| anyhow!("{} has no parent folder", exe.display()))?;
+    if let Some(mut cargo) = cargo_build(dir) {
+        eprintln!("looplab: a stage runs on another host; building the bridge (the first build takes minutes)");
+        let status = cargo.args(["-p", "looplab-bridge"]).status().context("cannot run cargo to build the bridge")?;
+        if !status.success() {
+            bail!("building the bridge failed ({status})");
+        }
+    }
+    let path = dir.join(binary_name(Role::Bridge));
+    if !path.is_file() {
+        bail!(
+            "missing binary {}: a stage on another host needs the bridge; run `cargo build --release -p looplab-bridge`",
+            path.display()
+        );
+    }
+    Ok(path)
+}
+
+/// `cargo build` with this binary's profile and target folder, when we were started by cargo.
+fn cargo_build(exe_dir: &Path) -> Option<std::process::Command> {
     let (Ok(cargo), Ok(manifest_dir)) = (std::env::var("CARGO"), std::env::var("CARGO_MANIFEST_DIR")) else {
-        return Ok(());
+        return None;
     };
     let profile_dir = exe_dir.file_name().and_then(|n| n.to_str()).unwrap_or("debug");
     let profile = if profile_dir == "debug" { "dev" } else { profile_dir };
     let target_dir = exe_dir.parent().unwrap_or(exe_dir);
-    let status = std::process::Command::new(cargo)
-        .args(["build", "--quiet", "--bins", "--profile", profile, "--manifest-path"])
+    let mut command = std::process::Command::new(cargo);
+    command
+        .args(["build", "--quiet", "--profile", profile, "--manifest-path"])
         .arg(Path::new(&manifest_dir).join("Cargo.toml"))
         .arg("--target-dir")
-        .arg(target_dir)
-        .status()
-        .context("cannot run cargo to build the loop processes")?;
+        .arg(target_dir);
+    Some(command)
+}
+
+/// `cargo run` builds only the binary it runs. When we were started by it, ask the same cargo
+/// to build the loop binaries too, with the same profile and target folder, so that they are
+/// never missing or stale.
+fn build_siblings_under_cargo(exe_dir: &Path) -> Result<()> {
+    let Some(mut cargo) = cargo_build(exe_dir) else { return Ok(()) };
+    let status = cargo.arg("--bins").status().context("cannot run cargo to build the loop processes")?;
     if !status.success() {
         bail!("building the loop processes failed ({status})");
     }
@@ -152,6 +183,8 @@ pub struct ChildArgs<'a> {
     pub run_id: &'a str,
     pub run_dir: &'a Path,
     pub incarnation: u32,
+    /// The command that runs it on its host (`hosts.<name>.command`); empty here.
+    pub prefix: &'a [String],
 }
 
 /// A started child: its start, its stdin (the plant's only), and the thread that reads it.
@@ -177,7 +210,17 @@ pub fn spawn<E: Send + 'static>(
         .append(true)
         .open(&log_path)
         .with_context(|| format!("create {}", log_path.display()))?;
-    let mut command = std::process::Command::new(binary);
+    let mut command = match args.prefix.split_first() {
+        Some((program, prefix)) => {
+            let mut command = std::process::Command::new(program);
+            command.args(prefix).arg(binary);
+            command
+        }
+        None => std::process::Command::new(binary),
+    };
+    if Role::BRIDGES.contains(&role) {
+        command.arg("--role").arg(role.name());
+    }
     command
         .arg("--launch")
         .arg(args.launch_file)
@@ -191,7 +234,10 @@ pub fn spawn<E: Send + 'static>(
         .stdout(Stdio::piped())
         .stderr(log);
     supervised(&mut command);
-    let mut child = command.spawn().with_context(|| format!("cannot start {}", binary.display()))?;
+    let mut child = command.spawn().with_context(|| match args.prefix.first() {
+        Some(program) => format!("cannot start {} with {program}", binary.display()),
+        None => format!("cannot start {}", binary.display()),
+    })?;
     let stdout = child.stdout.take().expect("stdout is piped");
     let incarnation = args.incarnation;
     let reader = std::thread::spawn(move || {

@@ -32,6 +32,7 @@ pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &
             (Role::Controller, BTreeMap::from([(0, ran.controller)])),
         ]),
         monitor: Some(recording.finish()?),
+        bridges: BTreeMap::new(),
     };
     let summary = summary::build(SummaryInputs {
         config,

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize, Serializer};
 
 use crate::config::faults::FaultKind;
 use crate::config::launch::{LaunchConfig, Mode};
-use crate::contract::protocol::{PlantReport, StageReport, WaitCounts};
+use crate::contract::protocol::{BridgeReport, PlantReport, StageReport, WaitCounts};
 use crate::contract::report::{FaultEffect, MissingLoops, MonitorReport, Stats};
 use crate::contract::role::Role;
 use crate::launcher::child::Start;
@@ -291,6 +291,8 @@ pub struct Reports {
     pub stages: BTreeMap<Role, BTreeMap<u32, StageReport>>,
     /// The last monitor's.
     pub monitor: Option<MonitorReport>,
+    /// Each bridge's, by incarnation (when a stage runs on another host).
+    pub bridges: BTreeMap<Role, BTreeMap<u32, BridgeReport>>,
 }
 
 /// What the supervisor saw during a run, in CLOCK_MONOTONIC ns; empty for a run without child
@@ -409,7 +411,7 @@ pub fn write(summary: &Summary, run_dir: &Path) -> Result<()> {
 /// report, or (killed, no report) the loop records the monitor received with its mark.
 fn processes(starts: &BTreeMap<Role, Vec<Start>>, reports: &Reports, monitor: &MonitorReport) -> Vec<ProcessInfo> {
     let mut processes = vec![];
-    for role in Role::START_ORDER {
+    for role in Role::BRIDGES.into_iter().chain(Role::START_ORDER) {
         let recorded = monitor.records_by_incarnation.get(&role);
         for (n, start) in starts.get(&role).into_iter().flatten().enumerate() {
             let incarnation = n as u32;

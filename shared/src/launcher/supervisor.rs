@@ -249,9 +249,11 @@ impl<'a> Supervisor<'a> {
             ProgressStyle::with_template("{spinner} {bar:16} {pos}/{len} loops · {msg}").expect("valid template"),
         );
         let (tx, events) = crossbeam_channel::unbounded();
-        let processes = Role::START_ORDER
-            .iter()
-            .map(|&role| Process {
+        let processes = config
+            .hosts
+            .processes()
+            .into_iter()
+            .map(|role| Process {
                 role,
                 policy: config.supervision.policy(role),
                 runs: vec![],
@@ -300,7 +302,7 @@ impl<'a> Supervisor<'a> {
             shown: vec![],
             quit,
         };
-        let spawned: Result<()> = Role::START_ORDER.into_iter().try_for_each(|role| supervisor.spawn(role));
+        let spawned = supervisor.start_all();
         let outcome = match spawned {
             Ok(()) => supervisor.supervise(),
             Err(e) => Outcome::Failed(format!("{e:#}")),
@@ -321,7 +323,11 @@ impl<'a> Supervisor<'a> {
         }
         supervisor.cleaner = None;
         let _ = clean_thread.join();
-        let cleanup = ipc::clean_up_run(&supervisor.run_id)?;
+        let mut cleanup = ipc::clean_up_run(&supervisor.run_id)?;
+        // The other host's bridge tidied its host up last and said what it left there.
+        if let Some(remote) = supervisor.reports.bridges.get(&Role::BridgeRemote).and_then(|r| r.values().last()) {
+            cleanup.leftover.extend(remote.leftover.iter().map(|f| format!("{f} (on the other host)")));
+        }
         drop(storage_lock);
         let starts: BTreeMap<Role, Vec<Start>> =
             supervisor.processes.iter().map(|p| (p.role, p.runs.clone())).collect();
@@ -345,15 +351,55 @@ impl<'a> Supervisor<'a> {
         Ok((summary, outcome))
     }
 
+    /// Starts every process. The other host's bridge goes first, and alone: it makes the run's
+    /// folder on its host, where the stages placed there need it.
+    fn start_all(&mut self) -> Result<()> {
+        for role in self.config.hosts.processes() {
+            self.spawn(role)?;
+            if role == Role::BridgeRemote {
+                self.wait_ready(role)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Handles events until `role` is ready (start-up, before the supervision loop).
+    fn wait_ready(&mut self, role: Role) -> Result<()> {
+        let deadline = Instant::now() + READY_TIMEOUT;
+        while !self.processes[role].ready {
+            if self.stop_outcome().is_some() {
+                anyhow::bail!("stopped while {role} started");
+            }
+            match self.events.recv_timeout(Duration::from_millis(50)) {
+                Ok(event) => {
+                    if let Some(ended) = self.handle(event) {
+                        anyhow::bail!("{} during start-up; see logs/{ended}.log", self.processes[ended].exit_text());
+                    }
+                }
+                Err(_) if Instant::now() > deadline => {
+                    anyhow::bail!("{role} not ready after {} s", READY_TIMEOUT.as_secs())
+                }
+                Err(_) => {}
+            }
+        }
+        Ok(())
+    }
+
     /// Starts the next incarnation of `role`.
     fn spawn(&mut self, role: Role) -> Result<()> {
+        let binary = match role {
+            Role::Bridge | Role::BridgeRemote => child::locate_bridge()?,
+            _ => self.binaries[&role].clone(),
+        };
+        let remote = self.config.hosts.remote().filter(|_| self.config.hosts.is_remote(role));
         let args = ChildArgs {
             launch_file: &self.launch_file,
             run_id: &self.run_id,
             run_dir: &self.run_dir,
             incarnation: self.processes[role].runs.len() as u32,
+            prefix: remote.map(|(_, host)| host.command.as_slice()).unwrap_or_default(),
         };
-        let spawned = child::spawn(role, &self.binaries[&role], &args, self.tx.clone(), Event::Child)?;
+        let spawned = child::spawn(role, &binary, &args, self.tx.clone(), Event::Child)?;
         self.readers.push(spawned.reader);
         let process = &mut self.processes[role];
         process.runs.push(spawned.start);
@@ -458,7 +504,7 @@ impl<'a> Supervisor<'a> {
         let now = Instant::now();
         self.inject_due_by_time();
         self.continue_stopped(now);
-        for role in Role::START_ORDER {
+        for role in self.config.hosts.processes() {
             if !self.processes[role].restart.as_ref().is_some_and(|r| r.cleaned && now >= r.not_before) {
                 continue;
             }
@@ -590,8 +636,14 @@ impl<'a> Supervisor<'a> {
         }
         if incarnation != self.processes[role].incarnation() {
             // A report from an incarnation that has since been replaced.
-            if let Line::Event(ChildEvent::StageReport(r)) = line {
-                self.reports.stages.entry(role).or_default().insert(incarnation, r);
+            match line {
+                Line::Event(ChildEvent::StageReport(r)) => {
+                    self.reports.stages.entry(role).or_default().insert(incarnation, r);
+                }
+                Line::Event(ChildEvent::BridgeReport(r)) => {
+                    self.reports.bridges.entry(role).or_default().insert(incarnation, r);
+                }
+                _ => {}
             }
             return None;
         }
@@ -664,6 +716,9 @@ impl<'a> Supervisor<'a> {
             ChildEvent::MonitorReport(r) => self.reports.monitor = Some(*r),
             ChildEvent::StageReport(r) => {
                 self.reports.stages.entry(role).or_default().insert(incarnation, r);
+            }
+            ChildEvent::BridgeReport(r) => {
+                self.reports.bridges.entry(role).or_default().insert(incarnation, r);
             }
         }
         None
@@ -789,7 +844,11 @@ impl<'a> Supervisor<'a> {
         for p in self.processes.iter() {
             p.signal(libc::SIGCONT);
         }
-        for role in Role::STOP_ORDER {
+        // The bridges after the stages (the remote one tidies its host up once they are gone),
+        // the monitor last.
+        let order = Role::STOP_ORDER.into_iter().flat_map(|r| if r == Role::Monitor { vec![Role::Bridge, Role::BridgeRemote, r] } else { vec![r] });
+        let present: Vec<Role> = order.filter(|r| self.processes.iter().any(|p| p.role == *r)).collect();
+        for role in present {
             self.show_processes();
             if self.processes[role].try_reap() {
                 continue;

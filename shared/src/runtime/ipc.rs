@@ -475,6 +475,28 @@ pub fn create_run_storage(run_id: &str) -> Result<std::fs::File> {
     Ok(lock)
 }
 
+/// The run's storage on another host, for the bridge there: created as the launcher creates its
+/// own, or, for a restarted bridge, taken over from the one that died (its lock is free).
+pub fn take_run_storage(run_id: &str) -> Result<std::fs::File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let folder = run_folder(run_id);
+    if std::fs::symlink_metadata(&folder).is_err() {
+        return create_run_storage(run_id);
+    }
+    check_private(&folder)?;
+    let path = owner_lock_path(run_id);
+    let lock = std::fs::OpenOptions::new()
+        .write(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+        .open(&path)
+        .with_context(|| format!("open {}", path.display()))?;
+    // SAFETY: flock on a file descriptor we own.
+    if unsafe { libc::flock(std::os::fd::AsRawFd::as_raw_fd(&lock), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+        return Err(anyhow!("{} is held by a live process of the run; refusing to share it", path.display()));
+    }
+    Ok(lock)
+}
+
 /// Refuses a run folder that is not a real folder of ours that only we can use: a symbolic
 /// link, another user's folder, or one others can read or write.
 pub fn check_private(folder: &std::path::Path) -> Result<()> {

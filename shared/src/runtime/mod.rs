@@ -1,6 +1,7 @@
 //! Layer 4, the runtime: it owns time and policy. iceoryx2 ports, waiting, the stage runner and
 //! its tasks, the plant loop, snapshots, and the in-process twin of the five processes.
 
+pub mod bridge;
 pub mod child;
 pub mod faults;
 pub mod in_process;

@@ -30,7 +30,7 @@ use crate::model::scenario::Scenario;
 use crate::runtime::child::{Context, WAIT_SLICE, emit, wait, wait_for_line, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
-use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks};
+use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.
@@ -299,7 +299,7 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     let supervision = &context.config.supervision;
     let mut p = PlantProcess {
         core: PlantCore::new(&context.config, context.scenario.as_ref(), context.incarnation),
-        state_out: context.ipc.publisher(Topic::State, reader_blocks(wait_settings, Topic::State, realtime))?,
+        state_out: context.ipc.publisher(Topic::State, writer_wakes(&context.config, Topic::State))?,
         loop_out: context.ipc.publisher(Topic::Loop, false)?,
         snapshot: Snapshot::open(&context.run_id, Role::Plant.name())?,
     };

@@ -15,7 +15,7 @@ use crate::runtime::child::{Context, WAIT_SLICE, wait, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
-use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks};
+use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
 /// Runs `task` as the process of `role` until a stop is requested.
 fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {
@@ -23,8 +23,7 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
     let (wait_settings, realtime) = (&context.config.wait, context.config.mode == Mode::Realtime);
     let subscriber: TopicSubscriber<T::In> =
         context.ipc.stage_subscriber(input, reader_blocks(wait_settings, input, realtime))?;
-    let publisher: TopicPublisher<T::Out> =
-        context.ipc.publisher(output, reader_blocks(wait_settings, output, realtime))?;
+    let publisher: TopicPublisher<T::Out> = context.ipc.publisher(output, writer_wakes(&context.config, output))?;
     let ws = waitset()?;
     let _wake = subscriber.attach_to(&ws)?;
     // The frozen state of the task survives a restart in the run's snapshot folder.

@@ -5,6 +5,7 @@ use std::collections::VecDeque;
 
 use anyhow::Result;
 
+use crate::config::launch::{LaunchConfig, Mode};
 use crate::config::wait::{Strategy, WaitSettings};
 use crate::contract::clock::now_ns;
 use crate::contract::protocol::WaitCounts;
@@ -124,6 +125,12 @@ pub fn method_of(settings: &WaitSettings, role: Role, realtime: bool) -> Method 
 /// its writer sends them.
 pub fn reader_blocks(settings: &WaitSettings, topic: Topic, realtime: bool) -> bool {
     Role::reading(topic).is_some_and(|reader| method_of(settings, reader, realtime).blocks())
+}
+
+/// Whether the writer of `topic` wakes its reader: the reader blocks, or it runs on another host
+/// and a bridge, which always blocks, reads the topic on the writer's host.
+pub fn writer_wakes(config: &LaunchConfig, topic: Topic) -> bool {
+    config.hosts.read_by_bridge(topic) || reader_blocks(&config.wait, topic, config.mode == Mode::Realtime)
 }
 
 impl From<Strategy> for Method {

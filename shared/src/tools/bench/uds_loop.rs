@@ -52,7 +52,7 @@ fn floats_sent_by(role: Role) -> usize {
         Role::Sensors => std::mem::size_of::<Measurements>(),
         Role::Estimator => std::mem::size_of::<Estimate>(),
         Role::Controller => std::mem::size_of::<CommandMessage>(),
-        Role::Monitor => unreachable!("the monitor is not in the baseline loop"),
+        Role::Monitor | Role::Bridge | Role::BridgeRemote => unreachable!("only loop stages are in the baseline loop"),
     };
     bytes / 8
 }
