@@ -7,6 +7,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+
+pub mod netns;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 pub use looplab_shared::config::faults::FaultKind;
