@@ -4,11 +4,11 @@
 // Each test file uses a part of these helpers and re-exports.
 #![allow(dead_code, unused_imports)]
 
+pub mod netns;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-
-pub mod netns;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 pub use looplab_shared::config::faults::FaultKind;

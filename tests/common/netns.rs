@@ -66,6 +66,8 @@ impl TestHosts {
             .take(24)
             .collect();
         prepare_state_dir()?;
+        static SWEPT: std::sync::Once = std::sync::Once::new();
+        SWEPT.call_once(remove_all_stale);
         let claim = Claim::next()?;
         let n = claim.n;
         remove_stale(n);
@@ -422,24 +424,29 @@ impl Claim {
         let span = LAST_HOST_NUMBER - FIRST_HOST_NUMBER + 1;
         for _ in 0..span {
             let n = FIRST_HOST_NUMBER + (NEXT.fetch_add(1, Ordering::Relaxed) - FIRST_HOST_NUMBER) % span;
-            let path = Path::new(STATE_DIR).join(format!("lock-{n}"));
-            let file = File::options()
-                .create(true)
-                .truncate(false)
-                .write(true)
-                .open(&path)
-                .map_err(|e| format!("cannot open {}: {e}", path.display()))?;
-            if file.try_lock().is_err() {
-                continue;
-            }
-            // The holder before us may have removed the file after we opened it: then the lock is
-            // on a file nobody else will find; take the number only if ours is still the file.
-            let same = std::fs::metadata(&path).is_ok_and(|m| file.metadata().is_ok_and(|f| f.ino() == m.ino()));
-            if same {
-                return Ok(Claim { n, path, _file: file });
+            if let Some(claim) = Claim::take(n)? {
+                return Ok(claim);
             }
         }
         Err(format!("every host number {FIRST_HOST_NUMBER}..={LAST_HOST_NUMBER} is in use"))
+    }
+
+    /// Claims `n` if no live process holds it.
+    fn take(n: u32) -> Result<Option<Claim>, String> {
+        let path = Path::new(STATE_DIR).join(format!("lock-{n}"));
+        let file = File::options()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&path)
+            .map_err(|e| format!("cannot open {}: {e}", path.display()))?;
+        if file.try_lock().is_err() {
+            return Ok(None);
+        }
+        // The holder before us may have removed the file after we opened it: then the lock is on
+        // a file nobody else will find; take the number only if ours is still the file.
+        let same = std::fs::metadata(&path).is_ok_and(|m| file.metadata().is_ok_and(|f| f.ino() == m.ino()));
+        Ok(same.then_some(Claim { n, path, _file: file }))
     }
 }
 
@@ -464,6 +471,26 @@ fn prepare_state_dir() -> Result<(), String> {
     }
     run(&format!("mount --make-private {STATE_DIR}"))?;
     Ok(())
+}
+
+/// Removes what crashed earlier runs left under any host number that no live process holds.
+fn remove_all_stale() {
+    let names = |dir: &str| -> Vec<String> {
+        let entries = std::fs::read_dir(dir).into_iter().flatten().flatten();
+        entries.filter_map(|entry| entry.file_name().into_string().ok()).collect()
+    };
+    let mut numbers: Vec<u32> = names("/run/netns")
+        .iter()
+        .filter_map(|name| name.strip_prefix("looplab")?.split('-').next()?.parse().ok())
+        .chain(names(STATE_DIR).iter().filter_map(|name| name.split_once('-')?.1.parse().ok()))
+        .collect();
+    numbers.sort_unstable();
+    numbers.dedup();
+    for n in numbers {
+        if let Ok(Some(_claim)) = Claim::take(n) {
+            remove_stale(n);
+        }
+    }
 }
 
 /// Removes what a crashed earlier run with host number `n` left: its processes, namespaces and
