@@ -4,6 +4,8 @@
 // Each test file uses a part of these helpers and re-exports.
 #![allow(dead_code, unused_imports)]
 
+pub mod netns;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
