@@ -239,8 +239,7 @@ fn open_session(endpoint: &str, listen: bool) -> Result<zenoh::Session> {
         // Keep trying the other host, quickly: after a cut the link comes back within a retry.
         ("connect/timeout_ms", "10000"),
         ("connect/exit_on_failure", "false"),
-        ("connect/retry/period_init_ms", "50"),
-        ("connect/retry/period_max_ms", "500"),
+        ("connect/retry", "{ period_init_ms: 50, period_max_ms: 500, period_increase_factor: 2 }"),
         ("transport/link/tx/lease", &LEASE_MS.to_string()),
         ("transport/link/tx/keep_alive", "4"),
     ];

@@ -74,8 +74,13 @@ impl Drop for Run {
 
 /// Runs `looplab run <args> --out <fresh dir> -q` and expects success.
 pub fn run(name: &str, args: &[&str]) -> Run {
+    run_from(looplab(), name, args)
+}
+
+/// `run` with the launcher started by `launcher` (on a test host, say).
+pub fn run_from(mut launcher: Command, name: &str, args: &[&str]) -> Run {
     let dir = fresh_dir(name);
-    let output = looplab().arg("run").args(args).arg("--out").arg(&dir).arg("-q").output().expect("start looplab");
+    let output = launcher.arg("run").args(args).arg("--out").arg(&dir).arg("-q").output().expect("start looplab");
     assert!(
         output.status.success(),
         "looplab run {args:?} failed ({}):\n{}\n{}",

@@ -149,7 +149,9 @@ impl TestHosts {
 
     /// A command prefix that runs a program on the local host, in place (it execs: same pid).
     pub fn local_prefix(&self) -> Vec<String> {
-        ["ip", "netns", "exec", &self.local].map(String::from).to_vec()
+        // Not `ip netns exec`: it unshares the mount namespace, and a copied mount namespace
+        // leaves out the mounted namespace files, so the remote host could not be entered from it.
+        vec!["nsenter".to_owned(), format!("--net={}", netns_path(&self.local).display())]
     }
 
     /// A command prefix that runs a program on the remote host, in place (nsenter execs: same

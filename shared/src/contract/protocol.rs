@@ -192,6 +192,17 @@ pub struct CrossingCounts {
     pub malformed: u64,
 }
 
+impl std::ops::AddAssign for CrossingCounts {
+    fn add_assign(&mut self, c: Self) {
+        self.sent += c.sent;
+        self.send_errors += c.send_errors;
+        self.received += c.received;
+        self.gaps += c.gaps;
+        self.missing += c.missing;
+        self.malformed += c.malformed;
+    }
+}
+
 /// The link to the other host's bridge, as one bridge saw it (its own CLOCK_MONOTONIC).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct LinkCounts {

@@ -69,6 +69,37 @@ pub struct MonitorReport {
     /// incarnation): the counts of a killed incarnation, which sent no report.
     #[serde(default)]
     pub records_by_incarnation: BTreeMap<Role, Vec<u64>>,
+    /// With a stage on another host: its clock and the link's round trip, from the loops' stamps.
+    #[serde(default)]
+    pub crossing: Option<CrossingReport>,
+}
+
+/// What the loops' own stamps tell of the other host: each loop that goes there and back is an
+/// NTP exchange (t1 leaves here, t2 arrives there, t3 leaves there, t4 arrives here).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct CrossingReport {
+    /// The hops (`hops` names) between the hosts, clock-corrected with `clock`.
+    pub hops: Vec<String>,
+    /// The round trip over the link per loop, (t4 − t1) − (t3 − t2): no clock offset needed.
+    pub round_trip: Stats,
+    /// None until a loop has gone there and back.
+    pub clock: Option<ClockReport>,
+}
+
+/// The other host's CLOCK_MONOTONIC against this one's, fitted to the loops' best exchanges.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct ClockReport {
+    /// There minus here, ns, at `at_ns` (here).
+    pub offset_ns: f64,
+    /// How much faster it runs, parts per million.
+    pub drift_ppm: f64,
+    /// The offset (and every corrected crossing hop) is within ± this, ns.
+    pub uncertainty_ns: f64,
+    pub at_ns: u64,
+    /// Windows of loops fitted, one best exchange each.
+    pub windows: u64,
+    /// The smallest round trip seen, ns: the offset can be no surer than half of it.
+    pub min_round_trip_ns: f64,
 }
 
 impl MonitorReport {

@@ -6,6 +6,7 @@
 pub mod child;
 pub mod dashboard;
 pub mod inject;
+pub mod network;
 pub mod outcome;
 pub mod report;
 pub mod restart;

@@ -100,10 +100,15 @@ pub fn render(s: &Summary) -> String {
         "latency (µs)", "count", "min", "p50", "p90", "p99", "p99.9", "max"
     );
     let empty = Stats::default();
+    let crossing = |hop: &str| s.network.as_ref().is_some_and(|n| n.crossing_hops.iter().any(|h| h == hop));
     for (hop, _, _) in HOPS {
-        stats_row(&mut out, &hop.replace('_', " "), s.latency_ns.hops.get(hop).unwrap_or(&empty));
+        let label = if crossing(hop) { format!("{} ⇄", hop.replace('_', " ")) } else { hop.replace('_', " ") };
+        stats_row(&mut out, &label, s.latency_ns.hops.get(hop).unwrap_or(&empty));
     }
     stats_row(&mut out, "END TO END", &s.latency_ns.end_to_end);
+    if let Some(network) = &s.network {
+        stats_row(&mut out, "link round trip", &network.round_trip_ns);
+    }
     if s.jitter_ns.plant_tick.count > 0 || s.jitter_ns.plant_wake_latency.count > 0 {
         stats_row(&mut out, "tick period error |T−dt|", &s.jitter_ns.plant_tick);
         stats_row(&mut out, "tick wake-up latency", &s.jitter_ns.plant_wake_latency);
@@ -123,6 +128,7 @@ pub fn render(s: &Summary) -> String {
         );
     }
 
+    render_network(&mut out, s);
     render_faults(&mut out, s);
     render_restarts(&mut out, s);
 
@@ -203,6 +209,62 @@ fn write_table(out: &mut String, rows: &[Vec<String>], right: &[bool]) {
 }
 
 /// The faults table and the timeline.
+/// The other host: its clock, what crossed and the link's outages.
+fn render_network(out: &mut String, s: &Summary) {
+    let Some(n) = &s.network else { return };
+    let stages: Vec<&str> = n.stages.iter().map(|r| r.name()).collect();
+    let _ = writeln!(
+        out,
+        "\n  other host: {} on {} ({}); ⇄ hops cross the link, corrected for its clock",
+        stages.join(", "),
+        n.host,
+        n.endpoint
+    );
+    match &n.clock {
+        Some(c) => {
+            let _ = writeln!(
+                out,
+                "    its clock: {:+.6} s against this one's, ± {:.1} µs; drift {:+.2} ppm ({} windows)",
+                c.offset_ns / 1e9,
+                c.uncertainty_ns / 1e3,
+                c.drift_ppm,
+                c.windows
+            );
+        }
+        None => {
+            let _ = writeln!(out, "    its clock: unknown (no loop went there and back)");
+        }
+    }
+    for (topic, t) in &n.topics {
+        let _ = writeln!(
+            out,
+            "    {topic}: {} sent, {} received, {} lost, {} gaps ({} loops missed){}",
+            t.sent,
+            t.received,
+            t.lost,
+            t.gaps,
+            t.missing,
+            if t.malformed > 0 { format!(", {} malformed", t.malformed) } else { String::new() }
+        );
+    }
+    let outages: Vec<String> = n
+        .link
+        .outages
+        .iter()
+        .map(|o| match o.outage_ms {
+            Some(ms) => format!("{ms:.0} ms"),
+            None => "until the end".into(),
+        })
+        .collect();
+    let _ = writeln!(
+        out,
+        "    link: {} losses, {} reconnects{}",
+        n.link.losses,
+        n.link.reconnects,
+        if outages.is_empty() { String::new() } else { format!("; outages {}", outages.join(", ")) }
+    );
+}
+
 fn render_faults(out: &mut String, s: &Summary) {
     if s.faults.is_empty() {
         return;

@@ -17,6 +17,7 @@ use crate::contract::report::{FaultEffect, MissingLoops, MonitorReport, Stats};
 use crate::contract::role::Role;
 use crate::launcher::child::Start;
 use crate::launcher::inject::{DetectedBy, FaultSeen, target};
+use crate::launcher::network::{self, Network};
 use crate::launcher::outcome::{Exit, Outcome, StopReason};
 use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
@@ -108,6 +109,9 @@ pub struct Summary {
     #[serde(default)]
     pub restart_steps: Vec<RestartSteps>,
     pub shared_memory: SharedMemoryCheck,
+    /// With a stage on another host: the link, the other host's clock and the crossing topics.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub network: Option<Network>,
 }
 
 /// A map by process written with its keys in alphabetical order, as `summary.json` always had.
@@ -399,6 +403,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         timeline: log.timeline.clone(),
         restart_steps: log.restarts.iter().map(|r| restart_steps(r, log)).collect(),
         shared_memory,
+        network: network::build(config, &reports.bridges, &monitor),
     }
 }
 

@@ -5,9 +5,13 @@
 //! - [`recording`]: the recorder it feeds, usable without a process.
 //! - [`join`]: the five messages of each loop joined by k; [`stats`]: the latency histograms;
 //!   [`fault_effect`]: what each fault did; [`stall`]: stalled processes found from the data.
+//! - [`crossing`]: the hops to and from another host, corrected with the other host's clock as
+//!   [`clock_fit`] fits it from the loops' own stamps.
 //! - [`sinks`]: the files of the run folder, one sink each; [`live`]: what the dashboard shows,
 //!   sent with each status.
 
+pub mod clock_fit;
+pub mod crossing;
 pub mod fault_effect;
 pub mod join;
 pub mod layout;

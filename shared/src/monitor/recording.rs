@@ -18,6 +18,7 @@ use crate::monitor::join::{Joiner, LoopParts, Sample};
 use crate::monitor::layout::Layout;
 use crate::monitor::live::Live;
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
+use crate::monitor::crossing::Crossing;
 use crate::monitor::stats::LoopStats;
 use crate::runtime::ipc::MONITOR_BUFFER;
 
@@ -68,7 +69,7 @@ impl Recording {
         Ok(Self {
             rate_hz: config.rate_hz,
             joiner: Joiner::new(JOIN_WINDOW),
-            stats: LoopStats::new(layout.sensors.len(), config.dt(), wall_clock),
+            stats: LoopStats::new(layout.sensors.len(), config.dt(), wall_clock).with_crossing(Crossing::new(config)),
             layout,
             metrics: scenario.metrics(),
             measure: scenario.error_measure(),
@@ -144,6 +145,9 @@ impl Recording {
             self.write(k, &parts)?;
         }
         let mut report = std::mem::take(&mut self.report);
+        if let Some(crossing) = &mut self.stats.crossing {
+            report.crossing = Some(crossing.finish(&mut self.stats.hops));
+        }
         let stats = &self.stats;
         report.loops_seen = self.joiner.next_k();
         report.end_to_end = stats.end_to_end.stats();

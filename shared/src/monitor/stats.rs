@@ -4,6 +4,7 @@
 use hdrhistogram::Histogram;
 
 use crate::contract::report::{HOPS, Stats};
+use crate::monitor::crossing::Crossing;
 use crate::monitor::join::LoopParts;
 
 /// Histogram range: 1 ns to 60 s at 3 significant digits.
@@ -80,6 +81,8 @@ pub struct LoopStats {
     /// The loop runs in wall-clock time: the time command k took to take effect adds to the age
     /// of the data it used.
     wall_clock: bool,
+    /// With a stage on another host: its hops across the link, recorded clock-corrected.
+    pub crossing: Option<Crossing>,
 }
 
 impl LoopStats {
@@ -92,7 +95,13 @@ impl LoopStats {
             data_age: (0..sensors).map(|_| Distribution::default()).collect(),
             period_ns: (dt * 1e9).round() as i64,
             wall_clock,
+            crossing: None,
         }
+    }
+
+    /// With the hops of a stage on another host recorded by `crossing`.
+    pub fn with_crossing(self, crossing: Option<Crossing>) -> Self {
+        Self { crossing, ..self }
     }
 
     /// |a tick's period − dt|.
@@ -115,8 +124,13 @@ impl LoopStats {
             return;
         };
         self.end_to_end.record(e2e);
-        for (distribution, ns) in self.hops.iter_mut().zip(hops) {
-            distribution.record(ns);
+        for (i, (distribution, ns)) in self.hops.iter_mut().zip(hops).enumerate() {
+            if !self.crossing.as_ref().is_some_and(|c| c.crosses(i)) {
+                distribution.record(ns);
+            }
+        }
+        if let (Some(crossing), Some(record)) = (&mut self.crossing, &parts.record) {
+            crossing.observe(&record.header.trace, &mut self.hops);
         }
         if let Some(meas) = &parts.measurements {
             // Simulation-time age of the sample used, plus (in wall-clock time) the time the

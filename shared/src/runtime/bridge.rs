@@ -270,14 +270,8 @@ pub fn counts_by_topic<'a>(
     ins: impl Iterator<Item = (Topic, CrossingCounts)> + 'a,
 ) -> BTreeMap<String, CrossingCounts> {
     let mut by_topic: BTreeMap<String, CrossingCounts> = BTreeMap::new();
-    for (topic, c) in outs.chain(ins) {
-        let entry = by_topic.entry(topic.name().into()).or_default();
-        entry.sent += c.sent;
-        entry.send_errors += c.send_errors;
-        entry.received += c.received;
-        entry.gaps += c.gaps;
-        entry.missing += c.missing;
-        entry.malformed += c.malformed;
+    for (topic, counts) in outs.chain(ins) {
+        *by_topic.entry(topic.name().into()).or_default() += counts;
     }
     by_topic
 }

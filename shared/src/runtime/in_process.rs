@@ -30,6 +30,9 @@ pub fn refusal(config: &LaunchConfig) -> Option<String> {
     if config.mode != Mode::Lockstep {
         return Some("only lockstep runs in one process (real time needs the processes it measures)".into());
     }
+    if let Some((host, _)) = config.hosts.remote() {
+        return Some(format!("the launch file places a stage on host {host}; one process runs on one machine"));
+    }
     config
         .faults
         .iter()

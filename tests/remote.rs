@@ -1,0 +1,125 @@
+//! A stage on another host: the pendulum's controller in a second network namespace, with its
+//! own /dev/shm (a mount namespace), reached over a veth pair through the two bridges and zenoh.
+//! Root only (namespaces): elsewhere each test prints why it skips.
+
+mod common;
+
+use common::netns::{Host, TestHosts};
+use common::*;
+
+/// `--set` arguments that place the controller on the test's remote host.
+fn placed(hosts: &TestHosts) -> Vec<String> {
+    let command: Vec<String> = hosts.remote_prefix().iter().map(|w| format!("{w:?}")).collect();
+    vec![
+        "--set".into(),
+        "hosts.controller=companion".into(),
+        "--set".into(),
+        format!("hosts.companion.address={}", hosts.remote_address()),
+        "--set".into(),
+        format!("hosts.companion.command=[{}]", command.join(", ")),
+    ]
+}
+
+fn launcher_on(hosts: &TestHosts) -> std::process::Command {
+    let mut command = hosts.command(Host::Local, env!("CARGO_BIN_EXE_looplab"));
+    command.env_remove("CARGO").env_remove("CARGO_MANIFEST_DIR");
+    command
+}
+
+fn hosts_or_skip(tag: &str, offset_s: Option<i64>) -> Option<TestHosts> {
+    match TestHosts::create(tag, offset_s) {
+        Ok(hosts) => Some(hosts),
+        Err(why) => {
+            eprintln!("skipped: {why}");
+            None
+        }
+    }
+}
+
+#[test]
+fn the_pendulum_with_its_controller_on_another_host_keeps_its_loop() {
+    let Some(hosts) = hosts_or_skip("rt", None) else { return };
+    let mut args: Vec<String> = ["pendulum", "--set", "duration_s=3"].map(String::from).to_vec();
+    args.extend(placed(&hosts));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let run = run_from(launcher_on(&hosts), "remote-rt", &args);
+    println!("{}", run.stdout());
+    assert!(run.summary["shared_memory"]["clean"].as_bool().unwrap(), "{}", run.summary["shared_memory"]);
+    assert_eq!(hosts.remote_shm_entries(), Vec::<String>::new());
+}
+
+#[test]
+fn lockstep_with_a_remote_controller_writes_the_local_runs_bytes() {
+    let Some(hosts) = hosts_or_skip("ls", None) else { return };
+    let base = ["pendulum", "--set", "mode=lockstep", "--set", "duration_s=2"];
+    let local = run("remote-ls-local", &base);
+    let mut args: Vec<String> = base.map(String::from).to_vec();
+    args.extend(placed(&hosts));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let remote = run_from(launcher_on(&hosts), "remote-ls", &args);
+    let bytes = |r: &Run| std::fs::read(r.dir.join("trajectory.csv")).unwrap();
+    assert_eq!(remote.summary["loops"], 2000);
+    assert!(bytes(&local) == bytes(&remote), "the remote run's trajectory.csv differs from the local run's");
+    let topics = &remote.summary["network"]["topics"];
+    for topic in ["estimate", "command"] {
+        assert_eq!(topics[topic]["sent"], 2000, "{topic}: {topics}");
+        assert_eq!(topics[topic]["received"], 2000, "{topic}: {topics}");
+        assert_eq!(topics[topic]["gaps"], 0, "{topic}: {topics}");
+    }
+}
+
+/// The fitted clock of a run on `hosts`, and the corrected crossing hops checked against the
+/// link's round trip: a one-way hop is at most the round trip, give or take the offset's
+/// uncertainty, which an uncorrected hop between clocks 1000 s apart could never be.
+fn fitted_offset_ns(hosts: &TestHosts, name: &str) -> (f64, f64) {
+    let mut args: Vec<String> = ["pendulum", "--set", "duration_s=3"].map(String::from).to_vec();
+    args.extend(placed(hosts));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let run = run_from(launcher_on(hosts), name, &args);
+    println!("{}", run.stdout());
+    let network = &run.summary["network"];
+    let clock = &network["clock"];
+    let (offset, uncertainty) = (clock["offset_ns"].as_f64().unwrap(), clock["uncertainty_ns"].as_f64().unwrap());
+    let round_trip_p50 = network["round_trip_ns"]["p50"].as_f64().unwrap();
+    assert_eq!(network["crossing_hops"], serde_json::json!(["estimator_to_controller", "controller_to_plant"]));
+    for hop in ["estimator_to_controller", "controller_to_plant"] {
+        let p50 = run.summary["latency_ns"]["hops"][hop]["p50"].as_f64().unwrap();
+        assert!(p50 <= round_trip_p50 + uncertainty, "{hop}: p50 {p50} ns against a round trip of {round_trip_p50}");
+    }
+    (offset, uncertainty)
+}
+
+#[test]
+fn a_clock_1000_s_ahead_is_fitted_and_the_crossing_hops_corrected() {
+    let Some(hosts) = hosts_or_skip("clk", None) else { return };
+    let (offset, uncertainty) = fitted_offset_ns(&hosts, "remote-clock-same");
+    assert!(offset.abs() <= uncertainty, "same clock: fitted offset {offset} ns ± {uncertainty}");
+    drop(hosts);
+    let Some(shifted) = hosts_or_skip("ofs", Some(1000)) else { return };
+    let (offset, uncertainty) = fitted_offset_ns(&shifted, "remote-clock-shifted");
+    assert!((offset - 1e12).abs() <= uncertainty, "shifted by 1000 s: fitted offset {offset} ns ± {uncertainty}");
+}
+
+#[test]
+fn a_slow_lossy_link_lengthens_the_round_trip_and_makes_commands_late_without_hanging() {
+    let Some(hosts) = hosts_or_skip("slow", None) else { return };
+    let slow = match hosts.slow_link(std::time::Duration::from_millis(1), 0.01) {
+        Ok(slow) => slow,
+        Err(why) => return eprintln!("skipped: {why}"),
+    };
+    let mut args: Vec<String> = ["pendulum", "--set", "duration_s=3"].map(String::from).to_vec();
+    args.extend(placed(&hosts));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let run = run_from(launcher_on(&hosts), "remote-slow", &args);
+    println!("{}", run.stdout());
+    let network = &run.summary["network"];
+    // Every frame back from the other host waits 1 ms on the way.
+    let round_trip_min = network["round_trip_ns"]["min"].as_u64().unwrap();
+    assert!(round_trip_min >= 1_000_000, "round trip min {round_trip_min} ns");
+    // At 1 kHz a command that takes over a period is late: the plant counts it.
+    let loops = run.summary["loops"].as_u64().unwrap();
+    assert_eq!(loops, 3000);
+    assert!(run.summary["deadline_misses"].as_u64().unwrap() > loops / 2, "{}", run.summary["deadline_misses"]);
+    assert!(slow.dropped_packets() > 0 && slow.delayed_packets() > 0);
+    assert_eq!(network["topics"]["command"]["malformed"], 0);
+}
