@@ -123,3 +123,45 @@ fn a_slow_lossy_link_lengthens_the_round_trip_and_makes_commands_late_without_ha
     assert!(slow.dropped_packets() > 0 && slow.delayed_packets() > 0);
     assert_eq!(network["topics"]["command"]["malformed"], 0);
 }
+
+/// A fault on the link's bridges: the run goes on, and the summary says what happened.
+fn faulted_run(tag: &str, fault: &str) -> Option<(TestHosts, Run)> {
+    let hosts = hosts_or_skip(tag, None)?;
+    let mut args: Vec<String> = ["pendulum", "--set", "duration_s=4", "--fault", fault].map(String::from).to_vec();
+    args.extend(placed(&hosts));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let run = run_from(launcher_on(&hosts), &format!("remote-{tag}"), &args);
+    println!("{}", run.stdout());
+    Some((hosts, run))
+}
+
+#[test]
+fn a_killed_remote_bridge_is_restarted_and_its_outage_reported() {
+    let Some((hosts, run)) = faulted_run("kill", "kill bridge-remote at 1s") else { return };
+    let s = run.summary();
+    assert_eq!(s.restarts[&Role::BridgeRemote], 1);
+    assert!(s.stale_ticks > 0, "the plant held its command while the link was down");
+    let network = &run.summary["network"];
+    assert_eq!(network["link"]["losses"], 1, "{network}");
+    assert_eq!(network["link"]["reconnects"], 1, "{network}");
+    assert_eq!(network["unreported_bridges"], 1, "the killed bridge sent no report");
+    assert_eq!(network["topics"]["estimate"]["lost"], serde_json::Value::Null, "unknown without its report");
+    assert!(run.summary["shared_memory"]["clean"].as_bool().unwrap(), "{}", run.summary["shared_memory"]);
+    assert_eq!(hosts.remote_shm_entries(), Vec::<String>::new());
+}
+
+#[test]
+fn a_silent_remote_bridge_is_lost_after_the_lease_and_found_again() {
+    // SIGSTOP: the other host goes silent, as behind a cut cable; zenoh's lease (1 s) notices.
+    let Some((_hosts, run)) = faulted_run("stop", "stop bridge-remote at 1s for 1500ms") else { return };
+    let s = run.summary();
+    assert!(s.completed, "the run goes on without its controller's commands");
+    assert!(s.stale_ticks > 0, "the plant applied its stale-command policy");
+    let link = &run.summary["network"]["link"];
+    assert!(link["losses"].as_u64().unwrap() >= 1, "{link}");
+    assert_eq!(link["losses"], link["reconnects"], "it came back each time: {link}");
+    let stop = &s.faults[0];
+    assert_eq!(stop.detected_by, Some(DetectedBy::LinkLease), "{stop:?}");
+    assert!(stop.resumed_after_ms.is_some(), "the link came back: {stop:?}");
+    assert!(stop.effect.as_ref().is_some_and(|e| e.outage_ticks > 0), "{stop:?}");
+}

@@ -76,15 +76,23 @@ struct Link {
 }
 
 impl Link {
-    fn seen(&mut self, up: bool, ns: u64) {
+    /// The other bridge's token appeared (`up`) or went; this host's bridge tells the launcher
+    /// of each loss and return after the first meeting.
+    fn seen(&mut self, up: bool, ns: u64, tell: bool) {
         if up && !self.up {
             self.counts.connects += 1;
             if let Some(outage) = self.counts.outages.last_mut().filter(|o| o.back_ns.is_none()) {
                 outage.back_ns = Some(ns);
+                if tell {
+                    let _ = emit(&ChildEvent::LinkBack { at_ns: ns });
+                }
             }
         } else if !up && self.up {
             self.counts.losses += 1;
             self.counts.outages.push(Outage { lost_ns: ns, back_ns: None });
+            if tell {
+                let _ = emit(&ChildEvent::LinkLost { at_ns: ns });
+            }
         }
         self.up = up;
     }
@@ -117,7 +125,9 @@ fn run(args: &Args) -> Result<BridgeReport> {
         .liveliness()
         .declare_subscriber(bridge::alive_key(&run_id, peer))
         .history(true)
-        .callback(move |sample| watched.lock().expect("not poisoned").seen(sample.kind() == SampleKind::Put, now_ns()))
+        .callback(move |sample| {
+            watched.lock().expect("not poisoned").seen(sample.kind() == SampleKind::Put, now_ns(), !remote)
+        })
         .wait()
         .map_err(zenoh_error("watch the other bridge"))?;
 

@@ -10,9 +10,13 @@ fn bridge(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn a_process_that_is_not_a_bridge_is_refused() {
-    let out = bridge(&["--launch", "/nonexistent.toml", "--run-id", "x", "--run-dir", "/nonexistent", "--role", "plant"]);
+    let out =
+        bridge(&["--launch", "/nonexistent.toml", "--run-id", "x", "--run-dir", "/nonexistent", "--role", "plant"]);
     assert_eq!(out.status.code(), Some(1));
-    assert_eq!(String::from_utf8_lossy(&out.stderr), "plant: error: --role must be bridge or bridge-remote, not plant\n");
+    assert_eq!(
+        String::from_utf8_lossy(&out.stderr),
+        "plant: error: --role must be bridge or bridge-remote, not plant\n"
+    );
 }
 
 #[test]
@@ -21,7 +25,16 @@ fn a_launch_file_without_a_remote_stage_is_refused() {
     std::fs::create_dir_all(&dir).unwrap();
     let launch = dir.join("launch.toml");
     std::fs::write(&launch, "scenario = \"pendulum\"\n").unwrap();
-    let out = bridge(&["--launch", launch.to_str().unwrap(), "--run-id", "x", "--run-dir", dir.to_str().unwrap(), "--role", "bridge"]);
+    let out = bridge(&[
+        "--launch",
+        launch.to_str().unwrap(),
+        "--run-id",
+        "x",
+        "--run-dir",
+        dir.to_str().unwrap(),
+        "--role",
+        "bridge",
+    ]);
     let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(out.status.code(), Some(1));
     assert_eq!(String::from_utf8_lossy(&out.stderr), "bridge: error: no stage is placed on another host\n");

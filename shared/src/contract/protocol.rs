@@ -57,6 +57,14 @@ pub enum ChildEvent {
         process: String,
         at_ns: u64,
     },
+    /// This host's bridge lost the other host's bridge (its session closed or its lease ran
+    /// out), or found it again.
+    LinkLost {
+        at_ns: u64,
+    },
+    LinkBack {
+        at_ns: u64,
+    },
     Status(Box<MonitorStatus>),
     PlantReport(PlantReport),
     StageReport(StageReport),

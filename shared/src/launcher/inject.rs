@@ -21,6 +21,9 @@ pub enum DetectedBy {
     /// A stop of the monitor itself: its status lines stopped.
     #[serde(rename = "the monitor's heartbeat stopped")]
     MonitorHeartbeat,
+    /// A stop of a bridge: the other bridge's link lease ran out.
+    #[serde(rename = "the link's lease ran out")]
+    LinkLease,
 }
 
 /// What the launcher saw of one fault (CLOCK_MONOTONIC, ns).

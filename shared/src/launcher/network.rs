@@ -11,6 +11,7 @@ use crate::config::launch::LaunchConfig;
 use crate::contract::protocol::{BridgeReport, CrossingCounts};
 use crate::contract::report::{ClockReport, MonitorReport, Stats};
 use crate::contract::role::Role;
+use crate::launcher::child::Start;
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct Network {
@@ -28,6 +29,8 @@ pub struct Network {
     pub clock: Option<ClockReport>,
     /// Per crossing topic, both bridges' counts added up.
     pub topics: BTreeMap<String, TopicCrossing>,
+    /// Bridge starts that ended without a report (killed): what they carried is not counted.
+    pub unreported_bridges: u64,
     /// The link as this host's bridge saw it.
     pub link: LinkReport,
 }
@@ -38,8 +41,9 @@ pub struct TopicCrossing {
     pub sent: u64,
     /// Frames the receiving bridge published into shared memory.
     pub received: u64,
-    /// Sent but never received (dropped on congestion, or lost with the link).
-    pub lost: u64,
+    /// Sent but never received (dropped on congestion, or lost with the link); none when a
+    /// bridge ended without its report (killed), so that its counts are unknown.
+    pub lost: Option<u64>,
     /// Frames the link refused at the sender.
     pub send_errors: u64,
     /// Jumps in the loop number of received frames, and the loops missed in them: what the
@@ -71,9 +75,13 @@ pub struct LinkOutage {
 pub fn build(
     config: &LaunchConfig,
     bridges: &BTreeMap<Role, BTreeMap<u32, BridgeReport>>,
+    starts: &BTreeMap<Role, Vec<Start>>,
     monitor: &MonitorReport,
 ) -> Option<Network> {
     let (host, spec) = config.hosts.remote()?;
+    let started: usize = Role::BRIDGES.iter().map(|r| starts.get(r).map_or(0, Vec::len)).sum();
+    let reported: usize = bridges.values().map(BTreeMap::len).sum();
+    let unreported_bridges = started.saturating_sub(reported) as u64;
     let reports = || bridges.values().flat_map(|by_incarnation| by_incarnation.values());
     let mut topics: BTreeMap<String, CrossingCounts> = BTreeMap::new();
     for (topic, counts) in reports().flat_map(|r| &r.topics) {
@@ -104,7 +112,7 @@ pub fn build(
                 let crossing = TopicCrossing {
                     sent: c.sent,
                     received: c.received,
-                    lost: c.sent.saturating_sub(c.received),
+                    lost: (unreported_bridges == 0).then(|| c.sent.saturating_sub(c.received)),
                     send_errors: c.send_errors,
                     gaps: c.gaps,
                     missing: c.missing,
@@ -113,6 +121,7 @@ pub fn build(
                 (topic, crossing)
             })
             .collect(),
+        unreported_bridges,
         link,
     })
 }

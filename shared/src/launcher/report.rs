@@ -235,13 +235,20 @@ fn render_network(out: &mut String, s: &Summary) {
             let _ = writeln!(out, "    its clock: unknown (no loop went there and back)");
         }
     }
+    if n.unreported_bridges > 0 {
+        let _ = writeln!(
+            out,
+            "    {} bridge start(s) ended without a report (killed): their frames are not counted",
+            n.unreported_bridges
+        );
+    }
     for (topic, t) in &n.topics {
         let _ = writeln!(
             out,
             "    {topic}: {} sent, {} received, {} lost, {} gaps ({} loops missed){}",
             t.sent,
             t.received,
-            t.lost,
+            t.lost.map_or("unknown".into(), |l| l.to_string()),
             t.gaps,
             t.missing,
             if t.malformed > 0 { format!(", {} malformed", t.malformed) } else { String::new() }

@@ -403,7 +403,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         timeline: log.timeline.clone(),
         restart_steps: log.restarts.iter().map(|r| restart_steps(r, log)).collect(),
         shared_memory,
-        network: network::build(config, &reports.bridges, &monitor),
+        network: network::build(config, &reports.bridges, starts, &monitor),
     }
 }
 
@@ -548,6 +548,7 @@ pub(crate) mod tests {
             timeline: vec![],
             restart_steps: vec![],
             shared_memory: SharedMemoryCheck { clean: true, ..Default::default() },
+            network: None,
         }
     }
 
@@ -572,6 +573,7 @@ pub(crate) mod tests {
             plant: Some(plant),
             stages: Role::STAGES.into_iter().map(|r| (r, [(0, stage.clone())].into())).collect(),
             monitor: Some(monitor),
+            ..Default::default()
         };
         let starts: BTreeMap<Role, Vec<Start>> =
             [(Role::Sensors, vec![Start { pid: 7, exit: Exit::Status(0), cpu_s: 0.5 }])].into();
@@ -669,6 +671,7 @@ pub(crate) mod tests {
                 records_by_incarnation: [(Role::Estimator, vec![500, 1500]), (Role::Sensors, vec![2000])].into(),
                 ..Default::default()
             }),
+            ..Default::default()
         };
         let start = |pid, exit| Start { pid, exit, cpu_s: 0.0 };
         let starts: BTreeMap<Role, Vec<Start>> = [

@@ -705,6 +705,29 @@ impl<'a> Supervisor<'a> {
                 }
                 self.note(at_ns, format!("{process} handles its input again"));
             }
+            ChildEvent::LinkLost { at_ns } => {
+                for bridge in Role::BRIDGES {
+                    for i in self.injected(bridge, FaultKind::Stop) {
+                        let seen = &mut self.log.faults[i];
+                        if seen.detected_ns.is_none() && seen.continued_ns.is_none() {
+                            seen.detected_ns = Some(at_ns);
+                            seen.detected_by = Some(DetectedBy::LinkLease);
+                        }
+                    }
+                }
+                self.note(at_ns, "link to the other host lost".into());
+            }
+            ChildEvent::LinkBack { at_ns } => {
+                for bridge in Role::BRIDGES {
+                    for i in self.injected(bridge, FaultKind::Stop) {
+                        let seen = &mut self.log.faults[i];
+                        if seen.resumed_ns.is_none() && seen.detected_ns.is_some() {
+                            seen.resumed_ns = Some(at_ns);
+                        }
+                    }
+                }
+                self.note(at_ns, "link to the other host back".into());
+            }
             ChildEvent::Status(status) => {
                 self.last_status = Instant::now();
                 self.show(&status);
@@ -846,7 +869,9 @@ impl<'a> Supervisor<'a> {
         }
         // The bridges after the stages (the remote one tidies its host up once they are gone),
         // the monitor last.
-        let order = Role::STOP_ORDER.into_iter().flat_map(|r| if r == Role::Monitor { vec![Role::Bridge, Role::BridgeRemote, r] } else { vec![r] });
+        let order = Role::STOP_ORDER
+            .into_iter()
+            .flat_map(|r| if r == Role::Monitor { vec![Role::Bridge, Role::BridgeRemote, r] } else { vec![r] });
         let present: Vec<Role> = order.filter(|r| self.processes.iter().any(|p| p.role == *r)).collect();
         for role in present {
             self.show_processes();

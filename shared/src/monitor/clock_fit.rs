@@ -7,6 +7,9 @@ use serde::{Deserialize, Serialize};
 /// Default length of a fitting window: one minimum-round-trip sample is kept per second of local time.
 pub const DEFAULT_WINDOW_NS: u64 = 1_000_000_000;
 
+/// Most the two clocks' rates can differ: Linux slews a clock by at most 500 ppm, crystals err by ~100.
+const MAX_DRIFT: f64 = 1e-3;
+
 /// Stretches of windows the uncertainty takes its tightest upper and lower bound points from.
 const BOUND_STRETCHES: usize = 32;
 
@@ -66,8 +69,7 @@ pub fn ntp_samples(stamps: &[u64; 8], hosts: &[u8; 8]) -> Vec<(u8, NtpSample)> {
         }
         if host != 0 && start > 0 && end < 7 && hosts[start - 1] == 0 && hosts[end + 1] == 0 {
             let s = NtpSample { t1: stamps[start - 1], t2: stamps[start], t3: stamps[end], t4: stamps[end + 1] };
-            let stamped = [s.t1, s.t2, s.t3, s.t4].iter().all(|&t| t != 0);
-            if stamped && s.t4 >= s.t1 && s.t3 >= s.t2 {
+            if [s.t1, s.t2, s.t3, s.t4].iter().all(|&t| t != 0) {
                 samples.push((host, s));
             }
         }
@@ -84,7 +86,7 @@ pub struct ClockFit {
     /// Local time the offset is given at: the mean of the windows' sample times.
     pub t_ref_ns: u64,
     /// Bound on |fitted − true offset| at any local time from the first sample's send to the last one's
-    /// receive, for a true clock of constant drift; with one window, for a true clock of no drift.
+    /// receive, for a true clock of constant drift under 1000 ppm; with one window, of no drift.
     pub uncertainty_ns: f64,
     /// Windows with a sample, each giving its smallest-round-trip sample to the fit.
     pub windows: usize,
@@ -155,17 +157,15 @@ impl ClockFitter {
     /// Least squares line through the windows' smallest-round-trip offsets (offset given at their mean
     /// time; drift 0 with one window).
     ///
-    /// Uncertainty: the out and back delays are ≥ 0, so the true offset θ obeys θ ≤ t2 − t1 when the
-    /// remote host received and θ ≥ t3 − t4 when it sent back. Moved to the local stamps t1 and t4 that
-    /// costs |drift|·(t4 − t1) (drift taken as the fitted one: its own error moves this far below 1 ns),
-    /// plus 1 ns for whole-ns stamps. The true line lies below every such upper point and above every
-    /// lower one: a 2-unknown linear programme, so by LP duality its extreme value at a time x0 is set
-    /// by two constraints, x0 = w·x_a + (1 − w)·x_b giving θ(x0) ≤ w·v_a + (1 − w)·v_b when each
-    /// positive weight falls on an upper point and each negative one on a lower point (and the mirror
-    /// for ≥). The tightest such bounds (over every pair of points, each the tightest of its side in one of
-    /// [`BOUND_STRETCHES`] stretches of windows) at the two ends of the sampled span, against the fitted line there, bound its error across
-    /// the span since the error is linear in time. With one window, a line of no drift is assumed: the
-    /// smallest upper and largest lower point bound it.
+    /// Uncertainty: the delays are ≥ 0, so the true offset θ is ≤ t2 − t1 when the remote host received
+    /// and ≥ t3 − t4 when it sent back. Moved to the local stamps t1 and t4 these widen by
+    /// [`MAX_DRIFT`]·(t4 − t1), and by 1 ns for whole-ns stamps. The true line lies below all such
+    /// upper points and above all lower ones: a linear programme in two unknowns, so by LP duality its
+    /// extreme at a time x0 is set by two points: x0 = w·x_a + (1 − w)·x_b gives θ(x0) ≤ w·v_a + (1 − w)·v_b
+    /// when each positive weight is on an upper point and each negative one on a lower point (mirrored
+    /// for ≥). Those bounds at both ends of the sampled span, against the fitted line there, bound its
+    /// error across the span, the error being linear in time. With one window a line of no drift is
+    /// assumed, bounded by the smallest upper and the largest lower point.
     pub fn fit(&self) -> Option<ClockFit> {
         let first = self.windows.values().next()?.best;
         let n = self.windows.len();
@@ -183,16 +183,16 @@ impl ClockFitter {
         let slope = if n > 1 && sxx > 0.0 { sxy / sxx } else { 0.0 };
         let fitted = |x: f64| mean_y + slope * (x - mean_x);
 
-        let drift_cost = |s: &NtpSample| slope.abs() * (s.t4 - s.t1) as f64 + 1.0;
+        let slack = |s: &NtpSample| MAX_DRIFT * (s.t4 - s.t1) as f64 + 1.0;
         let uppers: Vec<(f64, f64)> = self
             .windows
             .values()
-            .map(|w| (from_ref(w.min_out.t1), from_first(2 * w.min_out.out_bound()) + drift_cost(&w.min_out)))
+            .map(|w| (from_ref(w.min_out.t1), from_first(2 * w.min_out.out_bound()) + slack(&w.min_out)))
             .collect();
         let lowers: Vec<(f64, f64)> = self
             .windows
             .values()
-            .map(|w| (from_ref(w.max_back.t4), from_first(2 * w.max_back.back_bound()) - drift_cost(&w.max_back)))
+            .map(|w| (from_ref(w.max_back.t4), from_first(2 * w.max_back.back_bound()) - slack(&w.max_back)))
             .collect();
         // Any subset of points gives a valid bound; the tightest of each stretch of windows keeps the work
         // constant however long the run, and still has points across the whole span.
@@ -256,8 +256,8 @@ mod tests {
         (local as i64 + OFFSET_NS + (local - START_NS) as i64 * ppm / 1_000_000) as u64
     }
 
-    /// A remote controller at 1 kHz for `seconds`; returns the fitter and every (sample, true out delay).
-    fn simulate(seconds: u64, ppm: i64, seed: u64) -> (ClockFitter, Vec<(NtpSample, u64)>) {
+    /// A remote controller at 1 kHz for `seconds`; returns the fitter and every (sample, true delays out and back).
+    fn simulate(seconds: u64, ppm: i64, seed: u64) -> (ClockFitter, Vec<(NtpSample, u64, u64)>) {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let out = Uniform::new_inclusive(30_000u64, 400_000).unwrap();
         let back = Uniform::new_inclusive(30_000u64, 900_000).unwrap();
@@ -266,11 +266,11 @@ mod tests {
         let mut exchanges = Vec::new();
         for k in 0..seconds * 1000 {
             let t1 = START_NS + k * 1_000_000;
-            let (d_out, c) = (out.sample(&mut rng), compute.sample(&mut rng));
-            let t4 = t1 + d_out + c + back.sample(&mut rng);
+            let (d_out, c, d_back) = (out.sample(&mut rng), compute.sample(&mut rng), back.sample(&mut rng));
+            let t4 = t1 + d_out + c + d_back;
             let s = NtpSample { t1, t2: remote(t1 + d_out, ppm), t3: remote(t1 + d_out + c, ppm), t4 };
             fitter.push(s);
-            exchanges.push((s, d_out));
+            exchanges.push((s, d_out, d_back));
         }
         (fitter, exchanges)
     }
@@ -287,9 +287,11 @@ mod tests {
         assert!((fit.drift_ppm - ppm as f64).abs() * 1e-6 * (last - first) <= 2.0 * fit.uncertainty_ns);
         // Honest, and not much looser than the best exchange allows.
         assert!(fit.uncertainty_ns <= fit.min_round_trip_ns / 2.0 + 5_000.0, "{fit:?}");
-        for (s, d_out) in &exchanges {
-            let hop = fit.to_local_ns(s.t2) - s.t1 as f64;
-            assert!((hop - *d_out as f64).abs() <= fit.uncertainty_ns * (1.0 + 1e-3), "{hop} vs {d_out}");
+        // Corrected crossing hops are the true one-way delays, to within the uncertainty.
+        for &(s, d_out, d_back) in &exchanges {
+            let (out, back) = (fit.to_local_ns(s.t2) - s.t1 as f64, s.t4 as f64 - fit.to_local_ns(s.t3));
+            assert!((out - d_out as f64).abs() <= fit.uncertainty_ns * (1.0 + 1e-3), "{out} vs {d_out}");
+            assert!((back - d_back as f64).abs() <= fit.uncertainty_ns * (1.0 + 1e-3), "{back} vs {d_back}");
         }
         fit
     }
@@ -307,16 +309,19 @@ mod tests {
     }
 
     #[test]
-    fn one_window_gives_drift_zero_and_the_best_samples_bound() {
+    fn one_window_gives_drift_zero_and_its_one_way_bounds() {
         let (fitter, exchanges) = simulate(1, 0, 3);
         let fit = fitter.fit().unwrap();
         assert_eq!((fit.windows, fit.drift_ppm), (1, 0.0));
         let best = exchanges.iter().map(|e| e.0).min_by_key(|s| s.round_trip_ns()).unwrap();
         assert_eq!(fit.offset_ns, best.offset_ns());
         assert_eq!(fit.min_round_trip_ns, best.round_trip_ns() as f64);
-        let upper = exchanges.iter().map(|e| e.0.t2 - e.0.t1).min().unwrap() as f64 + 1.0;
-        let lower = exchanges.iter().map(|e| e.0.t3 as f64 - e.0.t4 as f64).fold(f64::MIN, f64::max) - 1.0;
-        assert_eq!(fit.uncertainty_ns, (upper - best.offset_ns()).max(best.offset_ns() - lower));
+        let slack = |s: &NtpSample| MAX_DRIFT * (s.t4 - s.t1) as f64 + 1.0;
+        let out = exchanges.iter().map(|e| e.0).min_by_key(|s| s.t2 - s.t1).unwrap();
+        let back = exchanges.iter().map(|e| e.0).min_by_key(|s| s.t4 as i64 - s.t3 as i64).unwrap();
+        let upper = (out.t2 - out.t1) as f64 + slack(&out) - best.offset_ns();
+        let lower = best.offset_ns() - (back.t3 as f64 - back.t4 as f64 - slack(&back));
+        assert!((fit.uncertainty_ns - upper.max(lower)).abs() < 1e-3, "{fit:?} {upper} {lower}");
         assert!((fit.offset_ns - OFFSET_NS as f64).abs() <= fit.uncertainty_ns);
         assert!(ClockFitter::default().fit().is_none());
     }

@@ -9,7 +9,7 @@ use crate::contract::msg::LoopTrace;
 use crate::contract::report::{ClockReport, CrossingReport, HOPS};
 use crate::contract::role::Role;
 use crate::monitor::clock_fit::{ClockFit, ClockFitter, DEFAULT_WINDOW_NS, ntp_samples};
-use crate::monitor::stats::Distribution;
+use crate::monitor::distribution::Distribution;
 
 /// The stage that stamps each of the trace's stamps, in `LoopTrace::stamps` order.
 const STAMPED_BY: [Role; 8] = [

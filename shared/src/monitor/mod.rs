@@ -12,6 +12,7 @@
 
 pub mod clock_fit;
 pub mod crossing;
+pub mod distribution;
 pub mod fault_effect;
 pub mod join;
 pub mod layout;

@@ -13,12 +13,12 @@ use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::role::{Role, Topic};
 use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
+use crate::monitor::crossing::Crossing;
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::join::{Joiner, LoopParts, Sample};
 use crate::monitor::layout::Layout;
 use crate::monitor::live::Live;
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
-use crate::monitor::crossing::Crossing;
 use crate::monitor::stats::LoopStats;
 use crate::runtime::ipc::MONITOR_BUFFER;
 
