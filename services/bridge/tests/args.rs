@@ -21,21 +21,9 @@ fn a_process_that_is_not_a_bridge_is_refused() {
 
 #[test]
 fn a_launch_file_without_a_remote_stage_is_refused() {
-    let dir = std::env::temp_dir().join(format!("looplab-bridge-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let launch = dir.join("launch.toml");
-    std::fs::write(&launch, "scenario = \"pendulum\"\n").unwrap();
-    let out = bridge(&[
-        "--launch",
-        launch.to_str().unwrap(),
-        "--run-id",
-        "x",
-        "--run-dir",
-        dir.to_str().unwrap(),
-        "--role",
-        "bridge",
-    ]);
-    let _ = std::fs::remove_dir_all(&dir);
+    // The pendulum's defaults: a whole launch file, with every stage here.
+    let launch = concat!(env!("CARGO_MANIFEST_DIR"), "/../../launch/pendulum.toml");
+    let out = bridge(&["--launch", launch, "--run-id", "x", "--run-dir", "/nonexistent", "--role", "bridge"]);
     assert_eq!(out.status.code(), Some(1));
     assert_eq!(String::from_utf8_lossy(&out.stderr), "bridge: error: no stage is placed on another host\n");
 }

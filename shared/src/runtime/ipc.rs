@@ -451,17 +451,22 @@ pub fn create_run_storage(run_id: &str) -> Result<std::fs::File> {
     })?;
     check_private(&folder)?;
     let path = owner_lock_path(run_id);
+    // Locked under another name, then renamed into place (the lock stays with the file): a
+    // lock file that exists is always locked while its launcher lives, so another launcher's
+    // `clean_abandoned_runs` never finds it free in the moment between creating and locking it.
+    let fresh = path.with_extension("new");
     let lock = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
         .mode(0o600)
         .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-        .open(&path)
-        .with_context(|| format!("create {}", path.display()))?;
+        .open(&fresh)
+        .with_context(|| format!("create {}", fresh.display()))?;
     // SAFETY: flock on a file descriptor we own.
     if unsafe { libc::flock(std::os::fd::AsRawFd::as_raw_fd(&lock), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
-        return Err(anyhow!("cannot lock {}: {}", path.display(), std::io::Error::last_os_error()));
+        return Err(anyhow!("cannot lock {}: {}", fresh.display(), std::io::Error::last_os_error()));
     }
+    std::fs::rename(&fresh, &path).with_context(|| format!("rename {} to {}", fresh.display(), path.display()))?;
     // iceoryx2 creates its registry segment world-writable; create it now, before any other
     // process of the run exists, and make it the owner's alone.
     drop(node("looplab", &run_config(run_id)?)?);
