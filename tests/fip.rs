@@ -62,7 +62,7 @@ fn without_disturbance_the_load_tracks_the_path_at_its_speed() {
 /// Case (ii), b = [−0.5, 0.5, −0.8] N: b̂ converges in x and y within a few hundredths of a
 /// newton; the mean thrust is ‖−b − m_T g e₃‖ = 2.164 N. b_z is poorly observable with the rod
 /// upright (Remark 5): b̂_z keeps what the filter learnt in the transient, and z is offset by
-/// exactly that error over m_T k_p (the note's 0.23 m is the offset if b̂_z had learnt nothing).
+/// exactly that error over m_T k_p (the derived 0.23 m is the offset if b̂_z had learnt nothing).
 #[test]
 fn a_constant_disturbance_is_estimated_in_x_and_y_and_offsets_z_by_its_error() {
     let r = run_in_process("fip-const", &[&case("3-constant-disturbance")]);

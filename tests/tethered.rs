@@ -1,5 +1,5 @@
 //! The tethered aerial robot (paper 002) in lockstep: the six cases of launch/tethered/, each
-//! against the paper's claims, the note's equilibria and its independent re-simulation. The
+//! against the paper's claims, derived equilibria and an independent re-simulation. The
 //! numerical cases run in-process (byte-identical to the five processes:
 //! tests/trajectory_hashes.rs); the sweeps run `looplab sweep`; one case runs the five
 //! processes in real time.
@@ -17,9 +17,9 @@ fn close(got: f64, want: f64, relative: f64, what: &str) {
 }
 
 /// Case 1: for both controllers the observer converges (both angles within 1e-3 rad for good)
-/// in under a second, as the paper says (the note's re-simulation: 0.2 s for Γb, 0.07 s for
+/// in under a second, as the paper says (an independent re-simulation: 0.2 s for Γb, 0.07 s for
 /// Γa′); phase 3's tracking error is near zero; and the motors settle at the flatness maps'
-/// equilibria at the end of phase 1 and of the run (the note's table, §7).
+/// equilibria at the end of phase 1 and of the run (derived by hand).
 #[test]
 fn the_nominal_loop_converges_and_settles_at_the_flatness_equilibria() {
     for (law, start, end, phase3) in [("gamma-b", 12.1184, 13.8059, 1e-4), ("gamma-a", 12.6115, 10.9937, 1e-3)] {
@@ -42,7 +42,7 @@ fn the_nominal_loop_converges_and_settles_at_the_flatness_equilibria() {
 /// prior, the loop moves, the branches' prediction errors part, and the selector takes the
 /// true branch once, within a second, and keeps it; the vehicle stays up. Held on the wrong
 /// branch, the vehicle is lost. Started at an exact equilibrium, both errors are zero and,
-/// without hysteresis, the selector flips on rounding to the wrong branch and back (the note's
+/// without hysteresis, the selector flips on rounding to the wrong branch and back (the
 /// chatter); the hysteresis removes it.
 #[test]
 fn the_selector_resolves_the_sign_of_eta() {
@@ -136,7 +136,7 @@ fn metric(point: &(f64, serde_json::Value), name: &str) -> f64 {
 
 /// Case 3: Δm_R from −10 % to +10 % (nominal = (1 + Δ)·real). Γa′ is very sensitive and
 /// asymmetric, as the paper says: overestimating the mass (+5 %) keeps the vehicle in the air,
-/// underestimating it by as much loses it (the note's re-simulation found the same). Γb keeps
+/// underestimating it by as much loses it (an independent re-simulation found the same). Γb keeps
 /// every value, with errors growing with |Δ|; unlike the paper, it too does better
 /// overestimating (e_track −10 % > +10 %), and it is the more robust of the two here.
 #[test]
@@ -166,7 +166,7 @@ fn final_errors(r: &common::Run) -> (f64, f64) {
 /// Case 4, the general model. The link's mass alone (1 % and 20 % of m_R) leaves Γb stable
 /// with a constant error, as the paper says. The offset r_BL makes an uncompensated torque
 /// f_L·(w × d) on the vehicle; with the joint above the centre of mass (r_z = −3 cm) Γb holds
-/// a constant error, but with the paper's r_BL = [0.03, 0, 0.03] m in the note's frame (the
+/// a constant error, but with the paper's r_BL = [0.03, 0, 0.03] m in our frame (the
 /// joint below it) the error drives ϕ to the ground and the vehicle is lost: the paper's
 /// advice "r_BLz ≤ 0" holds, its "stable" for this offset does not here.
 #[test]
@@ -190,8 +190,8 @@ fn the_general_model_leaves_a_constant_error_unless_the_joint_is_below() {
 }
 
 /// Case 5, motor lag τ_M: the paper says stable up to 0.08 s. Γb is stable up to 0.25 s and
-/// lost from 0.3 s, with the selector active and fixed alike (the note's re-simulation: 0.1 and
-/// 0.15 s); Γa′ only up to 6 ms, lost from 7 ms (the note: it diverged from 20 ms).
+/// lost from 0.3 s, with the selector active and fixed alike (an independent re-simulation:
+/// 0.1 and 0.15 s); Γa′ only up to 6 ms, lost from 7 ms (the re-simulation: it diverged from 20 ms).
 #[test]
 fn the_motor_lag_limit_is_measured_per_controller() {
     let metrics = ["lost", "etrack_mean_phase3"];

@@ -1,16 +1,16 @@
 //! The KF-aided backstepping controller of section 5 (29)–(56), evaluated with the filter's
-//! pseudo-estimates: v̂_L, ω̂, b̂, and the measured p_L, q, R (note §5, §9.4).
+//! pseudo-estimates: v̂_L, ω̂, b̂, and the measured p_L, q, R.
 //!
 //! The chain position → pendulum direction → pendulum rate → thrust direction needs time
-//! derivatives the paper does not print ("pseudo-derivatives" along the flow with f = f∥d,
-//! note §5): ξ̇ (η), η̇, q̇_d, ω̇_d and ż_ω are written out in [`desired`] as the note derives
-//! them. Everything the thrust direction needs beyond that comes exactly from dual numbers
+//! derivatives the paper does not print ("pseudo-derivatives" along the flow with f = f∥d):
+//! ξ̇ (η), η̇, q̇_d, ω̇_d and ż_ω are written out by hand in
+//! [`desired`]. Everything the thrust direction needs beyond that comes exactly from dual numbers
 //! (`model::autodiff`) through the same code:
 //! - ṙ₃d: [`desired`] evaluated on duals seeded with the model's flow under the applied
 //!   f = −T r₃ and ḃ̂ = 0, the reference's derivatives one order up (p_Ld⁽⁵⁾ enters here);
 //! - ∂z_ω/∂v_L: the same, seeded with each axis of v_L.
 //!
-//! δ in (56) is the note's δ′ = m_T·(50) (§5, §9.6): with (50)'s leading 1/m_T the third term
+//! δ in (56) is δ′ = m_T·(50): with (50)'s leading 1/m_T the third term
 //! of Ω would not cancel its cross term in V̇₄. γ (the yaw rate, free in the paper) is set in the
 //! launch file.
 
@@ -85,7 +85,7 @@ fn normal<S: Scalar>(q: Vec3<S>, a: Vec3<S>) -> Vec3<S> {
     sub(a, scale(q, dot(q, a)))
 }
 
-/// ‖ξ‖ is kept away from 0 by this (note §9.13; it never comes close in the paper's runs).
+/// ‖ξ‖ is kept away from 0 by this (it never comes close in the paper's runs).
 const XI_FLOOR: f64 = 1e-6;
 
 /// (29)–(53): the errors, the desired pendulum direction and rate, and the desired force.
@@ -273,7 +273,7 @@ mod tests {
         }
     }
 
-    /// The note's §7 numbers at t₀: ξ̂(0) = [−2.7188, 0.5116, 7.2536] N (‖ξ̂‖ = 7.763),
+    /// Numbers derived by hand at t₀: ξ̂(0) = [−2.7188, 0.5116, 7.2536] N (‖ξ̂‖ = 7.763),
     /// q_d(0) = [0.3502, −0.0659, −0.9343], f∥d(0) = [0.454, 0.454, −7.334] N.
     #[test]
     fn the_first_step_matches_the_note() {
@@ -285,7 +285,7 @@ mod tests {
         assert!(close(d.f_par, [0.454, 0.454, -7.334], 1e-3), "{:?}", d.f_par);
     }
 
-    /// The hand-expanded ω̇_d (η, η̇, q̇_d of the note) is the time derivative of ω_d along the
+    /// The hand-expanded ω̇_d (η, η̇, q̇_d, expanded by hand) is the time derivative of ω_d along the
     /// model's flow with f = f∥d and ḃ̂ = 0, which dual numbers give exactly through the same code.
     #[test]
     fn the_derived_pseudo_derivatives_are_the_flows_derivatives() {

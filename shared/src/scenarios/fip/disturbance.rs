@@ -2,7 +2,7 @@
 //! Ornstein–Uhlenbeck process (71), ḃ = 1.5·diag(13, 15, 22)⁻¹(−b + 5·diag(6.5, 5, 4)·w_d),
 //! written here per axis as ḃᵢ = (−bᵢ + gᵢwᵢ)/τᵢ.
 //!
-//! The paper does not give w_d's sample time (note §6, §9.9). Here w_d is a seeded Gaussian
+//! The paper does not give w_d's sample time. Here w_d is a seeded Gaussian
 //! (standard deviation 0.1) drawn every `ou_noise_sample_s` and held, and b is integrated
 //! exactly between draws: b(t + s) = gw + (b(t) − gw)·e^(−s/τ). The stationary spread is then
 //! √(g²σ²T_s/(2τ)): (0.078, 0.056, 0.037) N at the default 0.01 s.
@@ -145,7 +145,7 @@ pub mod tests {
         }
     }
 
-    /// The note's table: (0.078, 0.056, 0.037) N at T_s = 0.01 s, and the simulated spread
+    /// The derived spread: (0.078, 0.056, 0.037) N at T_s = 0.01 s, and the simulated spread
     /// over a long run agrees with it.
     #[test]
     fn the_ou_spread_matches_the_formula() {

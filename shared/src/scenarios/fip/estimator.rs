@@ -1,7 +1,7 @@
 //! The LTV Kalman–Bucy filter of section 4 for x = [q, ω, b/(m_Qℓ)] (6), with the input
 //! u = −T r₃/(m_Qℓ) (9) from the applied thrust and the measured attitude, and the output
 //! y = [q; 0] (7), whose last row is the virtual measurement of the constraint qᵀω = 0.
-//! A(t), B(t) and C(t) of (10)–(12) use the measured q (note §4, §9.4): q = (p_L − p_Q)/‖·‖
+//! A(t), B(t) and C(t) of (10)–(12) use the measured q: q = (p_L − p_Q)/‖·‖
 //! from the motion capture.
 //!
 //! The filter runs as its exact discrete-time equivalent (the quadcopter's estimator does the

@@ -1,12 +1,12 @@
 //! The flying inverted pendulum on a quadrotor (paper 000: Yang et al., LTV Kalman–Bucy filter
-//! and KF-aided backstepping; note `../shared/papers/000-flying-inverted-pendulum.md`).
+//! and KF-aided backstepping, a preprint submitted to Control Engineering Practice; see README.md).
 //!
 //! - `params`: m_Q, m_L, ℓ, g and the actuator's ranges;
 //! - `plant`: (3) and (5) on ℝ³ × S² × SO(3), Ω kinematic, the 45 Hz command link;
 //! - `disturbance`: b at the UAV: none, constant, or the Ornstein–Uhlenbeck process (71);
 //! - `sensors`: motion capture (p_L, p_Q, R) and v_Q; never ω or v_L;
 //! - `estimator`: the LTV Kalman–Bucy filter of section 4, exactly discretised;
-//! - `controller`: the backstepping of section 5 with the note's pseudo-derivatives;
+//! - `controller`: the backstepping of section 5 with its pseudo-derivatives expanded by hand;
 //! - `reference`: the constant-speed ellipse (68)–(69) with exact derivatives;
 //! - `metrics`: the tracking, speed, disturbance and thrust numbers of the contract.
 

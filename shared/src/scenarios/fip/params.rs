@@ -54,7 +54,7 @@ pub mod tests {
         }
     }
 
-    /// The note's derived numbers: m_T = 0.29 kg, m_Qℓ = 0.182 kg·m, m_T g = 2.8449 N.
+    /// Numbers derived by hand: m_T = 0.29 kg, m_Qℓ = 0.182 kg·m, m_T g = 2.8449 N.
     #[test]
     fn derived_masses_match_the_note() {
         let m = simulation();

@@ -203,7 +203,7 @@ mod tests {
         for (got, want) in x[state::DIRECTION].iter().zip([0.061628, 0.061628, -0.996195]) {
             assert!((got - want).abs() < 1e-6, "{got} vs {want}");
         }
-        // The note: p_Q(0) = [−0.043, 0.157, 0.397].
+        // Derived by hand: p_Q(0) = [−0.043, 0.157, 0.397].
         for (got, want) in x[state::UAV_POSITION].iter().zip([-0.043, 0.157, 0.397]) {
             assert!((got - want).abs() < 1e-3, "{got} vs {want}");
         }

@@ -135,7 +135,7 @@ pub mod tests {
         v.iter().map(|x| x * x).sum::<f64>().sqrt()
     }
 
-    /// The note's numbers: p_Ld(0) = [0.8, 0, −1.6], ṗ_Ld(0) = [0, 0.4240, 0.2650],
+    /// Numbers derived by hand: p_Ld(0) = [0.8, 0, −1.6], ṗ_Ld(0) = [0, 0.4240, 0.2650],
     /// p̈_Ld(0) = [−0.2247, 0, 0]; one lap takes 10.9726 s (arc 5.48631 m at 0.5 m/s).
     #[test]
     fn the_start_and_the_lap_match_the_note() {

@@ -1,4 +1,4 @@
-//! The pendulum's estimators (paper 003 §4, rebuilt in note 003 §5).
+//! The pendulum's estimators (paper 003 §4, rebuilt: see README.md).
 //!
 //! Both output (θ̂, θ̂̇, φ̇, δ̂). The wheel speed φ̇ is measured directly (held between its
 //! samples); the estimators reconstruct θ and θ̇ from the encoder, which reads y = θ + δ.

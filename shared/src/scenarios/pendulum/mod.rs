@@ -1,5 +1,5 @@
-//! Reaction-wheel inverted pendulum with a biased angle sensor (paper 003; note
-//! `../shared/papers/003-reaction-wheel-pendulum.md`).
+//! Reaction-wheel inverted pendulum with a biased angle sensor (paper 003; see
+//! README.md).
 //!
 //! - `plant`: the nonlinear model;
 //! - `sensors`: what the encoder and the motor controller's speed sensor read;

@@ -1,4 +1,4 @@
-//! The reaction-wheel pendulum's nonlinear model (note 003, §2).
+//! The reaction-wheel pendulum's nonlinear model (paper 003 §2).
 //!
 //! State x = (θ, θ̇, φ̇): pendulum angle from the upward vertical, its rate, and the wheel's
 //! speed relative to the pendulum. Input: motor current I, torque τ = k·I on the wheel.
@@ -13,7 +13,7 @@ use crate::model::integrate::rk4;
 use crate::model::scenario::Plant;
 
 /// Physical parameters [paper 003 §1], plus the actuator's torque constant and current limit
-/// (choices, note §1 and §3).
+/// (our choices; see README.md).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Model {
@@ -170,7 +170,7 @@ pub(crate) mod tests {
 
     #[test]
     fn paper_gain_gives_the_notes_closed_loop_poles() {
-        // I = −K X with K = (−378, −55, −1): poles −32.1 and −6.69 ± 1.10j (note §3).
+        // I = −K X with K = (−378, −55, −1): poles −32.1 and −6.69 ± 1.10j.
         let m = paper_model();
         let (a, b) = m.linearised();
         let k = nalgebra::RowVector3::new(-378.0, -55.0, -1.0);

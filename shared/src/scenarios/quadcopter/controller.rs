@@ -1,4 +1,4 @@
-//! The backstepping tracking law (note 001, §5): thrust (56) and torque (57), with the
+//! The backstepping tracking law (paper 001): thrust (56) and torque (57), with the
 //! parameters either true (the nominal controller of §4) or the estimator's (certainty
 //! equivalence, §6).
 //!

@@ -1,4 +1,4 @@
-//! The parameter estimator (note 001, §4): the 16-state Kalman-Bucy filter of §5.1 for
+//! The parameter estimator (paper 001): the 16-state Kalman-Bucy filter of §5.1 for
 //! ζ = [v, ω, ξ] and the cascaded scalar filters of §5.2 for m = 1/ξ₁ and jᵢ = 1/ξ₄ᵢ.
 //!
 //! The continuous filter is stiff (its gain reaches 10⁴ s⁻¹), so it is not integrated: the

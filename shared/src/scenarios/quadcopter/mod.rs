@@ -1,5 +1,6 @@
-//! Quadcopter with a Kalman-Bucy parameter estimator and backstepping tracking (paper 001;
-//! note `../shared/papers/001-quadcopter-kbf.md`).
+//! Quadcopter with a Kalman-Bucy parameter estimator and backstepping tracking (paper 001:
+//! Zhu et al., "Kalman-Bucy Filter-Based Tracking Controller Design and Experimental Validations
+//! for a Quadcopter with Parametric Uncertainties and Disturbances", 2022; see README.md).
 //!
 //! - `plant`: the rigid body (21) on SO(3), torque or rate-loop actuation, command link;
 //! - `sensors`: motion-capture pose, body velocity, body rate;

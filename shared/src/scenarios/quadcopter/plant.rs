@@ -1,4 +1,4 @@
-//! The quadcopter's rigid-body model (21) (note 001, §2), NED frame (z down):
+//! The quadcopter's rigid-body model (21) (paper 001), NED frame (z down):
 //!
 //!   ṗ = R v,   Ṙ = R S(ω),   v̇ = −S(ω) v + g Rᵀe₃ + m⁻¹ Rᵀ b − m⁻¹ T e₃,
 //!   ω̇ = −J⁻¹ S(ω) J ω + J⁻¹ τ

@@ -1,5 +1,5 @@
 //! The references p_d(t) with their first three time derivatives (the torque law needs p⃛_d),
-//! and the excitation γ(t) (note 001, §6).
+//! and the excitation γ(t) (paper 001).
 //!
 //! The derivatives are exact: positions are evaluated on truncated Taylor series in t
 //! ([`Jet`]), so the chain rule through ψ(t) is done by arithmetic, not by hand.

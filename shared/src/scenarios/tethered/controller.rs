@@ -4,7 +4,7 @@
 //!   b̄ᵃ = [−a₁ sin x₁ x₂ − a₂ sin ψ ψ̇ u₁, 0], Eᵃ = diag(a₂ cos ψ, a₃), ψ = x₁ + x₃; singular at
 //!   ψ = π/2 + kπ.
 //! - Γb (10)–(11): outputs ϕ and f_L, thrust extended twice. [ϕ⁽⁴⁾, f̈_L] = bᵇ + Eᵇ[ü₁, τ_R]
-//!   with the note's bᵇ and Eᵇ = [[a₂ cos ψ, −a₂a₃ sin ψ u₁], [sin ψ, a₃ cos ψ u₁]]; singular at
+//!   with a re-derived bᵇ and Eᵇ = [[a₂ cos ψ, −a₂a₃ sin ψ u₁], [sin ψ, a₃ cos ψ u₁]]; singular at
 //!   u₁ = 0.
 //!
 //! Each output's error follows the linear dynamics of its poles. u₁ (and u̇₁ for Γb) are the

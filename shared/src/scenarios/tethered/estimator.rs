@@ -3,7 +3,7 @@
 //! With the gyro as an input (u₃ = ω), z = [ϕ + ϑ, ϕ̇, ϕ̈] has the triangular form (18),
 //! ż₁ = z₂ + u₃, ż₂ = z₃, ż₃ = σ, and the accelerometer gives z₁ up to π: with
 //! η = ‖[a_x, a_z + f_R/m_R]‖ = |f_L|/m_R, w = atan2((a_z + f_R/m_R)/η_s, a_x/η_s) for
-//! η_s = ±η (20)–(21). The note's corrections are used: the thrust's specific force is f_R/m_R
+//! η_s = ±η (20)–(21). The corrected forms are used: the thrust's specific force is f_R/m_R
 //! (the printed a₂u₁ is off by a factor l), σ's first term is −a₁z₂ sin x₁, and atan2 takes
 //! (sin, cos). With (22) substituted, σ = z₂³ − (η_s/l)z₂ + a₂(cos z₁ u̇₁ − sin z₁ u₁u₃).
 //!
@@ -11,7 +11,7 @@
 //! by RK4 over each tick with u₁, u̇₁ held and ω, η, w interpolated between samples, its rate and acceleration saturated against
 //! peaking (section V-E.2); (24) takes it back to x̂. The selector of section V-D filters each
 //! branch's accelerometer prediction error, ẽ̇ = λ(‖a − â‖ − ẽ), and takes the smaller, with
-//! the note's hysteresis and, optionally, its prior that the vehicle is above the ground
+//! a hysteresis and, optionally, its prior that the vehicle is above the ground
 //! (x̂₁ ∈ (0, π)). u₁ and u̇₁ are the controller's compensator states, which reach the estimator
 //! through the command.
 
@@ -240,7 +240,7 @@ impl Estimator for HighGainObserver {
             // w of branch −η is w of +η turned by π.
             let turn = if b.sign > 0.0 { 0.0 } else { PI };
             match previous {
-                // ẑ(0) = [w, 0, 0] (the note's §9.A).
+                // ẑ(0) = [w, 0, 0].
                 None => b.z = Vector3::new(wrap(now.w + turn), 0.0, 0.0),
                 // The same instant again: nothing to integrate.
                 Some(p) if t <= p.t => {}

@@ -1,6 +1,6 @@
 //! The aerial robot tethered to the ground by a link (paper 002: Tognon & Franchi, flatness-based
-//! control and IMU-only high-gain observation; note `../shared/papers/002-tethered-aerial-robot.md`,
-//! whose corrected equations are used throughout).
+//! control and IMU-only high-gain observation, "Dynamics, Control, and Estimation for Aerial
+//! Robots Tethered by Cables or Bars"; its equations corrected as README.md says).
 //!
 //! - `params`: the nominal m_R, J_R, l, g, the flatness maps' equilibria, the actuator's ranges;
 //! - `plant`: the vehicle on its link, ideal (1) or general (section VI-C), motor lag τ_M,
@@ -380,7 +380,7 @@ mod closed_loop_tests {
         (reference.error(t + dt, plant.state()), lost)
     }
 
-    /// The note's correction of (15): the thrust's specific force in a_z is f_R/m_R. With the
+    /// The correction of (15): the thrust's specific force in a_z is f_R/m_R. With the
     /// printed a₂u₁ = f_R/(m_R l) in the observer (half of it here, l = 2 m), η and w are wrong
     /// by the thrust's half and the loop diverges: the vehicle reaches the ground. With the
     /// corrected term it tracks to a relative error below 1e-3.

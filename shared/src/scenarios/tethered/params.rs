@@ -81,7 +81,7 @@ pub mod tests {
         }
     }
 
-    /// The note's table (§7): Γa′ from (10°, 30°) to (50°, 5°), Γb from (45°, 3 N) to
+    /// The derived equilibria: Γa′ from (10°, 30°) to (50°, 5°), Γb from (45°, 3 N) to
     /// (135°, 5 N), with a₁ = −4.905 and a₂ = 0.5.
     #[test]
     fn the_equilibria_are_the_notes() {

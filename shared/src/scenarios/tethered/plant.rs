@@ -1,12 +1,12 @@
-//! The truth: the planar vehicle on a rigid link to a ground point (section II), frame of the
-//! note §1 (z_W up; the thrust points along [sin ϑ, cos ϑ] in the x–z plane; the vehicle at
+//! The truth: the planar vehicle on a rigid link to a ground point (section II), in the
+//! frame (z_W up; the thrust points along [sin ϑ, cos ϑ] in the x–z plane; the vehicle at
 //! l[cos ϕ, sin ϕ]).
 //!
 //! The motion comes from Newton–Euler with the joint force as the unknown, which covers both
 //! models at once: the ideal one of (1) (massless link at the centre of mass) and the general
 //! one of section VI-C (a uniform link of mass m_L, the joint at r_BL in the body frame), where
-//! the note corrects two printed terms (ḡ₂ has no factor l; the thrust's moment is −r_x f_R).
-//! The tests check this against (2), against the note's Lagrangian, and against energy.
+//! two printed terms are corrected (ḡ₂ has no factor l; the thrust's moment is −r_x f_R).
+//! The tests check this against (2), against a first-principles Lagrangian, and against energy.
 //!
 //! The motors may lag the commands (first order, τ_M, on thrust and torque; section VI-E):
 //! within a step the thrust is the exact exponential towards the held command. The plant's
@@ -252,7 +252,7 @@ mod tests {
         [0.8, 0.0, 0.0, 0.0, 0.0, 0.0],
     ];
 
-    /// The ideal model is (2) and (5), and the accelerometer is (15) as the note corrects it:
+    /// The ideal model is (2) and (5), and the accelerometer is (15) corrected:
     /// a_x = (f_L/m_R) cos(ϕ+ϑ), a_z = (f_L/m_R) sin(ϕ+ϑ) − f_R/m_R.
     #[test]
     fn the_ideal_model_is_the_papers_state_space_form() {
@@ -270,7 +270,7 @@ mod tests {
         }
     }
 
-    /// The general model satisfies the note's first-principles Lagrangian (§2.5), thrust and
+    /// The general model satisfies a first-principles Lagrangian, thrust and
     /// torque included: (m_R l² + m_L l²/3)ϕ̈ + m₁₂ϑ̈ + c₀ϑ̇² + (m_R + m_L/2) g l cos ϕ = l cos ψ f_R
     /// and m₁₂ϕ̈ + (J_R + m_R‖r‖²)ϑ̈ + c₀ϕ̇² − m_R g (R̄r)·e₃ = τ_R − r_x f_R.
     #[test]

@@ -1,6 +1,6 @@
 //! The references of section VI: smooth steps from one constant to another over a transition of
 //! D seconds (7, 5 or 3 s in the paper), in three phases: constant (the observer converges),
-//! the transition, constant again. The paper gives no formula; these are the note's
+//! the transition, constant again. The paper gives no formula; these are our
 //! polynomials, with exactly as many continuous derivatives as each output needs (Table I):
 //!
 //! - C²: s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ (ϑ_d of Γa′, f_Ld of Γb);

@@ -1,15 +1,15 @@
-//! The controllers' design models (note §2.7, A1–A4): the inner (z, φ, θ, ψ) model with the
+//! The controllers' design models (assumptions A1–A4): the inner (z, φ, θ, ψ) model with the
 //! thrusts' dynamic extension, differentiated in Taylor mode to give b and Δ of (34)–(36), and
 //! the outer (x, y, γ₁, γ₂) model that gives A and b of (48).
 //!
-//! Inner model (note §5.1, §9.11–9.12), nominal parameters with A1 applied:
+//! Inner model, nominal parameters with A1 applied:
 //! - z̈ = e₃ᵀR_B^F F^B(α, f)/m − g (A1, A2: no coupling to the load or the attitude);
 //! - the attitude as one rigid body, J ω̇ + ω × Jω = τ^B + τ_g, ω = W_η η̇, with the constant
 //!   J = Σ Jᵢ at α = 0 and at the measured γ, held during the expansion (so τ_α first appears in
-//!   the fourth derivative, note §9.11; this equals the Euler–Lagrange form with
+//!   the fourth derivative; this equals the Euler–Lagrange form with
 //!   M_ηη = W_ηᵀ J W_η, see the tests); τ^B = τ_R f_R + τ_L f_L of (22) verbatim; τ_g the
 //!   gravity torque of m₄d₄(γ) (A1: Σ mᵢdᵢ = m₄d₄);
-//! - α̈ = τ_α / I_yy (A3: m₂₃ = m₂₄ = 0); no drag on z, η, α (only μ_γ is given, note §9.14);
+//! - α̈ = τ_α / I_yy (A3: m₂₃ = m₂₄ = 0); no drag on z, η, α (only μ_γ is given);
 //! - f_R, f_L double integrators of the new inputs f̈_R, f̈_L.
 //!
 //! One deviation, inferred: (22)'s lever d_z is the plant's (0.123 m), not A1's 0. A1 is about
@@ -364,7 +364,7 @@ impl OuterModel {
         OuterTerms { a, b, velocity_xy: [velocity[0], velocity[1]] }
     }
 
-    /// ḋ^F = R_B^F (S(ω) d₄^B + L_γ γ̇): the load's velocity relative to the aircraft (note §9.25).
+    /// ḋ^F = R_B^F (S(ω) d₄^B + L_γ γ̇): the load's velocity relative to the aircraft.
     pub fn swing_velocity(&self, eta: [f64; 3], eta_dot: [f64; 3], gamma: [f64; 2], gamma_dot: [f64; 2]) -> [f64; 3] {
         load_velocity(self.rod_length, eta, eta_dot, gamma, gamma_dot)
     }

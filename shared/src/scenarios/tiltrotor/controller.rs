@@ -1,30 +1,30 @@
-//! NLLS-2L and NLPT-2L (paper 004, section 3; note §5): two loops of feedback linearisation.
+//! NLLS-2L and NLPT-2L (paper 004, section 3): two loops of feedback linearisation.
 //!
-//! Inner loop (z, φ, θ, ψ; section 3.1, note §5.1): the thrusts are the controller's own
+//! Inner loop (z, φ, θ, ψ; section 3.1): the thrusts are the controller's own
 //! double integrators (the dynamic extension), the new inputs are Γ̄ = (f̈_R, f̈_L, τ_αR, τ_αL),
 //! every output has relative degree 4 and Γ̄ = Δ⁻¹(v − b) (36), with
-//! vᵢ = iRef⁽⁴⁾ + K_ddd e⃛ + K_dd ë + K_d ė + K_p e + K_I ∫e, e = i − iRef (note §5.1, §9.9).
+//! vᵢ = iRef⁽⁴⁾ + K_ddd e⃛ + K_dd ë + K_d ė + K_p e + K_I ∫e, e = i − iRef.
 //! b, Δ and e's derivatives come exactly from the design model's Taylor series
-//! (`control_model`, note §9.11), from the estimated ż and the measured angles and rates: no
+//! (`control_model`), from the estimated ż and the measured angles and rates: no
 //! numerical differentiation.
 //!
-//! Outer loop (x, y and the load; section 3.2, note §5.2): Υ = A⁻¹(v − b) of (48) from M_q2 of
+//! Outer loop (x, y and the load; section 3.2): Υ = A⁻¹(v − b) of (48) from M_q2 of
 //! the design model, then φ_Ref, θ_Ref by (46) with σ saturation and f_z^B from the thrust
 //! states; f_x^B, f_y^B are compensated as known disturbances (n_x, n_y of (43)). NLLS-2L adds
 //! K_pd ḋ^F + K_Id ∫ḋ^F (49)–(50), NLPT-2L leaves them out (72)–(73).
 //!
-//! Choices the paper does not make (stand-ins, note §9):
+//! Choices the paper does not make (stand-ins, see README.md):
 //! - φ_Ref and θ_Ref pass through a 4th-order critically damped prefilter, (s + ω)⁴, whose
-//!   state gives their derivatives to the 4th order (§9.10); it starts at the measured φ, θ.
-//! - The thrust states start at the nominal hover thrust, ḟ = 0 (§9.4), and are integrated
+//!   state gives their derivatives to the 4th order; it starts at the measured φ, θ.
+//! - The thrust states start at the nominal hover thrust, ḟ = 0, and are integrated
 //!   exactly over the tick; the command is their value at the tick's midpoint,
 //!   f + τḟ/2 + τ²f̈/8: the plant holds the command over the whole tick, and the midpoint value
 //!   matches the model's thrust profile over it with no mean lag (the start value would lag
 //!   by half a tick, 5 ms, inside a loop that feeds back the thrust's 2nd derivative).
-//! - Limits (§9.22): f in [0, thrust_max] with ḟ zeroed at a bound, τ_α within ±torque_max;
+//! - Limits: f in [0, thrust_max] with ḟ zeroed at a bound, τ_α within ±torque_max;
 //!   every integrator is frozen while an actuator saturates (and the outer ones also while σ
 //!   of (46) saturates).
-//! - The gains come from poles (`gains`, note §9.5 option B).
+//! - The gains come from poles (`gains`).
 //! - ψ's error is not wrapped (the stand-in reference stays within ±π/4).
 //!
 //! Measured on the full plant (the launch file's poles, ±30 % draw): both kinds fly the
@@ -87,7 +87,7 @@ impl ControllerSection {
     }
 }
 
-/// The fastest pole or prefilter the 100 Hz loop is allowed: sτ ≤ 1 (note §9.5's caution).
+/// The fastest pole or prefilter the 100 Hz loop is allowed: sτ ≤ 1.
 const MAX_POLE_TICKS: f64 = 1.0;
 
 /// Every pole real and stable, no faster than 1/τ; the prefilter positive and no faster.
@@ -324,7 +324,7 @@ impl Controller for TwoLoop {
         command[2] = torques[0];
         command[3] = torques[1];
 
-        // Integrators, frozen while saturated (anti-windup, note §9.22).
+        // Integrators, frozen while saturated (anti-windup).
         if !saturated {
             for (integral, e) in self.inner_integral.iter_mut().zip(inner_error) {
                 *integral += tau * e;

@@ -1,5 +1,5 @@
 //! The external force F_ext on x, y, z (N, in F), rows 1–3 of (24). The paper shows its
-//! profiles only in Fig. 3, with no numbers (note §6, §9.2), so this is a stand-in: steps,
+//! profiles only in Fig. 3, with no numbers, so this is a stand-in: steps,
 //! which exercise the LKFUI's unknown input, plus smooth sin² pulses.
 
 use std::f64::consts::PI;

@@ -4,8 +4,7 @@
 //! The inertia matrix (17) and the potential (18) are written once, generic over
 //! [`Scalar`]; their partial derivatives come from forward-mode automatic differentiation
 //! ([`Dual`]), so C(q, q̇) is assembled from the Christoffel symbols of M and G = ∂P/∂q
-//! without a hand-typed term. The input map B(q) implements the torque map (22) verbatim
-//! (note §2.5, §9.17).
+//! without a hand-typed term. The input map B(q) implements the torque map (22) verbatim.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -19,7 +18,7 @@ use crate::model::autodiff::{
 /// The coordinates M and P depend on: η, α, γ (not ξ).
 const CONFIGURATION: std::ops::Range<usize> = 3..DOF;
 
-/// R_B^F = R_z(ψ) R_y(θ) R_x(φ) (note §1: forced by (12), (44), (46)).
+/// R_B^F = R_z(ψ) R_y(θ) R_x(φ) (forced by (12), (44), (46)).
 pub fn rotation<S: Scalar>(eta: [S; 3]) -> Mat3<S> {
     mat_mul(&rot_z(eta[2]), &mat_mul(&rot_y(eta[1]), &rot_x(eta[0])))
 }
@@ -48,8 +47,8 @@ pub fn body_rate<S: Scalar>(eta: [S; 3], eta_dot: [S; 3]) -> Vec3<S> {
     mat_vec(&w_eta(eta[0], eta[1]), eta_dot)
 }
 
-/// ḋ^F = R_B^F (S(ω) d₄ᴮ + L_γ γ̇): the load's velocity relative to the aircraft, in F (note
-/// §9.25, inferred: the paper says only "the load's translational velocity with respect to the
+/// ḋ^F = R_B^F (S(ω) d₄ᴮ + L_γ γ̇): the load's velocity relative to the aircraft, in F (our
+/// reading: the paper says only "the load's translational velocity with respect to the
 /// aircraft").
 pub fn load_velocity(l: f64, eta: [f64; 3], eta_dot: [f64; 3], gamma: [f64; 2], gamma_dot: [f64; 2]) -> [f64; 3] {
     let lg = l_gamma(l, gamma);
@@ -273,7 +272,7 @@ pub fn input_map(p: &Params, q: &[f64; DOF]) -> [[f64; 4]; DOF] {
     b
 }
 
-/// q̈ of (3): M⁻¹(BΓ + F_ext − [C + μ]q̇ − G), with μ only on γ̇ (note §9.14).
+/// q̈ of (3): M⁻¹(BΓ + F_ext − [C + μ]q̇ − G), with μ only on γ̇.
 pub fn acceleration(p: &Params, q: &[f64; DOF], qdot: &[f64; DOF], input: &[f64; 4], f_ext: &[f64; 3]) -> [f64; DOF] {
     let parts = partials(p, q);
     let b = input_map(p, q);

@@ -1,26 +1,26 @@
 //! The LKFUI, the linear Kalman filter with unknown inputs of paper 004 §4, eqs (58)–(71)
-//! (note §4). It estimates the translational position and velocity and the unknown force d.
+//! It estimates the translational position and velocity and the unknown force d.
 //! It predicts every tick τ and corrects when a new 10 Hz position and velocity fix arrives.
 //!
 //! What comes from the paper and what was chosen here:
 //! - Paper: the model (58)/(60) x⁺ = A x + B T^F + G d with B = G at the nominal mass; the
 //!   prediction (64) every tick with d̂ held; the lifted model (59)/(61)/(62) on the fix grid,
 //!   with Ḡ = Σ A^j G; the gain (69) under the constraint L E = F, E = F = Ḡ (C = I); the
-//!   covariance (68); Q = B_Ts B_Tsᵀ (71), which carries the launch file's `q_scale` (note §9.19:
+//!   covariance (68); Q = B_Ts B_Tsᵀ (71), which carries the launch file's `q_scale` (
 //!   1 is the literal (71), 1/9 is the 3σ = 1 N reading).
-//! - Note §9.21: Ω = E (Eᵀ (P^yy)⁻¹ E)⁻¹ Eᵀ (P^yy)⁻¹, the form for which L E = F holds.
-//! - Note §9.18, the simple form: the known input is the `thrust_force` reading (the
+//! - Ω = E (Eᵀ (P^yy)⁻¹ E)⁻¹ Eᵀ (P^yy)⁻¹, the form for which L E = F holds.
+//! - The simple form: the known input is the `thrust_force` reading (the
 //!   thrusters' force in F) minus the nominal weight m·g·k. The load's pull, drag and the mass
 //!   error are left to d̂.
-//! - Note §9.20 and §9.4 (inferred): R = diag(σ_p² I₃, σ_v² I₃); x̂₀ = the first fix, d̂₀ = 0,
+//! - Our choice: R = diag(σ_p² I₃, σ_v² I₃); x̂₀ = the first fix, d̂₀ = 0,
 //!   P₀ = diag(p0_p² I₃, p0_v² I₃).
-//! - Note §4 (inferred): the covariance lives only on the fix grid. A_Ts, Ḡ and Q are built
+//! - Our choice: the covariance lives only on the fix grid. A_Ts, Ḡ and Q are built
 //!   for the ticks that actually passed since the last correction. Normally that is h =
 //!   T_s/τ_s.
 //! - The d̂ update, see [`Lkfui::correct`]: this is (67) rewritten so that d̂ is consistent
 //!   with a prediction that already contains G d̂.
 //! - A fix is treated as a measurement of the state at the tick it is assimilated (the paper's
-//!   zero-delay sensor, note §9.24). In real time, a fix that arrives late is not moved back.
+//!   zero-delay sensor). In real time, a fix that arrives late is not moved back.
 //!   The exception is the first fix: x̂₀ is placed at its sample time and predicted to now. That
 //!   way an estimator restarted while a fix is held does not start up to T_s behind.
 
@@ -41,20 +41,20 @@ type Matrix3x6 = SMatrix<f64, 3, 6>;
 #[serde(deny_unknown_fields)]
 pub struct EstimatorSection {
     /// Q = q_scale · B_Ts B_Tsᵀ. 1 is the paper's literal (71), unit force variance per tick.
-    /// 1/9 is σ_T² for the stated 3σ = 1 N (note §9.19).
+    /// 1/9 is σ_T² for the stated 3σ = 1 N.
     pub q_scale: f64,
-    /// σ of the position fix in R, m (note §9.20: 0.05).
+    /// σ of the position fix in R, m (default 0.05).
     pub r_position_m: f64,
-    /// σ of the velocity fix in R, m/s (note §9.20: 0.04).
+    /// σ of the velocity fix in R, m/s (default 0.04).
     pub r_velocity_m_s: f64,
-    /// Initial σ of the position in P₀|₀, m (note §9.4: σ_p).
+    /// Initial σ of the position in P₀|₀, m (σ_p).
     pub p0_position_m: f64,
-    /// Initial σ of the velocity in P₀|₀, m/s (note §9.4: σ_v).
+    /// Initial σ of the velocity in P₀|₀, m/s (σ_v).
     pub p0_velocity_m_s: f64,
 }
 
 impl EstimatorSection {
-    /// The note's choices: literal Q (71), R and P₀ from the sensors' σ.
+    /// The defaults: literal Q (71), R and P₀ from the sensors' σ.
     pub fn paper() -> Self {
         EstimatorSection {
             q_scale: 1.0,
@@ -95,7 +95,7 @@ fn force_map(step: f64, mass: f64) -> Matrix6x3 {
     b
 }
 
-/// B_Ts B_Tsᵀ = Σ_{j<h} (A^j B)(A^j B)ᵀ of (71) in closed form (note §4), per axis:
+/// B_Ts B_Tsᵀ = Σ_{j<h} (A^j B)(A^j B)ᵀ of (71) in closed form, per axis:
 /// Q_pp = (τ²/2m)² h(4h²−1)/3, Q_pv = (τ²/2m)(τ/m) h², Q_vv = h (τ/m)².
 fn lifted_force_covariance(tick: f64, mass: f64, ticks: u32) -> Matrix6 {
     let h = f64::from(ticks);
@@ -155,7 +155,7 @@ struct Filter {
     ticks_since_fix: u32,
 }
 
-/// The LKFUI. It keeps the nominal mass; the plant's mass is drawn ±30 % (note §9.13).
+/// The LKFUI. It keeps the nominal mass; the plant's mass is drawn ±30 %.
 #[derive(Debug, Clone)]
 pub struct Lkfui {
     mass: f64,
@@ -201,7 +201,7 @@ impl Lkfui {
         }
     }
 
-    /// The known input T^F: the thrusters' force minus the nominal weight (note §9.18, simple
+    /// The known input T^F: the thrusters' force minus the nominal weight (the simple
     /// form). Before the force sensor's first sample, 0 (hover).
     fn known_force(&self, reading: &SensorReading) -> Vector3<f64> {
         if reading.valid == 0 {
@@ -233,7 +233,7 @@ impl Lkfui {
         let k = p_prior * p_yy_inv;
         let e = lifted.g_bar;
         let constrained = (e.transpose() * p_yy_inv * e).try_inverse().expect("Ḡ has full column rank");
-        // (69) in the note's equivalent form: L = K + (F − K E)(Eᵀ (P^yy)⁻¹ E)⁻¹ Eᵀ (P^yy)⁻¹.
+        // (69) in an equivalent form: L = K + (F − K E)(Eᵀ (P^yy)⁻¹ E)⁻¹ Eᵀ (P^yy)⁻¹.
         let l = k + (e - k * e) * constrained * e.transpose() * p_yy_inv;
         let innovation = y - filter.x;
         let step = l * innovation;
@@ -430,7 +430,7 @@ mod tests {
         (errors, d_z)
     }
 
-    /// The paper's anchors (§8.1): the a-priori x error within ±2.54 cm 95 % and ±3.81 cm 99.8 %
+    /// The paper's anchors: the a-priori x error within ±2.54 cm 95 % and ±3.81 cm 99.8 %
     /// of the time, σ(d̂_z) = 0.92 N; the issue allows 25 % and 30 %. Measured (pooled, 60 000
     /// ticks): p95 2.89 cm, p99.8 4.40 cm, σ(d̂_z) 1.003 N, the same to 0.01 cm for q_scale 1 and
     /// 1/9: Q = B_Ts B_Tsᵀ lies almost in the span of Ḡ, the direction the unknown-input
@@ -507,7 +507,7 @@ mod tests {
         assert!((lifted.q - q).amax() < 1e-15);
         assert!((lifted.g_bar - g_bar).amax() < 1e-15);
         assert!((lifted.a - a_j).amax() < 1e-15);
-        // Note §4: Q_pp, Q_pv, Q_vv and Ḡ at the nominal mass.
+        // Q_pp, Q_pv, Q_vv and Ḡ at the nominal mass.
         for (value, note) in [(q[(0, 0)], 1.06710e-6), (q[(0, 3)], 1.60466e-5), (q[(3, 3)], 3.20931e-4)] {
             assert!((value / note - 1.0).abs() < 1e-5, "{value} against {note}");
         }

@@ -1,10 +1,10 @@
-//! The linear gains of NLLS-2L and NLPT-2L by pole placement (note §9.5, option B). The paper
+//! The linear gains of NLLS-2L and NLPT-2L by pole placement. The paper
 //! synthesises them by mixed H₂/H∞ with pole regions (Tables 2–3) but publishes no numbers, so
 //! these are stand-ins: real closed-loop poles chosen inside each loop's Table 2 region (read
-//! as note §9.7: Re s < α, inside the disk of centre c and radius |r|, within the cone of
+//! as: Re s < α, inside the disk of centre c and radius |r|, within the cone of
 //! half-angle φ about the negative real axis; real poles satisfy every cone).
 //!
-//! | loop  | design model (note §9.6)              | poles (launch file)       | gains                                   | Table 2 region                         |
+//! | loop  | design model                          | poles (launch file)       | gains                                   | Table 2 region                         |
 //! |-------|----------------------------------------|---------------------------|-----------------------------------------|----------------------------------------|
 //! | x, y  | ë = v (e = [∫e, e, ė])                 | −1.5, −2, −2.5            | K_I, K_p, K_d = −7.5, −11.75, −6         | Re < −1, |s| < 3, cone π/36            |
 //! | z     | e⁽⁴⁾ = v (e = [∫e, e, ė, ë, e⃛])        | −3, −4, −5, −6, −7        | K_I…K_ddd = −2520, −2754, −1175, −245, −25 | Re < −1.1, |s| < 80, cone π/36       |
@@ -14,8 +14,8 @@
 //!
 //! Each e⁽ⁿ⁾ = v chain with v = Σ Kⱼ e⁽ʲ⁻¹⁾ (∫e first) has the characteristic polynomial
 //! sⁿ⁺¹ − K_last sⁿ − … − K_I, so Kⱼ = −aⱼ of Π(s − pᵢ) = sⁿ⁺¹ + aₙsⁿ + … + a₀ (e = i − i_Ref:
-//! the gains come out negative, as the note says). The swing model drives ḋ with −u (the
-//! aircraft's acceleration enters the pendulum with a minus sign, note §9.6), so its gains are
+//! the gains come out negative). The swing model drives ḋ with −u (the
+//! aircraft's acceleration enters the pendulum with a minus sign), so its gains are
 //! +aⱼ and K_pd > 0 damps; gravity's −(g/l)d is left out of the design model as the paper's
 //! integrator chains do, and the unit tests check the combined x + swing loop with it.
 //!
@@ -30,7 +30,7 @@
 //! also pushes it, and (46) compensates that push); at 40 rad/s the vehicle is lost (measured).
 //!
 //! NLLS-3L (the three-loop cascade of the paper's ref. [22]) is not here: the paper gives
-//! neither its structure nor its gains (note §5.4, §9.26).
+//! neither its structure nor its gains.
 
 /// Π(s − pᵢ) = sᴺ + a_(N−1)s^(N−1) + … + a₀, returned as [a₀ … a_(N−1)].
 pub fn characteristic<const N: usize>(poles: [f64; N]) -> [f64; N] {

@@ -1,5 +1,5 @@
 //! The tilt-rotor scenario's metrics: the paper's RMSE (Table 4) and IAVU (74, Table 5), the
-//! LKFUI's a-priori error percentiles and d̂_z spread (note §8.1), and a few findings of our
+//! LKFUI's a-priori error percentiles and d̂_z spread, and a few findings of our
 //! own (load swing, time at the thrust limits, age of the position fix).
 
 use std::collections::BTreeMap;

@@ -1,5 +1,6 @@
-//! Tilt-rotor UAV carrying a suspended load (paper 004: Raffo & de Almeida 2018; note
-//! `../shared/papers/004-tiltrotor-suspended-load.md`).
+//! Tilt-rotor UAV carrying a suspended load (paper 004: G. V. Raffo and
+//! M. M. de Almeida, "A Load Transportation Nonlinear Control Strategy Using a Tilt-Rotor UAV",
+//! Journal of Advanced Transportation, 2018; see README.md).
 //!
 //! - `params`: Table 1, the seeded ±30 % draw, the control-design model (A1);
 //! - `dynamics`: the 10-DOF Euler–Lagrange model (17)–(23), differentiated exactly;

