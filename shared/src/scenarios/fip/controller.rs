@@ -285,7 +285,7 @@ mod tests {
         assert!(close(d.f_par, [0.454, 0.454, -7.334], 1e-3), "{:?}", d.f_par);
     }
 
-    /// The hand-expanded ω̇_d (η, η̇, q̇_d, expanded by hand) is the time derivative of ω_d along the
+    /// The hand-expanded ω̇_d (η, η̇, q̇_d) is the time derivative of ω_d along the
     /// model's flow with f = f∥d and ḃ̂ = 0, which dual numbers give exactly through the same code.
     #[test]
     fn the_derived_pseudo_derivatives_are_the_flows_derivatives() {

@@ -11,7 +11,7 @@
 //! by RK4 over each tick with u₁, u̇₁ held and ω, η, w interpolated between samples, its rate and acceleration saturated against
 //! peaking (section V-E.2); (24) takes it back to x̂. The selector of section V-D filters each
 //! branch's accelerometer prediction error, ẽ̇ = λ(‖a − â‖ − ẽ), and takes the smaller, with
-//! a hysteresis and, optionally, its prior that the vehicle is above the ground
+//! a hysteresis and, optionally, a prior that the vehicle is above the ground
 //! (x̂₁ ∈ (0, π)). u₁ and u̇₁ are the controller's compensator states, which reach the estimator
 //! through the command.
 

@@ -6,8 +6,8 @@
 //! - Paper: the model (58)/(60) x⁺ = A x + B T^F + G d with B = G at the nominal mass; the
 //!   prediction (64) every tick with d̂ held; the lifted model (59)/(61)/(62) on the fix grid,
 //!   with Ḡ = Σ A^j G; the gain (69) under the constraint L E = F, E = F = Ḡ (C = I); the
-//!   covariance (68); Q = B_Ts B_Tsᵀ (71), which carries the launch file's `q_scale` (
-//!   1 is the literal (71), 1/9 is the 3σ = 1 N reading).
+//!   covariance (68); Q = B_Ts B_Tsᵀ (71), which carries the launch file's `q_scale`
+//!   (1 is the literal (71), 1/9 is the 3σ = 1 N reading).
 //! - Ω = E (Eᵀ (P^yy)⁻¹ E)⁻¹ Eᵀ (P^yy)⁻¹, the form for which L E = F holds.
 //! - The simple form: the known input is the `thrust_force` reading (the
 //!   thrusters' force in F) minus the nominal weight m·g·k. The load's pull, drag and the mass
