@@ -17,6 +17,7 @@ use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, dese
 use crate::config::schema::ScenarioSchema;
 use crate::config::wait::WaitSettings;
 
+/// The keys every scenario shares, as the document has them.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CommonKeys {
