@@ -1,6 +1,7 @@
 //! The test hosts themselves: the link between the two network namespaces, the remote host's own
-//! /dev/shm and clock, the slow and the cut link, and that nothing is left after them. Each test
-//! skips, saying why, where it cannot make the hosts (not root).
+//! /dev/shm and clock, the slow and the cut link, and that nothing is left after them. Root only:
+//! where the build is not root or lacks a tool the hosts need, every test is ignored
+//! (services/build.rs).
 
 mod common;
 
@@ -11,17 +12,7 @@ use std::process::{Command, Stdio};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use common::netns::{Host, TestHosts, ensure_iptables};
-
-fn hosts(tag: &str, remote_monotonic_offset_s: Option<i64>) -> Option<TestHosts> {
-    match TestHosts::create(tag, remote_monotonic_offset_s) {
-        Ok(hosts) => Some(hosts),
-        Err(reason) => {
-            eprintln!("skipped: {reason}");
-            None
-        }
-    }
-}
+use common::netns::{Host, TestHosts, test_hosts};
 
 fn address(hosts: &TestHosts, host: Host) -> IpAddr {
     let text = match host {
@@ -72,8 +63,9 @@ fn round_trip(stream: &mut TcpStream, seq: u8) -> Duration {
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn the_hosts_reach_each_other_over_tcp_on_their_own_addresses() {
-    let Some(hosts) = hosts("reach", None) else { return };
+    let hosts = test_hosts("reach", None);
     for (server, client) in [(Host::Remote, Host::Local), (Host::Local, Host::Remote)] {
         let (at, server_thread) = echo_server(&hosts, server);
         assert_eq!(at.ip(), address(&hosts, server));
@@ -86,8 +78,9 @@ fn the_hosts_reach_each_other_over_tcp_on_their_own_addresses() {
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn the_remote_host_has_its_own_dev_shm() {
-    let Some(hosts) = hosts("shm", None) else { return };
+    let hosts = test_hosts("shm", None);
     assert_eq!(hosts.remote_shm_entries(), Vec::<String>::new(), "a fresh host's /dev/shm is empty");
     let name = |side: &str| format!("looplab-netns-test-{}-{}-{side}", std::process::id(), hosts.number());
     let (remote_file, local_file) = (name("remote"), name("local"));
@@ -118,36 +111,31 @@ fn monotonic_ns() -> i128 {
 
 /// CLOCK_MONOTONIC in nanoseconds as a program on `host` reads it, bracketed by this process's
 /// reads before and after. Python's `time.clock_gettime_ns` is the one stock program here that
-/// prints that clock (`date` shows the wall clock, /proc/uptime the boot time); None without it.
-fn monotonic_on(hosts: &TestHosts, host: Host) -> Option<(i128, i128, i128)> {
-    if !Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success()) {
-        return None;
-    }
+/// prints that clock (`date` shows the wall clock, /proc/uptime the boot time).
+fn monotonic_on(hosts: &TestHosts, host: Host) -> (i128, i128, i128) {
     let before = monotonic_ns();
     let output = hosts
         .command(host, "python3")
         .args(["-c", "import time; print(time.clock_gettime_ns(time.CLOCK_MONOTONIC))"])
         .output()
-        .expect("python3 runs");
+        .unwrap_or_else(|e| panic!("python3 is needed to read CLOCK_MONOTONIC on a host: {e}"));
     let after = monotonic_ns();
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let there = String::from_utf8_lossy(&output.stdout).trim().parse().expect("nanoseconds");
-    Some((before, there, after))
+    (before, there, after)
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn the_remote_hosts_monotonic_clock_runs_1000_s_ahead_with_the_offset() {
-    let Some(hosts) = hosts("clock", Some(1000)) else { return };
+    let hosts = test_hosts("clock", Some(1000));
     // The kernel's own statement of the remote host's offsets (needs no program that reads clocks).
     let offsets = hosts.command(Host::Remote, "cat").arg("/proc/self/timens_offsets").output().expect("cat runs");
     let offsets = String::from_utf8_lossy(&offsets.stdout).into_owned();
     assert!(offsets.lines().any(|l| l.split_whitespace().eq(["monotonic", "1000", "0"])), "{offsets}");
-    let Some((before, local, after)) = monotonic_on(&hosts, Host::Local) else {
-        eprintln!("skipped the clock reading: no python3 to read CLOCK_MONOTONIC with");
-        return;
-    };
+    let (before, local, after) = monotonic_on(&hosts, Host::Local);
     assert!(before <= local && local <= after, "the local host's clock is this machine's: {before} {local} {after}");
-    let (before, remote, after) = monotonic_on(&hosts, Host::Remote).expect("python3 ran a moment ago");
+    let (before, remote, after) = monotonic_on(&hosts, Host::Remote);
     let offset = 1000 * 1_000_000_000;
     assert!(
         before + offset <= remote && remote <= after + offset,
@@ -156,12 +144,9 @@ fn the_remote_hosts_monotonic_clock_runs_1000_s_ahead_with_the_offset() {
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn a_slow_link_delays_the_round_trip_drops_packets_and_leaves_no_rule() {
-    let Some(hosts) = hosts("slow", None) else { return };
-    if let Err(reason) = ensure_iptables() {
-        eprintln!("skipped: {reason}");
-        return;
-    }
+    let hosts = test_hosts("slow", None);
     let (at, server) = echo_server(&hosts, Host::Remote);
     let mut stream = connect_from(&hosts, Host::Local, at);
     let delay = Duration::from_millis(1);
@@ -197,12 +182,9 @@ fn a_slow_link_delays_the_round_trip_drops_packets_and_leaves_no_rule() {
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn a_cut_link_passes_nothing_until_it_is_mended() {
-    let Some(hosts) = hosts("cut", None) else { return };
-    if let Err(reason) = ensure_iptables() {
-        eprintln!("skipped: {reason}");
-        return;
-    }
+    let hosts = test_hosts("cut", None);
     let (at, server) = echo_server(&hosts, Host::Remote);
     hosts.cut_link().expect("cut");
     hosts.cut_link().expect("cutting twice is cutting once");
@@ -221,8 +203,9 @@ fn a_cut_link_passes_nothing_until_it_is_mended() {
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn dropping_the_hosts_kills_their_processes_and_leaves_nothing() {
-    let Some(hosts) = hosts("drop", Some(5)) else { return };
+    let hosts = test_hosts("drop", Some(5));
     let mut sleepers: Vec<_> = [Host::Local, Host::Remote]
         .map(|host| hosts.command(host, "sleep").arg("1000").stdin(Stdio::null()).spawn().expect("sleep starts"))
         .into();

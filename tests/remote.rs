@@ -1,10 +1,11 @@
 //! A stage on another host: the pendulum's controller in a second network namespace, with its
 //! own /dev/shm (a mount namespace), reached over a veth pair through the two bridges and zenoh.
-//! Root only (namespaces): elsewhere each test prints why it skips.
+//! Root only (namespaces): where the build is not root or lacks a tool the hosts need, every test
+//! is ignored (services/build.rs).
 
 mod common;
 
-use common::netns::{Host, TestHosts};
+use common::netns::{Host, TestHosts, test_hosts};
 use common::*;
 
 /// `--set` arguments that place the controller on the test's remote host.
@@ -26,19 +27,10 @@ fn launcher_on(hosts: &TestHosts) -> std::process::Command {
     command
 }
 
-fn hosts_or_skip(tag: &str, offset_s: Option<i64>) -> Option<TestHosts> {
-    match TestHosts::create(tag, offset_s) {
-        Ok(hosts) => Some(hosts),
-        Err(why) => {
-            eprintln!("skipped: {why}");
-            None
-        }
-    }
-}
-
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn the_pendulum_with_its_controller_on_another_host_keeps_its_loop() {
-    let Some(hosts) = hosts_or_skip("rt", None) else { return };
+    let hosts = test_hosts("rt", None);
     let mut args: Vec<String> = ["pendulum", "--set", "duration_s=3"].map(String::from).to_vec();
     args.extend(placed(&hosts));
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -49,8 +41,9 @@ fn the_pendulum_with_its_controller_on_another_host_keeps_its_loop() {
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn lockstep_with_a_remote_controller_writes_the_local_runs_bytes() {
-    let Some(hosts) = hosts_or_skip("ls", None) else { return };
+    let hosts = test_hosts("ls", None);
     let base = ["pendulum", "--set", "mode=lockstep", "--set", "duration_s=2"];
     let local = run("remote-ls-local", &base);
     let mut args: Vec<String> = base.map(String::from).to_vec();
@@ -90,23 +83,22 @@ fn fitted_offset_ns(hosts: &TestHosts, name: &str) -> (f64, f64) {
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn a_clock_1000_s_ahead_is_fitted_and_the_crossing_hops_corrected() {
-    let Some(hosts) = hosts_or_skip("clk", None) else { return };
+    let hosts = test_hosts("clk", None);
     let (offset, uncertainty) = fitted_offset_ns(&hosts, "remote-clock-same");
     assert!(offset.abs() <= uncertainty, "same clock: fitted offset {offset} ns ± {uncertainty}");
     drop(hosts);
-    let Some(shifted) = hosts_or_skip("ofs", Some(1000)) else { return };
+    let shifted = test_hosts("ofs", Some(1000));
     let (offset, uncertainty) = fitted_offset_ns(&shifted, "remote-clock-shifted");
     assert!((offset - 1e12).abs() <= uncertainty, "shifted by 1000 s: fitted offset {offset} ns ± {uncertainty}");
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn a_slow_lossy_link_lengthens_the_round_trip_and_makes_commands_late_without_hanging() {
-    let Some(hosts) = hosts_or_skip("slow", None) else { return };
-    let slow = match hosts.slow_link(std::time::Duration::from_millis(1), 0.01) {
-        Ok(slow) => slow,
-        Err(why) => return eprintln!("skipped: {why}"),
-    };
+    let hosts = test_hosts("slow", None);
+    let slow = hosts.slow_link(std::time::Duration::from_millis(1), 0.01).expect("a slow link");
     let mut args: Vec<String> = ["pendulum", "--set", "duration_s=3"].map(String::from).to_vec();
     args.extend(placed(&hosts));
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -125,19 +117,20 @@ fn a_slow_lossy_link_lengthens_the_round_trip_and_makes_commands_late_without_ha
 }
 
 /// A fault on the link's bridges: the run goes on, and the summary says what happened.
-fn faulted_run(tag: &str, fault: &str) -> Option<(TestHosts, Run)> {
-    let hosts = hosts_or_skip(tag, None)?;
+fn faulted_run(tag: &str, fault: &str) -> (TestHosts, Run) {
+    let hosts = test_hosts(tag, None);
     let mut args: Vec<String> = ["pendulum", "--set", "duration_s=4", "--fault", fault].map(String::from).to_vec();
     args.extend(placed(&hosts));
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let run = run_from(launcher_on(&hosts), &format!("remote-{tag}"), &args);
     println!("{}", run.stdout());
-    Some((hosts, run))
+    (hosts, run)
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn a_killed_remote_bridge_is_restarted_and_its_outage_reported() {
-    let Some((hosts, run)) = faulted_run("kill", "kill bridge-remote at 1s") else { return };
+    let (hosts, run) = faulted_run("kill", "kill bridge-remote at 1s");
     let s = run.summary();
     assert_eq!(s.restarts[&Role::BridgeRemote], 1);
     assert!(s.stale_ticks > 0, "the plant held its command while the link was down");
@@ -151,9 +144,10 @@ fn a_killed_remote_bridge_is_restarted_and_its_outage_reported() {
 }
 
 #[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
 fn a_silent_remote_bridge_is_lost_after_the_lease_and_found_again() {
     // SIGSTOP: the other host goes silent, as behind a cut cable; zenoh's lease (1 s) notices.
-    let Some((_hosts, run)) = faulted_run("stop", "stop bridge-remote at 1s for 1500ms") else { return };
+    let (_hosts, run) = faulted_run("stop", "stop bridge-remote at 1s for 1500ms");
     let s = run.summary();
     assert!(s.completed, "the run goes on without its controller's commands");
     assert!(s.stale_ticks > 0, "the plant applied its stale-command policy");

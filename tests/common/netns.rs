@@ -45,9 +45,18 @@ pub struct TestHosts {
     _claim: Claim,
 }
 
+/// The hosts for one test, or a failure saying why they cannot be made. Each test that makes them
+/// carries `#[cfg_attr(netns_unavailable, ignore = "...")]`: the root package's build script
+/// (services/build.rs) sets that cfg where the build is not root or lacks a tool, so there the
+/// tests show as ignored in the summary line; where they run, a failure here is a broken machine.
+pub fn test_hosts(tag: &str, remote_monotonic_offset_s: Option<i64>) -> TestHosts {
+    TestHosts::create(tag, remote_monotonic_offset_s)
+        .unwrap_or_else(|e| panic!("cannot make the test hosts (root, ip, nsenter, unshare and mount are needed): {e}"))
+}
+
 impl TestHosts {
     /// Creates both hosts; `remote_monotonic_offset_s` puts the remote host's CLOCK_MONOTONIC that
-    /// many seconds ahead (a time namespace). Err is a reason to skip the test.
+    /// many seconds ahead (a time namespace). Err says why they cannot be made.
     pub fn create(tag: &str, remote_monotonic_offset_s: Option<i64>) -> Result<TestHosts, String> {
         // SAFETY: geteuid has no preconditions.
         if unsafe { libc::geteuid() } != 0 {
@@ -378,7 +387,7 @@ impl Drop for SlowLink {
 }
 
 /// Makes sure `iptables` is installed, installing Debian's package if it is missing (once per
-/// process; concurrent callers wait for the one doing it). Err is a reason to skip.
+/// process; concurrent callers wait for the one doing it). Err says why it is not there.
 pub fn ensure_iptables() -> Result<(), String> {
     static DONE: OnceLock<Result<(), String>> = OnceLock::new();
     DONE.get_or_init(|| {

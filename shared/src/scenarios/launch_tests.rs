@@ -239,14 +239,40 @@ fn extreme_values_of_every_key_load_or_fail_cleanly() {
     }
 }
 
-#[test]
-fn every_launch_file_of_the_repository_is_within_the_bounds() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch/quadcopter");
-    let mut files: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+/// Every launch file of the repository, `launch/*.toml` and `launch/*/*.toml`, listed now so that
+/// a new file is covered without naming it here.
+fn launch_files() -> Vec<std::path::PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch");
+    let list = |dir: &Path| -> Vec<std::path::PathBuf> {
+        let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()));
+        entries.map(|e| e.unwrap().path()).collect()
+    };
+    let mut files = Vec::new();
+    for path in list(&root) {
+        if path.is_dir() {
+            files.extend(list(&path).into_iter().filter(|p| p.extension().is_some_and(|e| e == "toml")));
+        } else if path.extension().is_some_and(|e| e == "toml") {
+            files.push(path);
+        }
+    }
     files.sort();
-    assert!(files.len() >= 7, "{files:?}");
-    for file in files {
-        resolve(file.to_str().unwrap(), &[]).unwrap_or_else(|e| panic!("{e}"));
+    files
+}
+
+/// Each launch file resolves (and its scenario builds), and names the scenario its place says:
+/// `launch/<scenario>.toml` or `launch/<scenario>/<case>.toml`.
+#[test]
+fn every_launch_file_of_every_scenario_resolves_within_the_bounds() {
+    let files = launch_files();
+    assert!(!files.is_empty(), "no launch file found under launch/");
+    for entry in scenarios::ALL {
+        assert!(files.iter().any(|f| f.ends_with(entry.file)), "{} is not among {files:?}", entry.file);
+    }
+    for file in &files {
+        let (config, _) = resolve(file.to_str().unwrap(), &[]).unwrap_or_else(|e| panic!("{e}"));
+        let parent = file.parent().unwrap();
+        let named_by_place = if parent.ends_with("launch") { file.file_stem() } else { parent.file_name() };
+        assert_eq!(Some(config.scenario.as_ref()), named_by_place, "{}", file.display());
     }
 }
 

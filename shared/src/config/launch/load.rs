@@ -1,0 +1,239 @@
+//! Loading: a scenario name or a launch file, with overrides, resolved into a checked
+//! [`LaunchConfig`]; and the resolved file each loop process reads back.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::error::{COMMON_KEYS, LaunchError};
+use crate::config::faults::{FaultSpec, Supervision};
+use crate::config::hosts::Hosts;
+use crate::config::launch::checks::{
+    check_common, check_fault, check_finite, check_sensors, check_supervision, check_wait,
+};
+use crate::config::launch::overrides::{Override, merge, set_dotted};
+use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
+use crate::config::schema::ScenarioSchema;
+use crate::config::wait::WaitSettings;
+
+/// The keys every scenario shares, as the document has them.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CommonKeys {
+    scenario: String,
+    mode: Mode,
+    rate_hz: f64,
+    duration_s: f64,
+    seed: u64,
+    #[serde(default)]
+    sensors: BTreeMap<String, SensorSpec>,
+    #[serde(default)]
+    faults: Vec<FaultSpec>,
+    #[serde(default)]
+    supervision: Supervision,
+    #[serde(default)]
+    wait: WaitSettings,
+    /// Read by `Hosts::parse`, for errors that name the key.
+    #[serde(default)]
+    hosts: toml::Table,
+}
+
+/// The names of the scenarios of `catalog`, for error messages.
+fn names(catalog: &[ScenarioSchema]) -> String {
+    catalog.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+}
+
+fn find<'a>(catalog: &'a [ScenarioSchema], name: &str) -> Option<&'a ScenarioSchema> {
+    catalog.iter().find(|s| s.name == name)
+}
+
+/// Resolves what the user asked to run, a scenario name or a launch-file path, with overrides,
+/// into a checked configuration for one of the scenarios of `catalog` (the scenarios layer
+/// passes its registry, and builds the scenario the configuration describes).
+pub fn resolve_config(
+    target: &str,
+    overrides: &[Override],
+    catalog: &[ScenarioSchema],
+) -> Result<LaunchConfig, LaunchError> {
+    let scenario_names = || names(catalog);
+    // A scenario's name wins over a file of that name; anything else that looks like a path is one.
+    let looks_like_path = find(catalog, target).is_none()
+        && !Path::new(target).is_dir()
+        && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
+    let (origin, document) = if looks_like_path {
+        let text = std::fs::read_to_string(target)
+            .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;
+        let user: toml::Table = toml::from_str(&text).map_err(|e| toml_error(target, &text, &e))?;
+        let name = match user.get("scenario") {
+            Some(toml::Value::String(name)) => name.clone(),
+            Some(_) => {
+                return Err(LaunchError::new(
+                    target,
+                    Some("scenario"),
+                    format!("must be a string; allowed: {}", scenario_names()),
+                ));
+            }
+            None => {
+                return Err(LaunchError::new(
+                    target,
+                    Some("scenario"),
+                    format!("missing; allowed: {}", scenario_names()),
+                ));
+            }
+        };
+        let schema = find(catalog, &name).ok_or_else(|| {
+            LaunchError::new(
+                target,
+                Some("scenario"),
+                format!("unknown scenario \"{name}\"; allowed: {}", scenario_names()),
+            )
+        })?;
+        let mut document = schema.defaults();
+        merge(&mut document, user);
+        (target.to_owned(), document)
+    } else if Path::new(target).is_dir() {
+        return Err(LaunchError::new(
+            target,
+            None,
+            format!("is a folder; give a launch file (.toml) or a scenario name: {}", scenario_names()),
+        ));
+    } else {
+        let schema = find(catalog, target).ok_or_else(|| {
+            LaunchError::new(
+                "command line",
+                None,
+                format!(
+                    "unknown scenario \"{target}\"; allowed: {} (or a path to a .toml launch file)",
+                    scenario_names()
+                ),
+            )
+        })?;
+        (schema.file.to_owned(), schema.defaults())
+    };
+    from_document(document, &origin, overrides, catalog)
+}
+
+/// Reads a resolved launch file written by the launcher (what each loop process does).
+pub fn load_resolved_config(path: &Path, catalog: &[ScenarioSchema]) -> Result<LaunchConfig, LaunchError> {
+    let origin = path.display().to_string();
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| LaunchError::new(&origin, None, format!("cannot read the launch file: {e}")))?;
+    let document: toml::Table = toml::from_str(&text).map_err(|e| toml_error(&origin, &text, &e))?;
+    from_document(document, &origin, &[], catalog)
+}
+
+fn from_document(
+    mut document: toml::Table,
+    origin: &str,
+    overrides: &[Override],
+    catalog: &[ScenarioSchema],
+) -> Result<LaunchConfig, LaunchError> {
+    let mut origins = Origins { file: origin.to_owned(), set_keys: BTreeMap::new() };
+    for o in overrides {
+        let key =
+            set_dotted(&mut document, o).map_err(|message| LaunchError::new(o.origin(), Some(&o.key), message))?;
+        origins.set_keys.insert(key, o.origin());
+    }
+    // TOML allows nan and inf; no key of a launch file means either, and the checks below
+    // (and the physics) can then assume finite numbers.
+    document.iter().try_for_each(|(key, value)| check_finite(&origins, key, value))?;
+
+    let scenario_name = match document.get("scenario") {
+        Some(toml::Value::String(s)) => s.clone(),
+        _ => return Err(origins.error("scenario", format!("missing or not a string; allowed: {}", names(catalog)))),
+    };
+    let schema = find(catalog, &scenario_name).ok_or_else(|| {
+        origins.error("scenario", format!("unknown scenario \"{scenario_name}\"; allowed: {}", names(catalog)))
+    })?;
+    schema.check_fits()?;
+
+    // Top-level keys: the shared ones, then the scenario's sections; anything else is a typo.
+    let sections = schema.sections();
+    let allowed: BTreeSet<&str> = COMMON_KEYS.iter().copied().chain(sections.iter().map(String::as_str)).collect();
+    for key in document.keys() {
+        if !allowed.contains(key.as_str()) {
+            return Err(origins.error(
+                key,
+                format!(
+                    "unknown key; allowed at the top level: {}",
+                    allowed.iter().copied().collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+    }
+    let mut common_table = toml::Table::new();
+    for key in COMMON_KEYS {
+        if let Some(v) = document.get(key) {
+            common_table.insert(key.to_owned(), v.clone());
+        }
+    }
+    let common: CommonKeys = deserialize_at(&origins, "", toml::Value::Table(common_table))?;
+    let hosts = Hosts::parse(&common.hosts, |key, message| origins.error(key, message))?;
+
+    let config = LaunchConfig {
+        scenario: common.scenario,
+        mode: common.mode,
+        rate_hz: common.rate_hz,
+        duration_s: common.duration_s,
+        seed: common.seed,
+        sensors: common.sensors.into_iter().filter(|(_, s)| s.enabled).collect(),
+        faults: common.faults,
+        supervision: common.supervision,
+        wait: common.wait,
+        hosts,
+        document,
+        schema: schema.clone(),
+        origins,
+    };
+    check_common(&config)?;
+    check_sensors(&config)?;
+    check_supervision(&config.supervision, &config)?;
+    check_wait(&config.wait, &config)?;
+    for (i, fault) in config.faults.iter().enumerate() {
+        check_fault(fault, &config, &format!("faults.{i}"))?;
+    }
+    Ok(config)
+}
+
+/// A TOML syntax error on one line: where, and what.
+fn toml_error(origin: &str, text: &str, e: &toml::de::Error) -> LaunchError {
+    let message = e.message().lines().collect::<Vec<_>>().join(", ");
+    let place = e.span().map(|span| {
+        let before = &text[..span.start.min(text.len())];
+        let line = before.matches('\n').count() + 1;
+        let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+        format!("line {line}, column {column}: ")
+    });
+    LaunchError::new(origin, None, format!("not valid TOML: {}{message}", place.unwrap_or_default()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scenario whose estimate is larger than a message carries cannot be resolved: the error
+    /// names the scenario and the vector (and no child process ever starts).
+    #[test]
+    fn a_scenario_whose_vectors_do_not_fit_the_messages_is_an_error_at_resolution() {
+        use crate::config::schema::Component;
+        const E60: &[Component] = &[Component::new("e", "1"); 60];
+        let schema = ScenarioSchema {
+            name: "made-up",
+            file: "launch/made-up.toml",
+            text: "scenario = \"made-up\"\nmode = \"lockstep\"\nrate_hz = 100.0\nduration_s = 1.0\nseed = 1\n",
+            state: &[],
+            input: &[],
+            estimate: E60,
+            signals: vec![],
+        };
+        let e = resolve_config("made-up", &[], std::slice::from_ref(&schema)).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "scenario made-up: the estimate has 60 components, more than the 48 a message carries"
+        );
+        let fits = ScenarioSchema { estimate: &E60[..48], ..schema };
+        let c = resolve_config("made-up", &[], &[fits]).unwrap();
+        assert_eq!((c.scenario.as_str(), c.loops()), ("made-up", 100));
+    }
+}
