@@ -2,7 +2,7 @@
 //! at their loop while the lockstep plant holds), the signal each sends, and what was seen of
 //! each fault. The supervisor sends the signals.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
@@ -36,7 +36,7 @@ pub struct FaultSeen {
     pub continued_ns: Option<u64>,
     pub resumed_ns: Option<u64>,
     /// A stop: when to send SIGCONT.
-    pub continue_at: Option<Instant>,
+    pub continue_at_ns: Option<u64>,
 }
 
 /// The process a fault targets (checked when the launch file was loaded).
@@ -71,13 +71,14 @@ pub fn injected(faults: &[FaultSpec], seen: &[FaultSeen], role: Role, kind: Faul
     found
 }
 
-/// What injecting `spec` at `now` does to its process, if it runs: the signal to send, and for
-/// a stop when to continue it. None: the process does it itself (delay, drop, corrupt).
-pub fn injection(spec: &FaultSpec, now: Instant) -> Option<(i32, Option<Instant>)> {
+/// What injecting `spec` at `now_ns` does to its process, if it runs: the signal to send, and
+/// for a stop when to continue it (ns). None: the process does it itself (delay, drop, corrupt).
+pub fn injection(spec: &FaultSpec, now_ns: u64) -> Option<(i32, Option<u64>)> {
     match spec.kind {
         FaultKind::Kill => Some((libc::SIGKILL, None)),
         FaultKind::Stop => {
-            Some((libc::SIGSTOP, Some(now + Duration::from_secs_f64(spec.duration_s.unwrap_or_default()))))
+            let lasts = Duration::from_secs_f64(spec.duration_s.unwrap_or_default());
+            Some((libc::SIGSTOP, Some(now_ns + lasts.as_nanos() as u64)))
         }
         FaultKind::Delay | FaultKind::Drop | FaultKind::Corrupt => None,
     }
@@ -146,9 +147,9 @@ mod tests {
     #[test]
     fn kills_and_stops_are_signals_and_a_stop_ends_after_its_duration() {
         let f = faults(&["kill plant at 1s", "stop sensors at 1s for 250ms", "drop sensors 20% at 1s"]);
-        let now = Instant::now();
+        let now = 3_000_000_000;
         assert_eq!(injection(&f[0], now), Some((libc::SIGKILL, None)));
-        assert_eq!(injection(&f[1], now), Some((libc::SIGSTOP, Some(now + Duration::from_millis(250)))));
+        assert_eq!(injection(&f[1], now), Some((libc::SIGSTOP, Some(3_250_000_000))));
         assert_eq!(injection(&f[2], now), None);
     }
 }

@@ -1,0 +1,139 @@
+//! Deaths and restarts: a process whose output ended either finished the run (the plant), or is
+//! restarted once its resources are cleaned up and its backoff is over (`launcher::restart`
+//! decides), or is gone, which ends the run unless it is the monitor.
+
+use crate::contract::clock::now_ns;
+use crate::contract::protocol::PlantReport;
+use crate::contract::role::Role;
+use crate::launcher::inject::DetectedBy;
+use crate::launcher::outcome::Outcome;
+use crate::launcher::restart::{self, Decision, RestartRecord};
+
+use super::Supervisor;
+
+impl Supervisor<'_> {
+    /// A process's output ended during the run: the run completed (the plant finished), or the
+    /// process is restarted, or the run fails. Returns the outcome if the run is over.
+    pub(super) fn ended(&mut self, role: Role) -> Option<Outcome> {
+        let ns = now_ns();
+        let death = self.processes[role].died(ns);
+        if role == Role::Plant {
+            // A pause belongs to the plant that asked; its successor asks again at the same tick.
+            self.paused = false;
+        }
+        if role == Role::Plant
+            && death.clean
+            && let Some(report) = &self.reports.plant
+        {
+            return Some(plant_finished(report, self.config.supervision.lockstep_stall_s));
+        }
+        let exit = self.processes[role].exit_text();
+        self.faults.detect(role, DetectedBy::ProcessExited, ns);
+        // Free what the dead process held in shared memory before its successor opens it, on the
+        // clean-up thread.
+        if let Some(cleaner) = &self.cleaner {
+            let _ = cleaner.send(role);
+        }
+        let decision = restart::decide(&self.processes[role].policy, self.config.supervision.backoff_reset_s, death);
+        if let Decision::Restart { backoff, quick_restarts } = decision {
+            let process = &mut self.processes[role];
+            process.restart_after(backoff, quick_restarts, ns);
+            self.log.restarts.push(RestartRecord {
+                process: role,
+                incarnation: process.runs.len() as u32,
+                backoff,
+                died_ns: ns,
+                cleaned_ns: None,
+                spawned_ns: None,
+                ready_ns: None,
+            });
+            self.note(
+                ns,
+                format!("{exit}; restart after its clean-up and {:.0} ms of backoff", backoff.as_secs_f64() * 1e3),
+            );
+            return None;
+        }
+        let why = format!("{exit}; {}", decision.refusal().expect("a refusal says why"));
+        self.processes[role].gone = true;
+        self.note(ns, why.clone());
+        if role == Role::Monitor {
+            // The loop goes on without its recorder; the report says which loops have none.
+            return None;
+        }
+        Some(Outcome::Failed(format!("{why}; see logs/{role}.log")))
+    }
+
+    /// The newest restart of `role`, the one under way.
+    pub(super) fn latest_restart(&mut self, role: Role) -> Option<&mut RestartRecord> {
+        self.log.restarts.iter_mut().rev().find(|r| r.process == role)
+    }
+
+    /// The clean-up after a death of `role` is done: its restart may go ahead.
+    pub(super) fn cleaned(&mut self, role: Role, removed: u64) {
+        let ns = now_ns();
+        self.removed_dead_nodes += removed;
+        if self.processes[role].cleaned() {
+            if let Some(r) = self.latest_restart(role) {
+                r.cleaned_ns = Some(ns);
+            }
+            self.note(ns, format!("{role}: its iceoryx2 resources removed ({removed} dead node(s))"));
+        }
+    }
+
+    /// Starts the restarts that are due at `now` (ns). Returns the outcome if one could not start
+    /// and the run cannot go on.
+    pub(super) fn start_due_restarts(&mut self, now: u64) -> Option<Outcome> {
+        for role in self.config.hosts.processes() {
+            if !self.processes[role].restart_due(now) {
+                continue;
+            }
+            match self.spawn(role) {
+                Ok(()) => {
+                    let ns = now_ns();
+                    let n = self.processes[role].incarnation();
+                    if let Some(r) = self.latest_restart(role) {
+                        r.spawned_ns = Some(ns);
+                    }
+                    self.note(ns, format!("{role} restarted (incarnation {n})"));
+                }
+                Err(e) => {
+                    self.processes[role].give_up();
+                    let why = format!("{role} could not be restarted: {e:#}");
+                    self.note(now_ns(), why.clone());
+                    if role != Role::Monitor {
+                        return Some(Outcome::Failed(why));
+                    }
+                }
+            }
+        }
+        None
+    }
+}
+
+/// The outcome of a plant that exited cleanly with its report: it finished, unless it stalled.
+fn plant_finished(report: &PlantReport, lockstep_stall_s: f64) -> Outcome {
+    match report.stalled_at {
+        Some(k) => Outcome::Failed(format!(
+            "the loop stalled at loop {k}: no command within {lockstep_stall_s} s (supervision.lockstep_stall_s)"
+        )),
+        None => Outcome::Completed,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plant_that_finished_completes_the_run_unless_its_loop_stalled() {
+        let finished = PlantReport { loops: 2000, ..Default::default() };
+        assert_eq!(plant_finished(&finished, 10.0), Outcome::Completed);
+        let stalled = PlantReport { loops: 700, stalled_at: Some(700), ..Default::default() };
+        assert_eq!(
+            plant_finished(&stalled, 2.5),
+            Outcome::Failed(
+                "the loop stalled at loop 700: no command within 2.5 s (supervision.lockstep_stall_s)".into()
+            )
+        );
+    }
+}

@@ -1,0 +1,119 @@
+//! What the processes say: each event line is filed (readiness, the plant's start and pauses,
+//! stalls and link losses into the fault ledger, statuses to the live view, reports for the
+//! summary); the end of a process's output is passed on to the supervision loop.
+
+use std::time::{Duration, Instant};
+
+use crate::contract::clock::now_ns;
+use crate::contract::protocol::ChildEvent;
+use crate::contract::role::Role;
+use crate::launcher::child::{ChildLine, Line};
+use crate::launcher::inject::DetectedBy;
+
+use super::{Event, Supervisor};
+
+impl Supervisor<'_> {
+    /// Files an event; returns the process whose output ended.
+    pub(super) fn handle(&mut self, event: Event) -> Option<Role> {
+        let ChildLine { role, incarnation, line } = match event {
+            Event::Child(line) => line,
+            Event::Cleaned { role, removed } => {
+                self.cleaned(role, removed);
+                return None;
+            }
+        };
+        if let Line::Unreadable { line, error } = &line {
+            eprintln!("looplab: {role} wrote a line that is not an event ({error}): {line}");
+            self.note(now_ns(), format!("{role} wrote a line that is not an event ({error})"));
+            return None;
+        }
+        if incarnation != self.processes[role].incarnation() {
+            // A report from an incarnation that has since been replaced.
+            match line {
+                Line::Event(ChildEvent::StageReport(r)) => {
+                    self.reports.stages.entry(role).or_default().insert(incarnation, r);
+                }
+                Line::Event(ChildEvent::BridgeReport(r)) => {
+                    self.reports.bridges.entry(role).or_default().insert(incarnation, r);
+                }
+                _ => {}
+            }
+            return None;
+        }
+        let event = match line {
+            Line::Event(event) => event,
+            Line::Unreadable { .. } => return None,
+            Line::Closed => {
+                // Its output ends when it exits: reap it (it may take a moment to go).
+                let until = Instant::now() + Duration::from_secs(2);
+                while !self.processes[role].try_reap() && Instant::now() < until {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                return Some(role);
+            }
+        };
+        match event {
+            ChildEvent::Ready => self.ready(role, incarnation),
+            ChildEvent::Started { start_ns, .. } => {
+                self.log.plant_start_ns.get_or_insert(start_ns);
+            }
+            ChildEvent::Paused { k } => self.pause_at(k),
+            ChildEvent::Stall { process, since_ns, detected_ns } => {
+                if let Ok(stalled) = process.parse::<Role>() {
+                    self.faults.detect(stalled, DetectedBy::InputDeadline, detected_ns);
+                }
+                let waited = (detected_ns.saturating_sub(since_ns)) as f64 / 1e6;
+                self.note(detected_ns, format!("{process} stalled: its input has waited {waited:.1} ms"));
+            }
+            ChildEvent::Resumed { process, at_ns } => {
+                if let Ok(resumed) = process.parse::<Role>() {
+                    self.faults.resume(resumed, at_ns);
+                }
+                self.note(at_ns, format!("{process} handles its input again"));
+            }
+            ChildEvent::LinkLost { at_ns } => {
+                for bridge in Role::BRIDGES {
+                    self.faults.detect(bridge, DetectedBy::LinkLease, at_ns);
+                }
+                self.note(at_ns, "link to the other host lost".into());
+            }
+            ChildEvent::LinkBack { at_ns } => {
+                for bridge in Role::BRIDGES {
+                    self.faults.resume(bridge, at_ns);
+                }
+                self.note(at_ns, "link to the other host back".into());
+            }
+            ChildEvent::Status(status) => {
+                self.last_status_ns = now_ns();
+                self.live.status(status);
+            }
+            ChildEvent::PlantReport(r) => self.reports.plant = Some(r),
+            ChildEvent::MonitorReport(r) => self.reports.monitor = Some(*r),
+            ChildEvent::StageReport(r) => {
+                self.reports.stages.entry(role).or_default().insert(incarnation, r);
+            }
+            ChildEvent::BridgeReport(r) => {
+                self.reports.bridges.entry(role).or_default().insert(incarnation, r);
+            }
+        }
+        None
+    }
+
+    /// `role`'s running incarnation is ready; a restarted one ends its restart (the plant is
+    /// told to start again).
+    fn ready(&mut self, role: Role, incarnation: u32) {
+        let ns = now_ns();
+        self.processes[role].became_ready(ns);
+        if incarnation == 0 {
+            return;
+        }
+        if let Some(r) = self.latest_restart(role) {
+            r.ready_ns.get_or_insert(ns);
+        }
+        self.faults.restarted(role, ns);
+        self.note(ns, format!("{role} ready again"));
+        if role == Role::Plant && !self.processes[role].write_line("start") {
+            self.note(ns, "cannot tell the restarted plant to start".into());
+        }
+    }
+}

@@ -1,0 +1,207 @@
+//! The fault ledger: each fault of the launch file beside what the launcher saw of it (injected,
+//! detected and by what, continued, resumed, restarted). It says which faults are due, which
+//! injected faults of a process are still undetected or unresumed, and records what was seen;
+//! the summary gets the record at the end. Times are passed in, never read here.
+
+use crate::config::faults::{FaultKind, FaultSpec};
+use crate::contract::role::Role;
+use crate::launcher::inject::{self, DetectedBy, FaultSeen};
+
+pub(super) struct FaultLedger<'a> {
+    specs: &'a [FaultSpec],
+    /// What was seen of `specs[i]`, at `i`.
+    seen: Vec<FaultSeen>,
+}
+
+impl<'a> FaultLedger<'a> {
+    pub(super) fn new(specs: &'a [FaultSpec]) -> Self {
+        Self { specs, seen: vec![FaultSeen::default(); specs.len()] }
+    }
+
+    pub(super) fn spec(&self, i: usize) -> &'a FaultSpec {
+        &self.specs[i]
+    }
+
+    /// Real time: the faults injected from outside that are due at `now_ns` (tick 0 at
+    /// `start_ns`) and not injected yet.
+    pub(super) fn due_by_time(&self, start_ns: u64, now_ns: u64) -> Vec<usize> {
+        inject::due_by_time(self.specs, &self.seen, start_ns, now_ns)
+    }
+
+    /// Lockstep: the faults injected from outside at loop `k`, not injected yet.
+    pub(super) fn due_at_loop(&self, rate_hz: f64, k: u64) -> Vec<usize> {
+        inject::due_at_loop(self.specs, &self.seen, rate_hz, k)
+    }
+
+    /// Fault `i` was injected at `ns` (or found its process not running then).
+    pub(super) fn injected(&mut self, i: usize, ns: u64) {
+        self.seen[i].injected_ns = Some(ns);
+    }
+
+    /// Fault `i`, a stop, is to be continued at `at_ns`.
+    pub(super) fn continue_at(&mut self, i: usize, at_ns: Option<u64>) {
+        self.seen[i].continue_at_ns = at_ns;
+    }
+
+    /// The stops that are over at `now_ns`, taken off the wait; each is
+    /// [`continued`](Self::continued) once its SIGCONT is sent.
+    pub(super) fn take_continues_due(&mut self, now_ns: u64) -> Vec<usize> {
+        let due: Vec<usize> =
+            (0..self.seen.len()).filter(|&i| self.seen[i].continue_at_ns.is_some_and(|at| now_ns >= at)).collect();
+        for &i in &due {
+            self.seen[i].continue_at_ns = None;
+        }
+        due
+    }
+
+    /// Fault `i`'s process was sent SIGCONT at `ns`.
+    pub(super) fn continued(&mut self, i: usize, ns: u64) {
+        self.seen[i].continued_ns = Some(ns);
+    }
+
+    /// `by` noticed something wrong with `role` at `ns`: the injected faults on it of the kind
+    /// `by` notices that are still undetected count as detected. Returns them.
+    pub(super) fn detect(&mut self, role: Role, by: DetectedBy, ns: u64) -> Vec<usize> {
+        let found: Vec<usize> =
+            self.injected_on(role, noticed_kind(by)).into_iter().filter(|&i| detectable(&self.seen[i], by)).collect();
+        for &i in &found {
+            self.seen[i].detected_ns = Some(ns);
+            self.seen[i].detected_by = Some(by);
+        }
+        found
+    }
+
+    /// `role` handles its input again at `ns`: its detected stops not resumed yet are resumed.
+    pub(super) fn resume(&mut self, role: Role, ns: u64) {
+        for i in self.injected_on(role, FaultKind::Stop) {
+            let seen = &mut self.seen[i];
+            if seen.resumed_ns.is_none() && seen.detected_ns.is_some() {
+                seen.resumed_ns = Some(ns);
+            }
+        }
+    }
+
+    /// A restarted `role` is ready at `ns`: its kills not restarted yet are restarted.
+    pub(super) fn restarted(&mut self, role: Role, ns: u64) {
+        for i in self.injected_on(role, FaultKind::Kill) {
+            self.seen[i].restarted_ns.get_or_insert(ns);
+        }
+    }
+
+    /// What was seen of each fault, in the launch file's order (`RunLog::faults`).
+    pub(super) fn seen(&self) -> &[FaultSeen] {
+        &self.seen
+    }
+
+    /// The faults on `role` of `kind` that were injected, newest first.
+    fn injected_on(&self, role: Role, kind: FaultKind) -> Vec<usize> {
+        inject::injected(self.specs, &self.seen, role, kind)
+    }
+}
+
+/// The kind of fault that `by` notices: a process that exited was killed, the rest were stopped.
+fn noticed_kind(by: DetectedBy) -> FaultKind {
+    match by {
+        DetectedBy::ProcessExited => FaultKind::Kill,
+        DetectedBy::InputDeadline | DetectedBy::MonitorHeartbeat | DetectedBy::LinkLease => FaultKind::Stop,
+    }
+}
+
+/// Whether `by` may still detect a fault: only once, and a silence (the monitor's heartbeat, the
+/// link's lease) only while the stop lasts, since after the SIGCONT it is not the stop's.
+fn detectable(seen: &FaultSeen, by: DetectedBy) -> bool {
+    seen.detected_ns.is_none()
+        && match by {
+            DetectedBy::ProcessExited | DetectedBy::InputDeadline => true,
+            DetectedBy::MonitorHeartbeat | DetectedBy::LinkLease => seen.continued_ns.is_none(),
+        }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::faults::parse_fault;
+
+    fn specs(texts: &[&str]) -> Vec<FaultSpec> {
+        texts.iter().map(|t| parse_fault(t).unwrap()).collect()
+    }
+
+    #[test]
+    fn a_death_detects_the_injected_kills_of_its_process_once() {
+        let f = specs(&["kill sensors at 1s", "kill plant at 1s", "stop sensors at 2s for 1s"]);
+        let mut ledger = FaultLedger::new(&f);
+        assert!(ledger.detect(Role::Sensors, DetectedBy::ProcessExited, 5).is_empty(), "nothing injected yet");
+        ledger.injected(0, 10);
+        ledger.injected(1, 10);
+        ledger.injected(2, 20);
+        assert_eq!(ledger.detect(Role::Sensors, DetectedBy::ProcessExited, 30), [0], "not the plant's, not a stop");
+        assert!(ledger.detect(Role::Sensors, DetectedBy::ProcessExited, 40).is_empty(), "detected once");
+        let seen = ledger.seen();
+        assert_eq!((seen[0].detected_ns, seen[0].detected_by), (Some(30), Some(DetectedBy::ProcessExited)));
+        assert_eq!((seen[1].detected_ns, seen[2].detected_ns), (None, None));
+    }
+
+    #[test]
+    fn a_stall_detects_a_stop_and_its_end_resumes_it() {
+        let f = specs(&["stop controller at 1s for 100ms", "kill controller at 3s"]);
+        let mut ledger = FaultLedger::new(&f);
+        ledger.injected(0, 100);
+        ledger.resume(Role::Controller, 150);
+        assert_eq!(ledger.seen[0].resumed_ns, None, "not resumed before it was detected");
+        assert_eq!(ledger.detect(Role::Controller, DetectedBy::InputDeadline, 200), [0]);
+        ledger.resume(Role::Controller, 300);
+        ledger.resume(Role::Controller, 400);
+        let seen = ledger.seen();
+        assert_eq!((seen[0].detected_by, seen[0].resumed_ns), (Some(DetectedBy::InputDeadline), Some(300)));
+        assert_eq!(seen[1], FaultSeen::default(), "the kill was not injected");
+    }
+
+    #[test]
+    fn a_fault_of_another_process_is_not_matched() {
+        let f = specs(&["stop estimator at 1s for 100ms", "kill estimator at 2s"]);
+        let mut ledger = FaultLedger::new(&f);
+        ledger.injected(0, 10);
+        ledger.injected(1, 20);
+        assert!(ledger.detect(Role::Sensors, DetectedBy::InputDeadline, 30).is_empty());
+        assert!(ledger.detect(Role::Controller, DetectedBy::ProcessExited, 30).is_empty());
+        ledger.restarted(Role::Plant, 40);
+        ledger.resume(Role::Sensors, 40);
+        assert!(ledger.seen().iter().all(|s| s.detected_ns.is_none() && s.restarted_ns.is_none()));
+    }
+
+    #[test]
+    fn two_faults_of_one_process_are_each_detected_and_restarted_once() {
+        let f = specs(&["kill plant at 1s", "kill plant at 2s"]);
+        let mut ledger = FaultLedger::new(&f);
+        ledger.injected(0, 1_000);
+        assert_eq!(ledger.detect(Role::Plant, DetectedBy::ProcessExited, 1_001), [0]);
+        ledger.restarted(Role::Plant, 1_100);
+        ledger.injected(1, 2_000);
+        assert_eq!(ledger.detect(Role::Plant, DetectedBy::ProcessExited, 2_002), [1]);
+        ledger.restarted(Role::Plant, 2_200);
+        let seen = ledger.seen();
+        assert_eq!([seen[0].detected_ns, seen[1].detected_ns], [Some(1_001), Some(2_002)]);
+        assert_eq!([seen[0].restarted_ns, seen[1].restarted_ns], [Some(1_100), Some(2_200)], "the first keeps its own");
+    }
+
+    #[test]
+    fn a_silence_detects_a_stop_only_before_its_continue() {
+        let f = specs(&["stop monitor at 1s for 200ms", "stop bridge at 1s for 200ms"]);
+        let mut ledger = FaultLedger::new(&f);
+        for i in [0, 1] {
+            ledger.injected(i, 100);
+            ledger.continue_at(i, Some(200));
+        }
+        assert!(ledger.take_continues_due(199).is_empty());
+        assert_eq!(ledger.take_continues_due(200), [0, 1]);
+        assert!(ledger.take_continues_due(300).is_empty(), "continued once");
+        ledger.continued(1, 250);
+        assert!(ledger.detect(Role::Bridge, DetectedBy::LinkLease, 260).is_empty(), "a silence after the SIGCONT");
+        assert_eq!(ledger.detect(Role::Monitor, DetectedBy::MonitorHeartbeat, 240), [0]);
+        // The monitor's input deadline reports a stall it saw while stopped, after the fact.
+        let mut late = FaultLedger::new(&f);
+        late.injected(1, 100);
+        late.continued(1, 300);
+        assert_eq!(late.detect(Role::Bridge, DetectedBy::InputDeadline, 310), [1]);
+    }
+}

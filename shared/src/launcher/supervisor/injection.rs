@@ -1,0 +1,105 @@
+//! Fault injection from outside: the kills and stops that are due are sent to their processes,
+//! stopped processes are continued when their stop is over, and a stopped monitor is noticed by
+//! its silence. What is due is the fault ledger's and `launcher::inject`'s to say.
+
+use crate::config::faults::FaultKind;
+use crate::config::launch::Mode;
+use crate::contract::clock::now_ns;
+use crate::contract::role::Role;
+use crate::launcher::inject::{self, DetectedBy};
+
+use super::Supervisor;
+
+/// How long the monitor may stay silent (it reports ten times a second) before it counts as
+/// stalled.
+const MONITOR_SILENCE_NS: u64 = 300_000_000;
+
+impl Supervisor<'_> {
+    /// Real time: injects the faults that are due.
+    pub(super) fn inject_due_by_time(&mut self) {
+        if self.config.mode != Mode::Realtime {
+            return;
+        }
+        if let Some(start) = self.log.plant_start_ns {
+            for i in self.faults.due_by_time(start, now_ns()) {
+                self.inject(i);
+            }
+        }
+    }
+
+    /// Lockstep: the plant holds loop `k`; injects the faults due there. The plant goes on once
+    /// every process is back up.
+    pub(super) fn pause_at(&mut self, k: u64) {
+        for i in self.faults.due_at_loop(self.config.rate_hz, k) {
+            self.inject(i);
+        }
+        self.paused = true;
+    }
+
+    /// Sends SIGCONT to the processes whose stop is over at `now` (ns).
+    pub(super) fn continue_stopped(&mut self, now: u64) {
+        for i in self.faults.take_continues_due(now) {
+            let role = inject::target(self.faults.spec(i));
+            self.processes[role].signal(libc::SIGCONT);
+            self.processes[role].stopped = false;
+            let ns = now_ns();
+            self.faults.continued(i, ns);
+            self.note(ns, format!("SIGCONT {role}"));
+        }
+    }
+
+    fn inject(&mut self, i: usize) {
+        let fault = self.faults.spec(i);
+        let role = inject::target(fault);
+        let ns = now_ns();
+        self.faults.injected(i, ns);
+        if !self.processes[role].running() {
+            self.note(ns, format!("{}: not injected, {role} is not running", fault.describe()));
+            return;
+        }
+        if let Some((signal, continue_at_ns)) = inject::injection(fault, ns) {
+            let process = &mut self.processes[role];
+            process.signal(signal);
+            match fault.kind {
+                FaultKind::Kill => process.ready = false,
+                _ => process.stopped = true,
+            }
+            self.faults.continue_at(i, continue_at_ns);
+        }
+        self.note(ns, format!("inject: {}", fault.describe()));
+    }
+
+    /// Only a stop fault on the monitor makes it silent while alive: its silence past
+    /// `MONITOR_SILENCE_NS` detects that stop.
+    pub(super) fn watch_monitor_heartbeat(&mut self) {
+        let now = now_ns();
+        let monitor = &self.processes[Role::Monitor];
+        if !monitor_silent(self.last_status_ns, now, monitor.ready, monitor.stopped) {
+            return;
+        }
+        for _ in self.faults.detect(Role::Monitor, DetectedBy::MonitorHeartbeat, now) {
+            self.note(now, "monitor silent: stalled".into());
+        }
+    }
+}
+
+/// Whether a monitor whose last status came at `last_status_ns` counts as silent at `now_ns`:
+/// only while it is up and stopped by a fault (a starting or dead one says nothing either).
+fn monitor_silent(last_status_ns: u64, now_ns: u64, ready: bool, stopped: bool) -> bool {
+    now_ns.saturating_sub(last_status_ns) > MONITOR_SILENCE_NS && ready && stopped
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_monitor_is_silent_past_300_ms_without_a_status_while_up_and_stopped() {
+        let last = 4_000_000_000;
+        assert!(!monitor_silent(last, last + 300_000_000, true, true));
+        assert!(monitor_silent(last, last + 300_000_001, true, true));
+        assert!(!monitor_silent(last, last + 900_000_000, false, true), "not ready: starting again");
+        assert!(!monitor_silent(last, last + 900_000_000, true, false), "not stopped by a fault");
+        assert!(!monitor_silent(last, last - 1, true, true), "a status after the look");
+    }
+}

@@ -1,0 +1,372 @@
+//! The supervision of one run: start every process, wait until all are ready, let the plant
+//! start, then handle their events (deaths and restarts, stalls, the status line) until the
+//! plant is done, and stop them in order.
+//!
+//! Here: the run's set-up and tear-down, start-up and the supervision loop. Beside it: the
+//! process table (`processes`), what was seen of each fault (`fault_ledger`), fault injection
+//! (`injection`), the child events (`events`), deaths and restarts (`deaths`), the ordered stop
+//! (`stop`) and what the user sees (`live`).
+
+mod deaths;
+mod events;
+mod fault_ledger;
+mod injection;
+mod live;
+mod processes;
+mod stop;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, anyhow};
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
+
+use crate::config::launch::LaunchConfig;
+use crate::contract::clock::now_ns;
+use crate::contract::role::Role;
+use crate::launcher::child::{self, Binaries, ChildArgs, ChildLine, Start};
+use crate::launcher::outcome::Outcome;
+use crate::launcher::run_dir::{begin_run, new_run_id};
+use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
+use crate::model::scenario::Scenario;
+use crate::runtime::ipc;
+use crate::runtime::signals::StopFlag;
+
+use fault_ledger::FaultLedger;
+use live::Live;
+pub use live::LiveView;
+use processes::{Process, Processes};
+
+/// Longest start-up: every process must report ready within it.
+const READY_TIMEOUT: Duration = Duration::from_secs(20);
+/// Longest wait between two looks at the fault schedule.
+const SUPERVISE_TICK: Duration = Duration::from_millis(2);
+
+/// Runs one launch configuration to its end in `run_dir` (which must exist, with `logs/`):
+/// writes `launch.toml` and `summary.json` there.
+pub fn run_once(
+    config: &LaunchConfig,
+    scenario: &dyn Scenario,
+    binaries: &Binaries,
+    run_dir: &Path,
+    quiet: bool,
+) -> Result<(Summary, Outcome)> {
+    run_with(config, scenario, binaries, run_dir, if quiet { LiveView::Quiet } else { LiveView::StatusLine })
+}
+
+/// [`run_once`], shown as `view` says.
+pub fn run_with(
+    config: &LaunchConfig,
+    scenario: &dyn Scenario,
+    binaries: &Binaries,
+    run_dir: &Path,
+    view: LiveView,
+) -> Result<(Summary, Outcome)> {
+    let decided = config.with_wait_decided(crate::runtime::wait::available_cpus());
+    Supervisor::run(&decided, scenario, binaries, run_dir, view)
+}
+
+/// What reaches the supervision loop.
+enum Event {
+    Child(ChildLine),
+    /// The clean-up after a death of `role` is done.
+    Cleaned {
+        role: Role,
+        removed: u64,
+    },
+}
+
+/// Why start-up did not finish.
+enum NotReady {
+    /// A stop request, or the dashboard's `q`.
+    Stopped(Outcome),
+    /// The output of this process ended.
+    Ended(Role),
+    /// These were not ready within `READY_TIMEOUT`.
+    Late(Vec<Role>),
+}
+
+struct Supervisor<'a> {
+    config: &'a LaunchConfig,
+    binaries: &'a Binaries,
+    launch_file: PathBuf,
+    run_id: String,
+    run_dir: PathBuf,
+    processes: Processes,
+    tx: Sender<Event>,
+    events: Receiver<Event>,
+    readers: Vec<std::thread::JoinHandle<()>>,
+    reports: Reports,
+    /// Restarts and the timeline, for the summary (its faults come from `faults` at the end).
+    log: RunLog,
+    /// Each fault of the launch file and what was seen of it.
+    faults: FaultLedger<'a>,
+    /// Lockstep: the plant is paused and waits for `go`.
+    paused: bool,
+    /// When the monitor's last status came (CLOCK_MONOTONIC ns).
+    last_status_ns: u64,
+    removed_dead_nodes: u64,
+    stop: StopFlag,
+    /// Clean-up requests (a process) for the clean-up thread: iceoryx2's clean-up of a dead
+    /// process's resources can wait on the file system, and nothing of the supervision may.
+    cleaner: Option<Sender<Role>>,
+    live: Live,
+}
+
+impl<'a> Supervisor<'a> {
+    fn run(
+        config: &'a LaunchConfig,
+        scenario: &dyn Scenario,
+        binaries: &'a Binaries,
+        run_dir: &Path,
+        view: LiveView,
+    ) -> Result<(Summary, Outcome)> {
+        let (launch_file, started_at) = begin_run(run_dir, config)?;
+        let stop = StopFlag::install()?;
+        let live = Live::open(view, config, scenario)?;
+        let (tx, events) = crossbeam_channel::unbounded();
+        let processes = config
+            .hosts
+            .processes()
+            .into_iter()
+            .map(|role| Process::new(role, config.supervision.policy(role)))
+            .collect();
+        let run_id = new_run_id();
+        // The run's private folder; the lock in it says the run is alive until we return.
+        let storage_lock = ipc::create_run_storage(&run_id)?;
+        let (cleaner, clean_requests) = crossbeam_channel::unbounded::<Role>();
+        let cleaned = tx.clone();
+        let clean_run_id = run_id.clone();
+        let clean_thread = std::thread::spawn(move || {
+            for role in clean_requests {
+                let removed = ipc::remove_dead_nodes(&clean_run_id).unwrap_or(0);
+                if cleaned.send(Event::Cleaned { role, removed }).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut supervisor = Supervisor {
+            config,
+            binaries,
+            launch_file,
+            run_id,
+            run_dir: run_dir.to_path_buf(),
+            processes: Processes::new(processes),
+            tx,
+            events,
+            readers: vec![],
+            reports: Reports::default(),
+            log: RunLog::default(),
+            faults: FaultLedger::new(&config.faults),
+            paused: false,
+            last_status_ns: now_ns(),
+            removed_dead_nodes: 0,
+            stop,
+            cleaner: Some(cleaner),
+            live,
+        };
+        let spawned = supervisor.start_all();
+        let outcome = match spawned {
+            Ok(()) => supervisor.supervise(),
+            Err(e) => Outcome::Failed(format!("{e:#}")),
+        };
+        supervisor.stop_all();
+        supervisor.live.close();
+        let outcome = match outcome {
+            Outcome::Completed => supervisor.check_ends(),
+            other => other,
+        };
+        let (tx, _) = crossbeam_channel::unbounded();
+        drop(std::mem::replace(&mut supervisor.tx, tx));
+        for reader in supervisor.readers.drain(..) {
+            let _ = reader.join();
+        }
+        supervisor.cleaner = None;
+        let _ = clean_thread.join();
+        let mut cleanup = ipc::clean_up_run(&supervisor.run_id)?;
+        // The other host's bridge tidied its host up last and said what it left there.
+        if let Some(remote) = supervisor.reports.bridges.get(&Role::BridgeRemote).and_then(|r| r.values().last()) {
+            cleanup.leftover.extend(remote.leftover.iter().map(|f| format!("{f} (on the other host)")));
+        }
+        drop(storage_lock);
+        let starts: BTreeMap<Role, Vec<Start>> =
+            supervisor.processes.iter().map(|p| (p.role, p.runs.clone())).collect();
+        supervisor.log.faults = supervisor.faults.seen().to_vec();
+        let summary = summary::build(SummaryInputs {
+            config,
+            scenario,
+            run_id: &supervisor.run_id,
+            run_dir,
+            started_at,
+            outcome: &outcome,
+            reports: &supervisor.reports,
+            starts: &starts,
+            log: &supervisor.log,
+            shared_memory: SharedMemoryCheck {
+                clean: cleanup.leftover.is_empty(),
+                removed_dead_nodes: cleanup.removed_dead_nodes + supervisor.removed_dead_nodes,
+                leftover: cleanup.leftover,
+            },
+        });
+        summary::write(&summary, run_dir)?;
+        Ok((summary, outcome))
+    }
+
+    /// Starts every process. The other host's bridge goes first, and alone: it makes the run's
+    /// folder on its host, where the stages placed there need it.
+    fn start_all(&mut self) -> Result<()> {
+        for role in self.config.hosts.processes() {
+            self.spawn(role)?;
+            if role == Role::BridgeRemote {
+                self.wait_ready(&[role]).map_err(|not| match not {
+                    NotReady::Stopped(_) => anyhow!("stopped while {role} started"),
+                    NotReady::Ended(ended) => anyhow!(self.ended_in_start_up(ended)),
+                    NotReady::Late(_) => anyhow!("{role} not ready after {} s", READY_TIMEOUT.as_secs()),
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Handles events until every process of `roles` is ready (start-up, before the supervision
+    /// loop).
+    fn wait_ready(&mut self, roles: &[Role]) -> Result<(), NotReady> {
+        let deadline = Instant::now() + READY_TIMEOUT;
+        loop {
+            let late: Vec<Role> = roles.iter().copied().filter(|&r| !self.processes[r].ready).collect();
+            if late.is_empty() {
+                return Ok(());
+            }
+            self.show_processes();
+            if let Some(outcome) = self.stop_outcome() {
+                return Err(NotReady::Stopped(outcome));
+            }
+            match self.events.recv_timeout(Duration::from_millis(50)) {
+                Ok(event) => {
+                    if let Some(ended) = self.handle(event) {
+                        return Err(NotReady::Ended(ended));
+                    }
+                }
+                Err(_) if Instant::now() > deadline => return Err(NotReady::Late(late)),
+                Err(_) => {}
+            }
+        }
+    }
+
+    fn ended_in_start_up(&self, role: Role) -> String {
+        format!("{} during start-up; see logs/{role}.log", self.processes[role].exit_text())
+    }
+
+    /// Starts the next incarnation of `role`.
+    fn spawn(&mut self, role: Role) -> Result<()> {
+        let binary = match role {
+            Role::Bridge | Role::BridgeRemote => child::locate_bridge()?,
+            _ => self.binaries[&role].clone(),
+        };
+        let remote = self.config.hosts.remote().filter(|_| self.config.hosts.is_remote(role));
+        let args = ChildArgs {
+            launch_file: &self.launch_file,
+            run_id: &self.run_id,
+            run_dir: &self.run_dir,
+            incarnation: self.processes[role].runs.len() as u32,
+            prefix: remote.map(|(_, host)| host.command.as_slice()).unwrap_or_default(),
+        };
+        let spawned = child::spawn(role, &binary, &args, self.tx.clone(), Event::Child)?;
+        self.readers.push(spawned.reader);
+        self.processes[role].started(spawned.start, spawned.stdin);
+        Ok(())
+    }
+
+    /// Notes `event` on the timeline, at `ns`.
+    fn note(&mut self, ns: u64, event: String) {
+        self.log.note(ns, event);
+        if let Some(entry) = self.log.timeline.last() {
+            self.live.event(entry);
+        }
+    }
+
+    /// The user quit the dashboard, or a signal asked to stop.
+    fn stop_outcome(&self) -> Option<Outcome> {
+        if self.stop.requested() {
+            Some(Outcome::Interrupted)
+        } else if self.live.quit_asked() {
+            Some(Outcome::Quit)
+        } else {
+            None
+        }
+    }
+
+    /// Sends the dashboard the processes' states when they changed.
+    fn show_processes(&mut self) {
+        self.live.processes(self.processes.rows());
+    }
+
+    fn supervise(&mut self) -> Outcome {
+        // Start-up: every process, the monitor included, has its ports before the first sample.
+        match self.wait_ready(&self.config.hosts.processes()) {
+            Ok(()) => {}
+            Err(NotReady::Stopped(outcome)) => return outcome,
+            Err(NotReady::Ended(role)) => return Outcome::Failed(self.ended_in_start_up(role)),
+            Err(NotReady::Late(late)) => {
+                let names: Vec<&str> = late.iter().map(|r| r.name()).collect();
+                return Outcome::Failed(format!("not ready after {} s: {}", READY_TIMEOUT.as_secs(), names.join(", ")));
+            }
+        }
+        if !self.processes[Role::Plant].write_line("start") {
+            return Outcome::Failed("cannot tell the plant to start".into());
+        }
+        self.last_status_ns = now_ns();
+
+        loop {
+            self.show_processes();
+            if let Some(outcome) = self.stop_outcome() {
+                return outcome;
+            }
+            if let Some(outcome) = self.due_actions() {
+                return outcome;
+            }
+            if let Some(outcome) = self.release_pause() {
+                return outcome;
+            }
+            match self.events.recv_timeout(SUPERVISE_TICK) {
+                Ok(event) => {
+                    if let Some(role) = self.handle(event)
+                        && let Some(outcome) = self.ended(role)
+                    {
+                        return outcome;
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return Outcome::Failed("lost every process's output".into()),
+            }
+        }
+    }
+
+    /// Injects the faults that are due (real time), continues stopped processes, restarts the
+    /// dead ones whose clean-up and backoff are over, and watches the monitor's heartbeat. Returns
+    /// the outcome if a restart failed and the run cannot go on.
+    fn due_actions(&mut self) -> Option<Outcome> {
+        let now = now_ns();
+        self.inject_due_by_time();
+        self.continue_stopped(now);
+        if let Some(outcome) = self.start_due_restarts(now) {
+            return Some(outcome);
+        }
+        self.watch_monitor_heartbeat();
+        None
+    }
+
+    /// Lockstep: once the faults due at the paused tick are in and every process is back up,
+    /// lets the plant go on.
+    fn release_pause(&mut self) -> Option<Outcome> {
+        if !self.paused || !self.processes.all_up() {
+            return None;
+        }
+        self.paused = false;
+        if !self.processes[Role::Plant].write_line("go") {
+            return Some(Outcome::Failed("cannot tell the plant to go on".into()));
+        }
+        None
+    }
+}
