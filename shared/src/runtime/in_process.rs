@@ -1,7 +1,7 @@
 //! The in-process twin of the five processes: the same plant core and the same stage runners
 //! and tasks, called in loop order in one thread, with no IPC. Lockstep only: it is the
 //! lockstep run without the transport, so its trajectory is byte-identical to the five-process
-//! run's (tests/in_process.rs proves it for every scenario and case). Faults done to a process
+//! run's (tests/trajectory_hashes.rs proves it for every scenario and case). Faults done to a process
 //! from outside (kill, stop) need processes and are refused.
 
 use anyhow::{Result, bail};
