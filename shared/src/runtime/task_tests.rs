@@ -151,15 +151,15 @@ fn a_loop_lost_upstream_is_passed_on_without_running_the_task() {
 #[test]
 fn a_lockstep_delay_sends_what_was_computed_that_many_loops_ago() {
     let mut r = runner("lockstep", &["delay controller by 3 ticks at 10ms for 5ms"], 0);
-    let out = outputs(&mut r, 8..17);
+    let out = outputs(&mut r, 0..17);
     let expected = [8.0, 9.0, 7.0, 8.0, 9.0, 10.0, 11.0, 15.0, 16.0].map(Some);
-    assert_eq!(out, expected);
+    assert_eq!(out[8..], expected);
     // From the first loop of a run: the oldest output computed stands in for the ones before.
     let mut r = runner("lockstep", &["delay controller by 3 ticks at 0s"], 0);
     assert_eq!(outputs(&mut r, 0..6), [0.0, 0.0, 0.0, 0.0, 1.0, 2.0].map(Some));
     // A delay in seconds is whole ticks in lockstep.
     let mut r = runner("lockstep", &["delay controller by 2ms at 10ms for 1ms"], 0);
-    assert_eq!(outputs(&mut r, 9..12), [9.0, 8.0, 11.0].map(Some));
+    assert_eq!(outputs(&mut r, 0..12)[9..], [9.0, 8.0, 11.0].map(Some));
     assert!(r.handle(&input(12)).hold.is_none());
 }
 
