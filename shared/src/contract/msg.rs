@@ -10,7 +10,7 @@
 
 use iceoryx2::prelude::*;
 
-use crate::contract::role::Role;
+use crate::contract::role::{Role, Topic};
 
 /// Largest true-state vector a scenario may have.
 pub const MAX_STATE: usize = 32;
@@ -22,6 +22,11 @@ pub const MAX_SENSORS: usize = 8;
 pub const MAX_SENSOR_DIM: usize = 16;
 /// Largest estimate vector.
 pub const MAX_ESTIMATE: usize = 48;
+
+/// Samples the monitor's reader of each topic holds: how far the monitor can fall behind
+/// before it loses any (real-time mode); at 1 kHz that is a second of slack. The transport sizes
+/// its buffers by it and the recorder its join window.
+pub const MONITOR_BUFFER: usize = 1024;
 
 /// CLOCK_MONOTONIC stamps (ns) of one loop, in the order the data passes. Zero means "not yet".
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
@@ -39,6 +44,91 @@ pub struct LoopTrace {
     pub plant_receive: u64,
 }
 
+/// One stamp of a [`LoopTrace`], in the order the data passes; its discriminant is its index in
+/// [`LoopTrace::stamps`]. This is the one place that says which role sets which stamp.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Stamp {
+    /// The plant publishes the state of tick k.
+    PlantPublish,
+    SensorsReceive,
+    SensorsPublish,
+    EstimatorReceive,
+    EstimatorPublish,
+    ControllerReceive,
+    ControllerPublish,
+    /// The command of loop k reaches the plant.
+    PlantReceive,
+}
+
+impl Stamp {
+    /// Every stamp, in the order the data passes.
+    pub const ALL: [Stamp; 8] = [
+        Stamp::PlantPublish,
+        Stamp::SensorsReceive,
+        Stamp::SensorsPublish,
+        Stamp::EstimatorReceive,
+        Stamp::EstimatorPublish,
+        Stamp::ControllerReceive,
+        Stamp::ControllerPublish,
+        Stamp::PlantReceive,
+    ];
+
+    /// Its index in [`LoopTrace::stamps`].
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Its name in `loops.csv` (without the `_ns` unit).
+    pub fn name(self) -> &'static str {
+        LoopTrace::STAMP_NAMES[self.index()]
+    }
+
+    /// The role that sets it.
+    pub fn role(self) -> Role {
+        match self {
+            Stamp::PlantPublish | Stamp::PlantReceive => Role::Plant,
+            Stamp::SensorsReceive | Stamp::SensorsPublish => Role::Sensors,
+            Stamp::EstimatorReceive | Stamp::EstimatorPublish => Role::Estimator,
+            Stamp::ControllerReceive | Stamp::ControllerPublish => Role::Controller,
+        }
+    }
+
+    /// The stamp `role` sets when its input reaches it (for the plant: the command); None for
+    /// the processes outside the loop.
+    pub fn received_by(role: Role) -> Option<Stamp> {
+        match role {
+            Role::Plant => Some(Stamp::PlantReceive),
+            Role::Sensors => Some(Stamp::SensorsReceive),
+            Role::Estimator => Some(Stamp::EstimatorReceive),
+            Role::Controller => Some(Stamp::ControllerReceive),
+            Role::Monitor | Role::Bridge | Role::BridgeRemote => None,
+        }
+    }
+
+    /// The stamp `role` sets when its output goes out (for the plant: the state).
+    pub fn published_by(role: Role) -> Option<Stamp> {
+        match role {
+            Role::Plant => Some(Stamp::PlantPublish),
+            Role::Sensors => Some(Stamp::SensorsPublish),
+            Role::Estimator => Some(Stamp::EstimatorPublish),
+            Role::Controller => Some(Stamp::ControllerPublish),
+            Role::Monitor | Role::Bridge | Role::BridgeRemote => None,
+        }
+    }
+
+    /// When a message on `topic` went out: its writer's publish stamp. A loop record "goes out"
+    /// when the plant takes the command it records.
+    pub fn sent_on(topic: Topic) -> Stamp {
+        match topic {
+            Topic::Loop => Stamp::PlantReceive,
+            Topic::State => Stamp::PlantPublish,
+            Topic::Measurements => Stamp::SensorsPublish,
+            Topic::Estimate => Stamp::EstimatorPublish,
+            Topic::Command => Stamp::ControllerPublish,
+        }
+    }
+}
+
 impl LoopTrace {
     /// The stamps in the order the data passes, named as in `loops.csv`.
     pub const STAMP_NAMES: [&'static str; 8] = [
@@ -52,55 +142,80 @@ impl LoopTrace {
         "plant_receive",
     ];
 
-    /// Sets the receive and publish stamps of a stage (the plant's are set where they happen).
-    pub fn stamp(&mut self, role: Role, received: u64, published: u64) {
-        let (r, p) = match role {
-            Role::Sensors => (&mut self.sensors_receive, &mut self.sensors_publish),
-            Role::Estimator => (&mut self.estimator_receive, &mut self.estimator_publish),
-            Role::Controller => (&mut self.controller_receive, &mut self.controller_publish),
-            Role::Plant | Role::Monitor | Role::Bridge | Role::BridgeRemote => {
-                unreachable!("only the stages stamp a receive and a publish")
-            }
-        };
-        *r = received;
-        *p = published;
+    /// The value of one stamp (0: not yet).
+    pub fn get(&self, stamp: Stamp) -> u64 {
+        *self.slot(stamp)
     }
 
+    fn slot(&self, stamp: Stamp) -> &u64 {
+        match stamp {
+            Stamp::PlantPublish => &self.plant_publish,
+            Stamp::SensorsReceive => &self.sensors_receive,
+            Stamp::SensorsPublish => &self.sensors_publish,
+            Stamp::EstimatorReceive => &self.estimator_receive,
+            Stamp::EstimatorPublish => &self.estimator_publish,
+            Stamp::ControllerReceive => &self.controller_receive,
+            Stamp::ControllerPublish => &self.controller_publish,
+            Stamp::PlantReceive => &self.plant_receive,
+        }
+    }
+
+    fn slot_mut(&mut self, stamp: Stamp) -> &mut u64 {
+        match stamp {
+            Stamp::PlantPublish => &mut self.plant_publish,
+            Stamp::SensorsReceive => &mut self.sensors_receive,
+            Stamp::SensorsPublish => &mut self.sensors_publish,
+            Stamp::EstimatorReceive => &mut self.estimator_receive,
+            Stamp::EstimatorPublish => &mut self.estimator_publish,
+            Stamp::ControllerReceive => &mut self.controller_receive,
+            Stamp::ControllerPublish => &mut self.controller_publish,
+            Stamp::PlantReceive => &mut self.plant_receive,
+        }
+    }
+
+    /// Sets the stamp `role` takes when its input reaches it, at `ns`.
+    pub fn stamp_received(&mut self, role: Role, ns: u64) {
+        let stamp = Stamp::received_by(role).expect("only the loop's processes stamp the trace");
+        *self.slot_mut(stamp) = ns;
+    }
+
+    /// Sets the stamp `role` takes when its output goes out, at `ns`.
+    pub fn stamp_published(&mut self, role: Role, ns: u64) {
+        let stamp = Stamp::published_by(role).expect("only the loop's processes stamp the trace");
+        *self.slot_mut(stamp) = ns;
+    }
+
+    /// Sets the receive and publish stamps of a stage, which has both on one message (the
+    /// plant's two are on different messages: it sets each where it happens).
+    pub fn stamp(&mut self, role: Role, received: u64, published: u64) {
+        self.stamp_received(role, received);
+        self.stamp_published(role, published);
+    }
+
+    /// From `from` to `to`, ns (0 if `to` is not later, or either is not stamped yet: a
+    /// stamp of 0 is earlier than any other).
+    pub fn between_ns(&self, from: Stamp, to: Stamp) -> u64 {
+        self.get(to).saturating_sub(self.get(from))
+    }
+
+    /// The whole loop: the plant publishes the state, and the command derived from it reaches
+    /// the plant.
+    pub fn end_to_end_ns(&self) -> u64 {
+        self.between_ns(Stamp::PlantPublish, Stamp::PlantReceive)
+    }
+
+    /// The stamps in [`Stamp`] order.
     pub fn stamps(&self) -> [u64; 8] {
-        [
-            self.plant_publish,
-            self.sensors_receive,
-            self.sensors_publish,
-            self.estimator_receive,
-            self.estimator_publish,
-            self.controller_receive,
-            self.controller_publish,
-            self.plant_receive,
-        ]
+        Stamp::ALL.map(|s| self.get(s))
     }
 
     /// The inverse of [`LoopTrace::stamps`] (a trace read back from loops.csv).
     pub fn from_stamps(s: [u64; 8]) -> Self {
-        let [
-            plant_publish,
-            sensors_receive,
-            sensors_publish,
-            estimator_receive,
-            estimator_publish,
-            controller_receive,
-            controller_publish,
-            plant_receive,
-        ] = s;
-        LoopTrace {
-            plant_publish,
-            sensors_receive,
-            sensors_publish,
-            estimator_receive,
-            estimator_publish,
-            controller_receive,
-            controller_publish,
-            plant_receive,
+        let mut trace = LoopTrace::default();
+        for (stamp, ns) in Stamp::ALL.into_iter().zip(s) {
+            *trace.slot_mut(stamp) = ns;
         }
+        trace
     }
 }
 
@@ -121,6 +236,15 @@ pub struct Header {
     /// message only carries the loop on; stages pass it through and the plant holds its command.
     pub lost: u32,
     pub _reserved: u32,
+}
+
+impl Header {
+    /// Marks this loop as handled by `incarnation` of `role`, in the role's slot of
+    /// `incarnations`.
+    pub fn set_incarnation(&mut self, role: Role, incarnation: u32) {
+        let slot = role.slot().expect("only the loop's processes carry an incarnation");
+        self.incarnations[slot] = incarnation;
+    }
 }
 
 /// How the plant's clock behaved at the tick that produced a state (real-time mode only;
@@ -260,6 +384,35 @@ pub enum LoopMessage {
     Loop(LoopRecord),
 }
 
+impl LoopMessage {
+    /// The topic it came on.
+    pub fn topic(&self) -> Topic {
+        match self {
+            LoopMessage::State(_) => Topic::State,
+            LoopMessage::Measurements(_) => Topic::Measurements,
+            LoopMessage::Estimate(_) => Topic::Estimate,
+            LoopMessage::Command(_) => Topic::Command,
+            LoopMessage::Loop(_) => Topic::Loop,
+        }
+    }
+
+    pub fn header(&self) -> &Header {
+        match self {
+            LoopMessage::State(m) => &m.header,
+            LoopMessage::Measurements(m) => &m.header,
+            LoopMessage::Estimate(m) => &m.header,
+            LoopMessage::Command(m) => &m.header,
+            LoopMessage::Loop(m) => &m.header,
+        }
+    }
+
+    /// When its sender published it (CLOCK_MONOTONIC, ns; 0 if not stamped): see
+    /// [`Stamp::sent_on`].
+    pub fn published_ns(&self) -> u64 {
+        self.header().trace.get(Stamp::sent_on(self.topic()))
+    }
+}
+
 /// All-zero values: every message is plain numbers, so zero is a valid starting point.
 macro_rules! zeroed_default {
     ($($t:ty),*) => {$(
@@ -303,5 +456,59 @@ mod tests {
             plant_receive: 8,
         };
         assert_eq!(trace.stamps(), [1, 2, 3, 4, 5, 6, 7, 8]);
+        assert_eq!(LoopTrace::from_stamps(trace.stamps()), trace);
+        for (i, stamp) in Stamp::ALL.into_iter().enumerate() {
+            assert_eq!(stamp.index(), i);
+            assert_eq!(trace.get(stamp), i as u64 + 1, "{stamp:?}");
+        }
+        assert_eq!(trace.end_to_end_ns(), 7);
+        assert_eq!(trace.between_ns(Stamp::SensorsPublish, Stamp::EstimatorReceive), 1);
+        assert_eq!(trace.between_ns(Stamp::PlantReceive, Stamp::PlantPublish), 0, "never negative");
+    }
+
+    #[test]
+    fn each_loop_role_sets_its_own_receive_and_publish_stamps() {
+        for role in Role::LOOP {
+            let (received, published) = (Stamp::received_by(role).unwrap(), Stamp::published_by(role).unwrap());
+            assert_eq!((received.role(), published.role()), (role, role));
+            let mut trace = LoopTrace::default();
+            trace.stamp_received(role, 10);
+            trace.stamp_published(role, 20);
+            let set: Vec<_> = Stamp::ALL.into_iter().filter(|&s| trace.get(s) != 0).collect();
+            assert_eq!(set.len(), 2, "{role}: {set:?}");
+            assert_eq!((trace.get(received), trace.get(published)), (10, 20), "{role}");
+        }
+        // Every stamp is set by exactly one loop role, and the stages stamp in flow order.
+        for stamp in Stamp::ALL {
+            let setters = Role::LOOP
+                .iter()
+                .filter(|&&r| Stamp::received_by(r) == Some(stamp) || Stamp::published_by(r) == Some(stamp))
+                .count();
+            assert_eq!(setters, 1, "{stamp:?}");
+        }
+        for role in Role::STAGES {
+            assert!(Stamp::received_by(role) < Stamp::published_by(role), "{role}");
+        }
+        assert_eq!(Stamp::received_by(Role::Monitor), None);
+        assert_eq!(Stamp::published_by(Role::Bridge), None);
+        assert_eq!(Stamp::PlantReceive.name(), "plant_receive");
+    }
+
+    #[test]
+    fn a_message_is_sent_when_its_writer_stamps_its_publish() {
+        for role in Role::LOOP {
+            let topic = role.output().unwrap();
+            assert_eq!(Some(Stamp::sent_on(topic)), Stamp::published_by(role), "{topic}");
+        }
+        assert_eq!(Stamp::sent_on(Topic::Loop), Stamp::PlantReceive);
+    }
+
+    #[test]
+    fn each_loop_role_writes_its_own_incarnation_slot() {
+        let mut header = Header::default();
+        for (n, role) in Role::LOOP.into_iter().enumerate() {
+            header.set_incarnation(role, n as u32 + 1);
+        }
+        assert_eq!(header.incarnations, [1, 2, 3, 4]);
     }
 }

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::contract::msg::Stamp;
 use crate::contract::role::{Role, Topic};
 
 /// Most missing ranges listed in the report.
@@ -13,13 +14,13 @@ pub const MAX_MISSING_RANGES: usize = 100;
 /// The hops of one loop, as (name, index of the start stamp, index of the end stamp) in
 /// `LoopTrace::stamps()`.
 pub const HOPS: [(&str, usize, usize); 7] = [
-    ("plant_to_sensors", 0, 1),
-    ("sensors_compute", 1, 2),
-    ("sensors_to_estimator", 2, 3),
-    ("estimator_compute", 3, 4),
-    ("estimator_to_controller", 4, 5),
-    ("controller_compute", 5, 6),
-    ("controller_to_plant", 6, 7),
+    ("plant_to_sensors", Stamp::PlantPublish.index(), Stamp::SensorsReceive.index()),
+    ("sensors_compute", Stamp::SensorsReceive.index(), Stamp::SensorsPublish.index()),
+    ("sensors_to_estimator", Stamp::SensorsPublish.index(), Stamp::EstimatorReceive.index()),
+    ("estimator_compute", Stamp::EstimatorReceive.index(), Stamp::EstimatorPublish.index()),
+    ("estimator_to_controller", Stamp::EstimatorPublish.index(), Stamp::ControllerReceive.index()),
+    ("controller_compute", Stamp::ControllerReceive.index(), Stamp::ControllerPublish.index()),
+    ("controller_to_plant", Stamp::ControllerPublish.index(), Stamp::PlantReceive.index()),
 ];
 
 /// A latency distribution as the summary reports it, in nanoseconds. Percentiles come from the

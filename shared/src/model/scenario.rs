@@ -209,11 +209,19 @@ pub trait Estimator {
     fn resume(&mut self, _calibration: &Calibration) {}
 }
 
-/// Up to 32 numbers an estimator keeps across restarts.
+/// Up to 32 numbers an estimator or a controller keeps across restarts.
 pub type Calibration = [f64; 32];
 
 pub trait Controller {
     fn update(&mut self, t: f64, estimate: &[f64], command: &mut [f64]);
+    /// Its state between updates (integrators, filters, the previous time), frozen after each
+    /// update so that a restarted controller goes on where this one stopped. None: a static
+    /// law, nothing to keep.
+    fn freeze(&self) -> Option<Calibration> {
+        None
+    }
+    /// A restarted controller gets its predecessor's frozen state before its first update.
+    fn thaw(&mut self, _frozen: &Calibration) {}
 }
 
 /// One loop as the monitor joined it, for the scenario's metrics.

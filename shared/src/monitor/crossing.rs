@@ -5,23 +5,10 @@
 //! exchange. The link's round trip needs no clock at all.
 
 use crate::config::launch::LaunchConfig;
-use crate::contract::msg::LoopTrace;
+use crate::contract::msg::{LoopTrace, Stamp};
 use crate::contract::report::{ClockReport, CrossingReport, HOPS};
-use crate::contract::role::Role;
 use crate::monitor::clock_fit::{ClockFit, ClockFitter, DEFAULT_WINDOW_NS, ntp_samples};
 use crate::monitor::distribution::Distribution;
-
-/// The stage that stamps each of the trace's stamps, in `LoopTrace::stamps` order.
-const STAMPED_BY: [Role; 8] = [
-    Role::Plant,
-    Role::Sensors,
-    Role::Sensors,
-    Role::Estimator,
-    Role::Estimator,
-    Role::Controller,
-    Role::Controller,
-    Role::Plant,
-];
 
 pub struct Crossing {
     /// Per stamp: 1 if it is the other host's clock, 0 if ours.
@@ -39,7 +26,7 @@ impl Crossing {
     /// None when the whole loop runs here.
     pub fn new(config: &LaunchConfig) -> Option<Self> {
         config.hosts.remote()?;
-        let hosts = STAMPED_BY.map(|role| u8::from(config.hosts.is_remote(role)));
+        let hosts = Stamp::ALL.map(|stamp| u8::from(config.hosts.is_remote(stamp.role())));
         let hops = (0..HOPS.len()).filter(|&i| hosts[HOPS[i].1] != hosts[HOPS[i].2]).collect();
         Some(Self {
             hosts,
@@ -64,7 +51,7 @@ impl Crossing {
             self.fitter.push(sample);
             self.round_trip.record(sample.round_trip_ns().max(0) as u64);
         }
-        let now = stamps[0];
+        let now = trace.get(Stamp::PlantPublish);
         if self.window_end_ns.is_some_and(|end| now >= end) {
             self.correct_pending(hops);
         }

@@ -15,25 +15,7 @@ pub use crate::contract::msg::LoopMessage as Sample;
 impl Sample {
     /// The loop it belongs to, and its topic.
     pub fn key(&self) -> (u64, Topic) {
-        match self {
-            Sample::State(s) => (s.header.k, Topic::State),
-            Sample::Measurements(s) => (s.header.k, Topic::Measurements),
-            Sample::Estimate(s) => (s.header.k, Topic::Estimate),
-            Sample::Command(s) => (s.header.k, Topic::Command),
-            Sample::Loop(s) => (s.header.k, Topic::Loop),
-        }
-    }
-
-    /// When its sender published it (CLOCK_MONOTONIC, ns; 0 if not stamped). A loop record is
-    /// "published" when the plant took its command.
-    pub fn published_ns(&self) -> u64 {
-        match self {
-            Sample::State(s) => s.header.trace.plant_publish,
-            Sample::Measurements(s) => s.header.trace.sensors_publish,
-            Sample::Estimate(s) => s.header.trace.estimator_publish,
-            Sample::Command(s) => s.header.trace.controller_publish,
-            Sample::Loop(s) => s.header.trace.plant_receive,
-        }
+        (self.header().k, self.topic())
     }
 }
 
@@ -71,10 +53,7 @@ impl LoopParts {
 
     /// Plant publish of the state to the command reaching the plant, from the loop record.
     pub fn end_to_end_ns(&self) -> Option<u64> {
-        self.record.map(|r| {
-            let stamps = r.header.trace.stamps();
-            stamps[7].saturating_sub(stamps[0])
-        })
+        self.record.map(|r| r.header.trace.end_to_end_ns())
     }
 
     /// Each hop of [`HOPS`], from the loop record.

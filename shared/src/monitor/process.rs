@@ -15,6 +15,7 @@ use iceoryx2::prelude::ZeroCopySend;
 
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
+use crate::contract::msg::MONITOR_BUFFER;
 use crate::contract::protocol::ChildEvent;
 use crate::contract::report::MonitorReport;
 use crate::monitor::join::Sample;
@@ -22,7 +23,7 @@ use crate::monitor::recording::{Recording, StatusCallback};
 use crate::monitor::stall::StallWatch;
 use crate::runtime::child::Context;
 use crate::runtime::child::emit;
-use crate::runtime::ipc::{MONITOR_BUFFER, Topic, TopicSubscriber};
+use crate::runtime::ipc::{Topic, TopicSubscriber};
 
 /// Sleep between drains when the queues were nearly empty.
 const POLL_PERIOD: Duration = Duration::from_millis(5);

@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::Result;
 
 use crate::config::launch::{LaunchConfig, Mode};
-use crate::contract::msg::PlantCounters;
+use crate::contract::msg::{MONITOR_BUFFER, PlantCounters};
 use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::role::{Role, Topic};
@@ -20,7 +20,6 @@ use crate::monitor::layout::Layout;
 use crate::monitor::live::Live;
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
 use crate::monitor::stats::LoopStats;
-use crate::runtime::ipc::MONITOR_BUFFER;
 
 /// A loop still missing parts once this many newer loops have arrived is written as it is: by
 /// then the monitor's buffer of that topic has overflowed past it.

@@ -96,3 +96,68 @@ impl StageFaults {
         self.active(FaultKind::Corrupt, k).map(|s| s.value.unwrap_or_default())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::launch::Override;
+
+    /// The pendulum at 1 kHz (10 ms is loop 10) with these faults.
+    fn faults(mode: &str, role: Role, faults: &[&str]) -> StageFaults {
+        let mut overrides = vec![Override::parse(&format!("mode=\"{mode}\"")).unwrap()];
+        overrides.extend(faults.iter().map(|f| Override::fault(f).unwrap()));
+        let (config, _) = crate::scenarios::resolve("pendulum", &overrides).unwrap();
+        StageFaults::for_role(&config, role)
+    }
+
+    #[test]
+    fn a_window_covers_its_first_loop_and_not_its_end() {
+        let f = faults("lockstep", Role::Controller, &["corrupt controller out-of-range at 10ms for 5ms"]);
+        let covered: Vec<u64> = (0..30).filter(|&k| f.corrupt(k).is_some()).collect();
+        assert_eq!(covered, (10..15).collect::<Vec<_>>());
+        assert_eq!(f.corrupt(10), Some(CorruptValue::OutOfRange));
+        // Without a duration a fault lasts to the end of the run.
+        let f = faults("lockstep", Role::Controller, &["corrupt controller at 10ms"]);
+        assert_eq!((f.corrupt(9), f.corrupt(9999)), (None, Some(CorruptValue::default())));
+    }
+
+    #[test]
+    fn a_stage_applies_only_its_own_in_loop_faults() {
+        let all = ["delay sensors by 2 ticks at 0s", "kill controller at 5ms", "stop controller at 5ms for 1ms"];
+        let mut f = faults("lockstep", Role::Controller, &all);
+        assert!((0..100).all(|k| f.delay(k).is_none() && !f.drops(k) && f.corrupt(k).is_none()));
+        assert_eq!(f.max_delay_ticks(), 0);
+        let f = faults("lockstep", Role::Sensors, &all);
+        assert_eq!(f.delay(0), Some(AddedDelay::Ticks(2)));
+    }
+
+    #[test]
+    fn a_delay_is_ticks_in_lockstep_and_wall_time_in_real_time() {
+        let delays = ["delay controller by 4 ticks at 0s for 10ms", "delay controller by 7ms at 20ms for 10ms"];
+        let lockstep = faults("lockstep", Role::Controller, &delays);
+        assert_eq!((lockstep.delay(0), lockstep.delay(25)), (Some(AddedDelay::Ticks(4)), Some(AddedDelay::Ticks(7))));
+        assert_eq!((lockstep.delay(10), lockstep.max_delay_ticks()), (None, 7));
+        let realtime = faults("realtime", Role::Controller, &delays);
+        let wall = |k| match realtime.delay(k) {
+            Some(AddedDelay::Wall(d)) => (d.as_secs_f64() * 1e6).round() as u64,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!((wall(0), wall(25)), (4000, 7000));
+        assert_eq!(realtime.max_delay_ticks(), 7, "the history a lockstep run would keep");
+    }
+
+    #[test]
+    fn drops_are_drawn_only_inside_the_window_from_the_stages_own_stream() {
+        let drop = ["drop controller 50% at 10ms for 100ms", "drop estimator 50% at 10ms for 100ms"];
+        let draws = |f: &mut StageFaults, ks: std::ops::Range<u64>| ks.map(|k| f.drops(k)).collect::<Vec<_>>();
+        let first = draws(&mut faults("lockstep", Role::Controller, &drop), 10..110);
+        let mut again = faults("realtime", Role::Controller, &drop);
+        assert!(draws(&mut again, 0..10).iter().all(|d| !d), "nothing before the window");
+        assert_eq!(draws(&mut again, 10..110), first, "the same loops drop, whatever the mode or what came before");
+        let estimator = draws(&mut faults("lockstep", Role::Estimator, &drop), 10..110);
+        assert_ne!(estimator, first, "each process draws from its own stream");
+        let mut all = faults("lockstep", Role::Controller, &["drop controller 100% at 0s"]);
+        let mut none = faults("lockstep", Role::Controller, &["drop controller 0% at 0s"]);
+        assert!((0..50).all(|k| all.drops(k) && !none.drops(k)));
+    }
+}

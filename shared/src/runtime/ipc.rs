@@ -35,13 +35,11 @@ use iceoryx2::waitset::{WaitSet, WaitSetGuard};
 
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
+use crate::contract::msg::MONITOR_BUFFER;
 use crate::runtime::reader_state::ReaderState;
 use crate::runtime::signals::StopFlag;
 use crate::runtime::wait::{sleep_until, timespec};
 
-/// Samples the monitor can fall behind by before it loses any (real-time mode); at 1 kHz that
-/// is a second of slack.
-pub const MONITOR_BUFFER: usize = 1024;
 /// Longest a lockstep publisher waits for a full reader before dropping the sample for it.
 pub const LOCKSTEP_BACKPRESSURE_LIMIT: Duration = Duration::from_secs(5);
 /// Readers per topic: the next stage, the monitor, and room for a restarted one.

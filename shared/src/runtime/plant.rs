@@ -114,10 +114,10 @@ impl PlantCore {
             counters: self.counters,
             ..Default::default()
         };
-        msg.header.incarnations[0] = self.incarnation;
+        msg.header.set_incarnation(Role::Plant, self.incarnation);
         let x = self.plant.state();
         msg.x[..x.len()].copy_from_slice(x);
-        msg.header.trace.plant_publish = published_ns;
+        msg.header.trace.stamp_published(Role::Plant, published_ns);
         self.published_k = Some(self.k);
         if self.report.published == 0 {
             self.report.first_publish_ns = published_ns;
@@ -145,7 +145,7 @@ impl PlantCore {
         if in_time {
             self.in_time_k = self.in_time_k.max(Some(k));
         }
-        self.arrivals.observe(k, command.header.trace.plant_publish, arrived);
+        self.arrivals.observe(k, command.header.trace.get(Stamp::PlantPublish), arrived);
         self.report.commands += 1;
         let mut record = LoopRecord {
             header: command.header,
@@ -155,7 +155,7 @@ impl PlantCore {
             _reserved: 0,
             sequence: self.report.commands,
         };
-        record.header.trace.plant_receive = arrived;
+        record.header.trace.stamp_received(Role::Plant, arrived);
         record
     }
 
@@ -191,6 +191,41 @@ impl PlantCore {
             self.applied = self.held;
         }
         self.k += 1;
+    }
+
+    /// Real time: starts the schedule with tick 0 at `now_ns`, unless a restored snapshot holds
+    /// one already; returns when tick 0 was.
+    pub fn start_schedule(&mut self, now_ns: u64) -> u64 {
+        let period_ns = (self.dt * 1e9).round() as u64;
+        self.schedule.get_or_insert((now_ns, period_ns)).0
+    }
+
+    /// A restarted plant catches up with the ticks that passed while it was down, to tick
+    /// `current`: the system kept moving under the command in effect (or `on_stale`). Every
+    /// tick from here to `current` goes without a state, this one too if the last plant died
+    /// before publishing it.
+    pub fn catch_up(&mut self, current: u64) {
+        if current <= self.k {
+            return;
+        }
+        let unpublished_now = u64::from(self.published_k != Some(self.k));
+        self.counters.skipped_ticks += current - self.k - 1 + unpublished_now;
+        while self.k < current {
+            self.advance();
+        }
+    }
+
+    /// Real time: the timer says `expired` periods passed; advances that many ticks, not past
+    /// the run's `loops`, and returns how many. Only the newest tick's state goes out: the
+    /// ticks passed over count as skipped.
+    pub fn advance_expired(&mut self, expired: u64, loops: u64) -> u64 {
+        let mut advanced = 0;
+        while advanced < expired && self.k < loops {
+            self.advance();
+            advanced += 1;
+        }
+        self.counters.skipped_ticks += advanced.saturating_sub(1);
+        advanced
     }
 
     /// Completes the report at the end of a run of `loops` loops.
@@ -364,20 +399,14 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
         }
         Mode::Realtime => {
             let period_ns = (p.dt * 1e9).round() as u64;
-            let (start_ns, _) = *p.schedule.get_or_insert((now_ns(), period_ns));
+            let start_ns = p.core.start_schedule(now_ns());
             emit(&ChildEvent::Started { start_ns, period_ns, k: p.k })?;
-            // A restarted plant catches up with the ticks that passed while it was down: the
-            // pendulum kept moving under the command in effect (or `on_stale`).
+            // A restarted plant catches up with the ticks that passed while it was down.
             let woke = now_ns();
             let current = ((woke - start_ns) / period_ns).min(loops.saturating_sub(1));
             if current > p.k {
-                // Every tick from here to `current` goes without a state, this one too if the
-                // last plant died before publishing it.
-                let unpublished_now = u64::from(p.published_k != Some(p.k));
-                p.counters.skipped_ticks += current - p.k - 1 + unpublished_now;
-                while p.k < current {
-                    p.advance();
-                }
+                p.core.catch_up(current);
+                p.save();
             }
             let timer = TickTimer::new(start_ns + (p.k + 1) * period_ns, period_ns)?;
             let _tick = ws.attach_notification(&timer).map_err(|e| anyhow!("cannot attach the tick timer: {e:?}"))?;
@@ -404,17 +433,10 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                 let woke = now_ns();
                 p.drain(&commands)?;
                 let expired = timer.expirations();
-                let mut advanced = 0;
-                while advanced < expired && p.k < loops {
-                    p.advance();
-                    advanced += 1;
-                }
-                if advanced == 0 {
+                if p.core.advance_expired(expired, loops) == 0 {
                     continue;
                 }
-                // Only the newest state goes out; the ticks passed over have none. Saved at
-                // once: after the run's last tick no state goes out to save it.
-                p.counters.skipped_ticks += advanced - 1;
+                // Saved at once: after the run's last tick no state goes out to save it.
                 p.save();
                 if p.k < loops {
                     let timing = TickTiming {
@@ -461,3 +483,7 @@ struct SnapshotData {
     first_publish_ns: u64,
     last_publish_ns: u64,
 }
+
+#[cfg(test)]
+#[path = "plant_tests.rs"]
+mod tests;

@@ -6,7 +6,7 @@ use anyhow::Result;
 
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
-use crate::contract::msg::Message;
+use crate::contract::msg::{Message, Stamp};
 use crate::contract::protocol::ChildEvent;
 use crate::contract::role::Role;
 use crate::model::scenario::Calibration;
@@ -57,8 +57,14 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
             let received = now_ns();
             let input: &T::In = &sample;
             let header = *input.header();
-            arrivals.observe(header.k, header.trace.plant_publish, received);
+            arrivals.observe(header.k, header.trace.get(Stamp::PlantPublish), received);
             let handled = runner.handle(input);
+            // Lockstep: the state is kept before the output goes out, so that a kill injected
+            // at a later loop (with the plant holding the loop) always finds this loop's state;
+            // real time: after the send, off the hop's path.
+            if !realtime {
+                keep(&mut kept, &runner.task);
+            }
             if let Some(hold) = handled.hold {
                 std::thread::sleep(hold);
             }
@@ -67,10 +73,10 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
                 publisher.send(&out)?;
                 last_k = Some(header.k);
             }
-            // After the send, off the hop's path: the input's chunk goes back, the state is kept.
+            // After the send, off the hop's path: the input's chunk goes back.
             drop(sample);
-            if let (Some(kept), Some(frozen)) = (kept.as_mut(), runner.task.freeze()) {
-                kept.write(&frozen);
+            if realtime {
+                keep(&mut kept, &runner.task);
             }
         }
     }
@@ -78,6 +84,13 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
     (report.waited, report.dropped) = publisher.backpressure();
     report.wait = waiter.counts;
     Ok(ChildEvent::StageReport(report))
+}
+
+/// Writes the task's frozen state to its snapshot, if it has one.
+fn keep<T: Task>(kept: &mut Option<Snapshot<Calibration>>, task: &T) {
+    if let (Some(kept), Some(frozen)) = (kept.as_mut(), task.freeze()) {
+        kept.write(&frozen);
+    }
 }
 
 pub fn sensors(context: &Context) -> Result<ChildEvent> {

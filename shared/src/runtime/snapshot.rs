@@ -1,6 +1,6 @@
 //! A process's snapshot in shared memory: what a restarted process needs to go on where the
 //! last one stopped. The plant keeps the truth in one (the physical system does not stop when
-//! its simulator dies), the estimator its slow calibration states.
+//! its simulator dies), the estimator its slow calibration states, the controller its integrators.
 //!
 //! The file is in the run's private folder on tmpfs ([`crate::runtime::ipc::run_folder`]), so no other
 //! user can read or forge it, the launcher's leftover check covers it and its clean-up removes it.

@@ -25,7 +25,8 @@ pub trait Task {
     const FREEZES: bool = false;
     /// Computes this loop's output from its input (the header is the runner's business).
     fn process(&mut self, input: &Self::In, output: &mut Self::Out);
-    /// Slow state worth keeping across a restart, such as a calibrated bias.
+    /// State worth keeping across a restart: an estimator's calibrated bias, a controller's
+    /// integrators.
     fn freeze(&self) -> Option<Calibration> {
         None
     }
@@ -119,9 +120,16 @@ impl ControllerTask {
 impl Task for ControllerTask {
     type In = Estimate;
     type Out = Command;
+    const FREEZES: bool = true;
     fn process(&mut self, est: &Estimate, out: &mut Command) {
         let m = self.limits.len();
         self.controller.update(est.header.t, &est.x[..self.estimates], &mut out.u[..m]);
+    }
+    fn freeze(&self) -> Option<Calibration> {
+        self.controller.freeze()
+    }
+    fn thaw(&mut self, frozen: &Calibration) {
+        self.controller.thaw(frozen);
     }
     fn corrupt(&self, out: &mut Command, value: CorruptValue) {
         for (u, (_, hi)) in out.u.iter_mut().zip(&self.limits) {
@@ -221,7 +229,7 @@ impl<T: Task> StageRunner<T> {
             None => {}
         }
         *out.header_mut() = header;
-        out.header_mut().incarnations[self.slot] = self.incarnation;
+        out.header_mut().set_incarnation(self.role, self.incarnation);
         if self.faults.drops(k) {
             self.report.dropped_by_fault += 1;
             if !self.drop_sends_lost {
@@ -237,3 +245,7 @@ impl<T: Task> StageRunner<T> {
         Handled { hold, output: Some(out) }
     }
 }
+
+#[cfg(test)]
+#[path = "task_tests.rs"]
+mod tests;

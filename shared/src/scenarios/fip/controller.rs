@@ -249,6 +249,20 @@ impl Controller for Backstepping {
     fn update(&mut self, t: f64, estimate: &[f64], command: &mut [f64]) {
         command[..4].copy_from_slice(&self.command(t, estimate));
     }
+
+    /// The law is static, but the reference's phase ϑ is integrated on from the last update:
+    /// [t, ϑ(t)], so that a restarted controller computes the very same ϑ, not one integrated
+    /// afresh from 0 (equal only to rounding).
+    fn freeze(&self) -> Option<crate::model::scenario::Calibration> {
+        let mut frozen = [0.0; 32];
+        let (t, theta) = self.reference.phase();
+        frozen[..2].copy_from_slice(&[t, theta]);
+        Some(frozen)
+    }
+
+    fn thaw(&mut self, frozen: &crate::model::scenario::Calibration) {
+        self.reference.resume_phase((frozen[0], frozen[1]));
+    }
 }
 
 const _: () = assert!(ORDERS >= 6, "ṙ₃d needs p_Ld⁽⁵⁾");

@@ -82,6 +82,16 @@ impl EllipseReference {
         series
     }
 
+    /// The last (t, ϑ(t)) computed, from which the next call integrates on.
+    pub fn phase(&self) -> (f64, f64) {
+        self.cached
+    }
+
+    /// Goes on from a phase that [`EllipseReference::phase`] gave (a restarted controller).
+    pub fn resume_phase(&mut self, phase: (f64, f64)) {
+        self.cached = phase;
+    }
+
     /// ϑ(t), integrated from the last instant asked for (from 0 if t is earlier).
     pub fn theta(&mut self, t: f64) -> f64 {
         let (mut at, mut theta) = if t >= self.cached.0 { self.cached } else { (0.0, 0.0) };

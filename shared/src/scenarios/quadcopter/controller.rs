@@ -189,6 +189,20 @@ impl Controller for Backstepping {
             command[..7].fill(0.0);
         }
     }
+
+    /// The rate command's integral and when it was last advanced: [1, t, ∫x, ∫y, ∫z], or all
+    /// zero before the first update.
+    fn freeze(&self) -> Option<crate::model::scenario::Calibration> {
+        let mut frozen = [0.0; 32];
+        if let Some((t, integral)) = self.rate_integral {
+            frozen[..5].copy_from_slice(&[1.0, t, integral.x, integral.y, integral.z]);
+        }
+        Some(frozen)
+    }
+
+    fn thaw(&mut self, frozen: &crate::model::scenario::Calibration) {
+        self.rate_integral = (frozen[0] == 1.0).then(|| (frozen[1], Vector3::new(frozen[2], frozen[3], frozen[4])));
+    }
 }
 
 #[cfg(test)]

@@ -187,4 +187,18 @@ impl Controller for FlatnessController {
         command[1] = if torque.is_finite() { torque.clamp(-torque_max, torque_max) } else { 0.0 };
         command[2] = self.u1_dot;
     }
+
+    /// The compensator and when it last ran: [u₁, u̇₁, ü₁, 1, t], or [u₁, u̇₁, ü₁, 0, 0] before
+    /// the first update.
+    fn freeze(&self) -> Option<crate::model::scenario::Calibration> {
+        let mut frozen = [0.0; 32];
+        let last = self.last_t.map_or([0.0, 0.0], |t| [1.0, t]);
+        frozen[..5].copy_from_slice(&[self.u1, self.u1_dot, self.u1_ddot, last[0], last[1]]);
+        Some(frozen)
+    }
+
+    fn thaw(&mut self, frozen: &crate::model::scenario::Calibration) {
+        (self.u1, self.u1_dot, self.u1_ddot) = (frozen[0], frozen[1], frozen[2]);
+        self.last_t = (frozen[3] == 1.0).then_some(frozen[4]);
+    }
 }

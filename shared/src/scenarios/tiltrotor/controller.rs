@@ -345,6 +345,39 @@ impl Controller for TwoLoop {
             saturated,
         };
     }
+
+    /// The thrust integrators (4), the integrals of the inner loop (4), of x, y (2) and of the
+    /// swing (2), then 1 and the φ_Ref and θ_Ref prefilters (4 + 4) once they exist: 21 numbers.
+    fn freeze(&self) -> Option<crate::model::scenario::Calibration> {
+        let mut frozen = [0.0; 32];
+        let parts: [&[f64]; 4] = [&self.thrust, &self.inner_integral, &self.xy_integral, &self.swing_integral];
+        let state = parts.concat();
+        frozen[..state.len()].copy_from_slice(&state);
+        if let Some([phi, theta]) = &self.prefilter {
+            let at = state.len();
+            frozen[at] = 1.0;
+            frozen[at + 1..at + 5].copy_from_slice(&phi.y);
+            frozen[at + 5..at + 9].copy_from_slice(&theta.y);
+        }
+        Some(frozen)
+    }
+
+    fn thaw(&mut self, frozen: &crate::model::scenario::Calibration) {
+        let mut rest = frozen.as_slice();
+        for part in [
+            &mut self.thrust[..],
+            &mut self.inner_integral[..],
+            &mut self.xy_integral[..],
+            &mut self.swing_integral[..],
+        ] {
+            let (head, tail) = rest.split_at(part.len());
+            part.copy_from_slice(head);
+            rest = tail;
+        }
+        let omega = self.prefilter_rad_s;
+        let filter = |y: &[f64]| Prefilter { omega, y: [y[0], y[1], y[2], y[3]] };
+        self.prefilter = (rest[0] == 1.0).then(|| [filter(&rest[1..5]), filter(&rest[5..9])]);
+    }
 }
 
 #[cfg(test)]
