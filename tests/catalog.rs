@@ -76,7 +76,6 @@ fn an_added_scenario_runs_by_name_with_its_own_defaults() {
     assert_eq!(builtin.rows.len(), stiff.rows.len());
     assert_eq!(builtin.col("theta_rad")[0], stiff.col("theta_rad")[0], "the same initial state");
     let (a, b) = (builtin.col("cmd.current_A"), stiff.col("cmd.current_A"));
-    assert_ne!(a[0], b[0], "the first command is −K·x̂ with another K");
     assert!(a.iter().zip(&b).filter(|(a, b)| a != b).count() > a.len() / 2, "the commands differ throughout");
 
     // What each loop process does with the run's launch file: only the extended catalog has it.
