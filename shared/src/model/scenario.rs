@@ -91,8 +91,8 @@ pub trait ScenarioParts: Send + Sync {
     }
 }
 
-/// A configured scenario as the loop sees it: its parts and its entry's vectors (only
-/// [`ScenarioEntry::build`] makes one).
+/// A configured scenario as the loop sees it: its parts and its entry's vectors (made by
+/// [`ScenarioEntry::build`]).
 pub trait Scenario: ScenarioParts {
     /// Names, units and sizes of its vectors: its entry's.
     fn vectors(&self) -> &'static Vectors;
