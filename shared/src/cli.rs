@@ -10,6 +10,7 @@ use clap::{Args, CommandFactory, Parser, Subcommand};
 
 use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
+use crate::model::catalog::Catalog;
 use crate::runtime::ipc;
 use crate::scenarios;
 use crate::tools::{ToolError, bench, compare, export, plot, sweep};
@@ -37,7 +38,7 @@ pub struct Cli {
 enum Command {
     /// Run a scenario or a launch file and report latency, jitter and control metrics
     Run(RunArgs),
-    /// List the built-in scenarios and their launch files
+    /// List the scenarios and their launch files
     List,
     /// Print a scenario's launch file: every key, its default and what it means
     Show {
@@ -242,21 +243,29 @@ impl Default for RunArgs {
     }
 }
 
+/// `looplab`: the launcher with the built-in scenarios.
 pub fn main() -> ExitCode {
+    main_with(&scenarios::builtin())
+}
+
+/// The launcher with the scenarios of `catalog`: `run`, `show`, `list`, `sweep` and `bench`
+/// know these. Its loop processes must load the same catalog: how a crate of its own builds the
+/// six binaries is told at [`crate::runtime::child::process_main_with`].
+pub fn main_with(catalog: &Catalog) -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Some(Command::List) => {
-            list();
+            list(catalog);
             ExitCode::SUCCESS
         }
-        Some(Command::Show { scenario }) => match scenarios::builtin(&scenario) {
+        Some(Command::Show { scenario }) => match catalog.find(&scenario) {
             Some(entry) => {
                 print!("{}", entry.text);
                 ExitCode::SUCCESS
             }
-            None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", scenarios::scenario_names())),
+            None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", catalog.names())),
         },
-        Some(Command::Run(args)) => run(args),
+        Some(Command::Run(args)) => run(args, catalog),
         Some(Command::Clean) => clean(),
         Some(Command::Completions { shell }) => {
             clap_complete::generate(shell, &mut Cli::command(), "looplab", &mut std::io::stdout());
@@ -272,8 +281,8 @@ pub fn main() -> ExitCode {
             }
             Err(e) => bad_input(format!("{e:#}")),
         },
-        Some(Command::Sweep(args)) => sweep(args),
-        Some(Command::Bench(args)) => report_failure(bench::run(&args)),
+        Some(Command::Sweep(args)) => sweep(args, catalog),
+        Some(Command::Bench(args)) => report_failure(bench::run(&args, catalog)),
         Some(Command::Export { run_dir, mcap: _ }) => match export::write_mcap(&run_dir) {
             Ok(path) => {
                 println!("wrote {}", path.display());
@@ -298,7 +307,7 @@ pub fn main() -> ExitCode {
         },
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
-        None => run(RunArgs::default()),
+        None => run(RunArgs::default(), catalog),
     }
 }
 
@@ -352,9 +361,9 @@ fn report_failure(result: Result<()>) -> ExitCode {
     }
 }
 
-fn list() {
+fn list(catalog: &Catalog) {
     println!("Scenarios (looplab run <name>; defaults in the launch file named):");
-    for s in scenarios::ALL {
+    for s in catalog.entries() {
         println!("  {:<12} {}  [{}]", s.name, s.description, s.file);
     }
 }
@@ -364,23 +373,26 @@ fn bad_input(message: impl std::fmt::Display) -> ExitCode {
     ExitCode::from(EXIT_BAD_INPUT)
 }
 
-fn sweep(args: SweepCli) -> ExitCode {
+fn sweep(args: SweepCli, catalog: &Catalog) -> ExitCode {
     let overrides = match overrides(None, &args.launch) {
         Ok(o) => o,
         Err(e) => return bad_input(e),
     };
-    sweep::run(sweep::SweepArgs {
-        target: args.target,
-        param: args.param,
-        from: args.from,
-        to: args.to,
-        step: args.step,
-        overrides,
-        out: args.out,
-        jobs: args.jobs,
-        processes: args.processes,
-        metrics: args.metrics,
-    })
+    sweep::run(
+        sweep::SweepArgs {
+            target: args.target,
+            param: args.param,
+            from: args.from,
+            to: args.to,
+            step: args.step,
+            overrides,
+            out: args.out,
+            jobs: args.jobs,
+            processes: args.processes,
+            metrics: args.metrics,
+        },
+        catalog,
+    )
 }
 
 /// The launch-file overrides the command line gives, in the order they apply: the options,
@@ -403,9 +415,9 @@ fn overrides(mode: Option<&str>, launch: &LaunchArgs) -> Result<Vec<Override>, l
     texts.iter().map(|t| Override::parse(t)).chain(launch.fault.iter().map(|f| Override::fault(f))).collect()
 }
 
-fn run(args: RunArgs) -> ExitCode {
+fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
     let overrides = overrides(args.mode.as_deref(), &args.launch);
-    let resolved = overrides.and_then(|o| scenarios::resolve(&args.target, &o));
+    let resolved = overrides.and_then(|o| catalog.resolve(&args.target, &o));
     let (config, scenario) = match resolved {
         Ok(r) => r,
         Err(e) => return bad_input(e),

@@ -2,6 +2,7 @@
 //! sensor emulator, the integrator). Depends on the contract and the configuration.
 
 pub mod autodiff;
+pub mod catalog;
 pub mod command_link;
 pub mod integrate;
 pub mod mean;

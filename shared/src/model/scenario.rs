@@ -1,6 +1,7 @@
 //! The scenario interface: what a scenario gives the loop (a plant, an estimator, a controller,
-//! metrics, an error measure) and the registry entry that names it. The five processes and the
-//! monitor see scenarios only through these traits.
+//! metrics, an error measure) and the catalog entry that names it. A scenario's code implements
+//! [`ScenarioParts`]; its entry states its vectors; the five processes and the monitor see the
+//! two together as a [`Scenario`].
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
@@ -12,16 +13,20 @@ use crate::contract::msg::SensorReading;
 use crate::model::reference::Reference;
 use crate::model::vectors::Vectors;
 
-/// A scenario the launcher knows by name, with its default launch file compiled in.
+/// A scenario the launcher knows by name, with its default launch file compiled in (an entry of
+/// a [`crate::model::catalog::Catalog`]).
+#[derive(Clone)]
 pub struct ScenarioEntry {
     pub name: &'static str,
     pub description: &'static str,
     /// The launch file in the repository that holds the defaults.
     pub file: &'static str,
+    /// The defaults: a whole launch file whose `scenario` is this entry's name.
     pub text: &'static str,
-    /// Its vectors; the built scenario's [`Scenario::vectors`] returns the same.
+    /// Its vectors, stated here only: the built scenario carries them ([`Scenario::vectors`]).
     pub vectors: &'static Vectors,
-    pub build: fn(&LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError>,
+    /// The scenario's code, configured by a launch file checked against [`Self::schema`].
+    pub build: fn(&LaunchConfig) -> Result<Box<dyn ScenarioParts>, LaunchError>,
 }
 
 impl std::fmt::Debug for ScenarioEntry {
@@ -48,6 +53,13 @@ impl ScenarioEntry {
     pub fn defaults(&self) -> toml::Table {
         self.schema().defaults()
     }
+
+    /// The scenario `config` describes (checked against [`Self::schema`]), with this entry's
+    /// vectors.
+    pub fn build(&self, config: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+        let parts = (self.build)(config)?;
+        Ok(Box::new(Configured { vectors: self.vectors, parts }))
+    }
 }
 
 /// The most integration steps per loop period: more would only make a loop slower than its
@@ -59,21 +71,11 @@ pub fn check_substeps(c: &LaunchConfig, key: &str, substeps: u32) -> Result<(), 
     validate::in_range(c, key, substeps, 1..=MAX_SUBSTEPS, "integration steps per loop")
 }
 
-/// A configured scenario: its vectors and factories for its loop stages.
-pub trait Scenario: Send + Sync {
+/// What a scenario's code builds from a launch file: its title, limits and the factories of its
+/// loop stages. Its vectors are its entry's ([`ScenarioEntry::build`] pairs the two).
+pub trait ScenarioParts: Send + Sync {
     /// One line for reports, for example "reaction-wheel pendulum, bias-observer".
     fn title(&self) -> String;
-    /// Names, units and sizes of its vectors (its entry's).
-    fn vectors(&self) -> &'static Vectors;
-    fn state_names(&self) -> Vec<&'static str> {
-        names(self.vectors().state)
-    }
-    fn input_names(&self) -> Vec<&'static str> {
-        names(self.vectors().input)
-    }
-    fn estimate_names(&self) -> Vec<&'static str> {
-        names(self.vectors().estimate)
-    }
     /// The closed range of each input the actuator accepts; the plant rejects anything else.
     fn input_limits(&self) -> Vec<(f64, f64)>;
     fn plant(&self) -> Box<dyn Plant>;
@@ -86,6 +88,62 @@ pub trait Scenario: Send + Sync {
     /// in ticks, at which the sampled loop is unstable. None if the scenario has no such model.
     fn delay_margin(&self, _config: &LaunchConfig) -> Option<TheoreticalMargin> {
         None
+    }
+}
+
+/// A configured scenario as the loop sees it: its parts and its entry's vectors (made by
+/// [`ScenarioEntry::build`]).
+pub trait Scenario: ScenarioParts {
+    /// Names, units and sizes of its vectors: its entry's.
+    fn vectors(&self) -> &'static Vectors;
+    fn state_names(&self) -> Vec<&'static str> {
+        names(self.vectors().state)
+    }
+    fn input_names(&self) -> Vec<&'static str> {
+        names(self.vectors().input)
+    }
+    fn estimate_names(&self) -> Vec<&'static str> {
+        names(self.vectors().estimate)
+    }
+}
+
+/// A scenario's parts with its entry's vectors.
+struct Configured {
+    vectors: &'static Vectors,
+    parts: Box<dyn ScenarioParts>,
+}
+
+impl Scenario for Configured {
+    fn vectors(&self) -> &'static Vectors {
+        self.vectors
+    }
+}
+
+/// Every method forwards, the provided ones too: a default here would hide the scenario's own.
+impl ScenarioParts for Configured {
+    fn title(&self) -> String {
+        self.parts.title()
+    }
+    fn input_limits(&self) -> Vec<(f64, f64)> {
+        self.parts.input_limits()
+    }
+    fn plant(&self) -> Box<dyn Plant> {
+        self.parts.plant()
+    }
+    fn estimator(&self) -> Box<dyn Estimator> {
+        self.parts.estimator()
+    }
+    fn controller(&self) -> Box<dyn Controller> {
+        self.parts.controller()
+    }
+    fn metrics(&self) -> Box<dyn Metrics> {
+        self.parts.metrics()
+    }
+    fn error_measure(&self) -> ErrorMeasure {
+        self.parts.error_measure()
+    }
+    fn delay_margin(&self, config: &LaunchConfig) -> Option<TheoreticalMargin> {
+        self.parts.delay_margin(config)
     }
 }
 

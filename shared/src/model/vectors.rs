@@ -26,7 +26,7 @@ impl Signal {
 /// Every vector of one scenario.
 pub struct Vectors {
     pub state: &'static [Component],
-    /// The input's limits depend on the launch file: [`crate::model::scenario::Scenario::input_limits`].
+    /// The input's limits depend on the launch file: [`crate::model::scenario::ScenarioParts::input_limits`].
     pub input: &'static [Component],
     pub estimate: &'static [Component],
     pub signals: &'static [Signal],

@@ -12,10 +12,10 @@ use iceoryx2::prelude::*;
 use crate::config::launch::LaunchConfig;
 use crate::contract::protocol::{ChildEvent, ProcessArgs};
 use crate::contract::role::Role;
+use crate::model::catalog::Catalog;
 use crate::model::scenario::Scenario;
 use crate::runtime::ipc::Ipc;
 use crate::runtime::signals::StopFlag;
-use crate::scenarios::load_resolved;
 
 /// Longest a wait blocks before it looks at the stop flag again (a signal also ends it early).
 pub const WAIT_SLICE: Duration = Duration::from_millis(100);
@@ -32,9 +32,23 @@ pub struct Context {
     pub incarnation: u32,
 }
 
-/// Parses the arguments, loads the run's launch file and connects to iceoryx2, runs `body`,
-/// and turns a failure into a message on stderr and exit code 1.
-pub fn process_main(role: Role, body: fn(&Context) -> Result<ChildEvent>) -> ExitCode {
+/// A loop process's `main`: parses the arguments, loads the run's launch file (its scenario
+/// from `catalog`) and connects to iceoryx2, runs `body`, and turns a failure into a message on
+/// stderr and exit code 1. LoopLab's own binaries (`services/`) pass `scenarios::builtin()`.
+///
+/// A crate of its own with its own scenarios builds the same six binaries as `services/`, each
+/// with the same catalog (for example `scenarios::builtin().with(MY_ENTRY)`):
+/// - the launcher, any name: `fn main() -> ExitCode { looplab_shared::cli::main_with(&catalog()) }`;
+/// - the five loop processes, named `looplab-plant`, `looplab-sensors`, `looplab-estimator`,
+///   `looplab-controller` and `looplab-monitor`, each
+///   `process_main_with(Role::Plant, runtime::plant::run, &catalog())` with its role and body
+///   (`runtime::relay::{sensors, estimator, controller}`, `monitor::run`), as in `services/`.
+///
+/// The launcher starts the loop processes found beside its own executable
+/// (`launcher::locate_binaries`), so all six must be built into one folder (one package's
+/// `[[bin]]`s do; under `cargo run` the launcher builds its package's binaries first). Every
+/// process must get the same catalog: each reads the run's launch file by scenario name.
+pub fn process_main_with(role: Role, body: fn(&Context) -> Result<ChildEvent>, catalog: &Catalog) -> ExitCode {
     let name = role.name();
     use clap::Parser;
     let args = ProcessArgs::parse();
@@ -42,7 +56,7 @@ pub fn process_main(role: Role, body: fn(&Context) -> Result<ChildEvent>) -> Exi
     let launcher = unsafe { libc::getppid() };
     let result = (|| -> Result<()> {
         let stop = StopFlag::install()?;
-        let (config, scenario) = load_resolved(Path::new(&args.launch))?;
+        let (config, scenario) = catalog.load_resolved(Path::new(&args.launch))?;
         let ipc = Ipc::new(name, &args.run_id, config.mode)?;
         let context = Context {
             config,

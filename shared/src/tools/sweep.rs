@@ -19,6 +19,7 @@ use crate::contract::role::Role;
 use crate::launcher::in_process::run_in_process;
 use crate::launcher::inject::target;
 use crate::launcher::{Binaries, EXIT_BAD_INPUT, EXIT_INTERRUPTED, Outcome, StopReason, Summary, run_once};
+use crate::model::catalog::Catalog;
 use crate::model::scenario::{Scenario, TheoreticalMargin};
 use crate::runtime::in_process::refusal;
 use crate::runtime::signals::StopFlag;
@@ -108,7 +109,8 @@ fn swept_fault(param: &str) -> Option<usize> {
     param.strip_prefix("faults.")?.split('.').next()?.parse().ok()
 }
 
-pub fn run(args: SweepArgs) -> ExitCode {
+/// Runs the sweep of `args.target`, a scenario of `catalog` or a launch file for one.
+pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
     let bad = |message: String| {
         eprintln!("error: {message}");
         ExitCode::from(EXIT_BAD_INPUT)
@@ -137,7 +139,7 @@ pub fn run(args: SweepArgs) -> ExitCode {
             Ok(o) => overrides.push(o),
             Err(e) => return bad(e.to_string()),
         }
-        match crate::scenarios::resolve(&args.target, &overrides) {
+        match catalog.resolve(&args.target, &overrides) {
             Ok((config, scenario)) => configs.push((value, config, scenario)),
             Err(e) => return bad(e.to_string()),
         }

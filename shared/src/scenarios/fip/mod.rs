@@ -29,7 +29,7 @@ use self::reference::{EllipseReference, ReferenceSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{each, in_range, not_negative, positive, within, within_si};
 use crate::model::scenario::{
-    Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Scenario, ScenarioEntry, check_substeps,
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, ScenarioEntry, ScenarioParts, check_substeps,
 };
 use crate::model::vectors::{Component, Vectors, concat};
 
@@ -134,7 +134,7 @@ pub struct Fip {
     seed: u64,
 }
 
-fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+fn build(c: &LaunchConfig) -> Result<Box<dyn ScenarioParts>, LaunchError> {
     Ok(Box::new(Fip::from_config(c)?))
 }
 
@@ -279,7 +279,7 @@ fn check_gains(c: &LaunchConfig, g: &Gains, model: &Model) -> Result<(), LaunchE
     within(c, "controller.yaw_rate_rad_s", g.yaw_rate_rad_s, model.rate_max_rad_s, "rad/s, model.rate_max_rad_s")
 }
 
-impl Scenario for Fip {
+impl ScenarioParts for Fip {
     fn title(&self) -> String {
         let link = if self.plant.command_period_s > 0.0 {
             format!(", commands at {:.0} Hz", 1.0 / self.plant.command_period_s)
@@ -287,10 +287,6 @@ impl Scenario for Fip {
             String::new()
         };
         format!("flying inverted pendulum, {}, Kalman–Bucy + backstepping{link}", self.disturbance.kind)
-    }
-
-    fn vectors(&self) -> &'static Vectors {
-        &VECTORS
     }
 
     fn input_limits(&self) -> Vec<(f64, f64)> {

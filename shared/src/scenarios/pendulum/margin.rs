@@ -400,7 +400,7 @@ mod tests {
     use super::*;
     use crate::config::launch::Override;
     use crate::contract::msg::SensorReading;
-    use crate::model::scenario::Scenario;
+    use crate::model::scenario::ScenarioParts;
     use crate::model::sensors::SensorEmulator;
     use crate::scenarios::resolve;
 
@@ -433,7 +433,7 @@ mod tests {
     /// command of loop k applied over tick k+d → k+d+1 (zero before that).
     fn simulate(p: &Pendulum, config: &LaunchConfig, d: usize, ticks: u64) -> Vec<Recorded> {
         let (mut plant, mut estimator, mut controller) = (p.plant(), p.estimator(), p.controller());
-        let mut sensors = SensorEmulator::new(config, p.vectors().signals);
+        let mut sensors = SensorEmulator::new(config, crate::scenarios::pendulum::VECTORS.signals);
         let mut readings = vec![SensorReading::default(); config.sensors.len()];
         let (mut estimate, mut command) = ([0.0; 4], [0.0]);
         let mut pending: VecDeque<f64> = std::iter::repeat_n(0.0, d).collect();

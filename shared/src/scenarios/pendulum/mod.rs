@@ -27,7 +27,7 @@ use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{positive, positive_as};
 use crate::model::reference::Reference;
 use crate::model::scenario::{
-    Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, Scenario, ScenarioEntry, TheoreticalMargin,
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, ScenarioEntry, ScenarioParts, TheoreticalMargin,
     check_substeps,
 };
 use crate::model::vectors::{Component, Vectors};
@@ -143,7 +143,7 @@ pub struct Pendulum {
     dt: f64,
 }
 
-fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+fn build(c: &LaunchConfig) -> Result<Box<dyn ScenarioParts>, LaunchError> {
     Ok(Box::new(Pendulum::from_config(c)?))
 }
 
@@ -226,17 +226,13 @@ impl Pendulum {
     }
 }
 
-impl Scenario for Pendulum {
+impl ScenarioParts for Pendulum {
     fn title(&self) -> String {
         let kind = match self.estimator.kind {
             Kind::BiasObserver => "bias-observer",
             Kind::NoBias => "no-bias",
         };
         format!("reaction-wheel pendulum, {kind}")
-    }
-
-    fn vectors(&self) -> &'static Vectors {
-        &VECTORS
     }
 
     fn input_limits(&self) -> Vec<(f64, f64)> {

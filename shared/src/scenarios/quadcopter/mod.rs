@@ -31,7 +31,8 @@ use crate::model::command_link::ActuationAge;
 use crate::model::mean::Mean;
 use crate::model::reference::Reference as _;
 use crate::model::scenario::{
-    Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Row, Scenario, ScenarioEntry, check_substeps,
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Row, ScenarioEntry, ScenarioParts,
+    check_substeps,
 };
 use crate::model::vectors::{Component, Vectors, concat};
 
@@ -150,7 +151,7 @@ pub struct Quadcopter {
     seed: u64,
 }
 
-fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+fn build(c: &LaunchConfig) -> Result<Box<dyn ScenarioParts>, LaunchError> {
     Ok(Box::new(Quadcopter::from_config(c)?))
 }
 
@@ -271,7 +272,7 @@ impl Quadcopter {
     }
 }
 
-impl Scenario for Quadcopter {
+impl ScenarioParts for Quadcopter {
     fn title(&self) -> String {
         let parameters = match self.controller.parameters {
             Parameters::Nominal => "true parameters",
@@ -283,10 +284,6 @@ impl Scenario for Quadcopter {
         };
         let sensing = if self.inputs.rates.is_some() { "full state" } else { "pose only" };
         format!("quadcopter, {:?} reference, {parameters}, {actuation}, {sensing}", self.reference.kind)
-    }
-
-    fn vectors(&self) -> &'static Vectors {
-        &VECTORS
     }
 
     fn input_limits(&self) -> Vec<(f64, f64)> {

@@ -29,7 +29,7 @@ use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{each, in_range, not_negative, positive, within, within_si};
 use crate::model::reference::Reference;
 use crate::model::scenario::{
-    Controller, ErrorMeasure, Estimator, Metrics, Plant, Scenario, ScenarioEntry, check_substeps,
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, ScenarioEntry, ScenarioParts, check_substeps,
 };
 use crate::model::vectors::{Component, Vectors, concat};
 
@@ -134,7 +134,7 @@ pub struct Tethered {
     duration_s: f64,
 }
 
-fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+fn build(c: &LaunchConfig) -> Result<Box<dyn ScenarioParts>, LaunchError> {
     Ok(Box::new(Tethered::from_config(c)?))
 }
 
@@ -279,7 +279,7 @@ impl Tethered {
     }
 }
 
-impl Scenario for Tethered {
+impl ScenarioParts for Tethered {
     fn title(&self) -> String {
         let law = match self.controller.law {
             Law::GammaA => "Γa′ (ϕ, ϑ)",
@@ -294,10 +294,6 @@ impl Scenario for Tethered {
             "tethered aerial robot, {} model, high-gain observer ({}) + {law}, transition {} s{lag}",
             self.plant.model, self.estimator.selector, self.reference.transition_s
         )
-    }
-
-    fn vectors(&self) -> &'static Vectors {
-        &VECTORS
     }
 
     fn input_limits(&self) -> Vec<(f64, f64)> {

@@ -36,7 +36,7 @@ use self::reference::{ReferenceSection, TiltReference};
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{MAX_SI, in_range, not_negative, positive, within, within_si};
 use crate::model::scenario::{
-    Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Scenario, ScenarioEntry, check_substeps,
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, ScenarioEntry, ScenarioParts, check_substeps,
 };
 use crate::model::vectors::{Component, Vectors, concat};
 
@@ -159,7 +159,7 @@ pub struct Tiltrotor {
     fix_period_ticks: u32,
 }
 
-fn build(c: &LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError> {
+fn build(c: &LaunchConfig) -> Result<Box<dyn ScenarioParts>, LaunchError> {
     Ok(Box::new(Tiltrotor::from_config(c)?))
 }
 
@@ -297,13 +297,9 @@ impl Tiltrotor {
     }
 }
 
-impl Scenario for Tiltrotor {
+impl ScenarioParts for Tiltrotor {
     fn title(&self) -> String {
         format!("tilt-rotor with a suspended load, {}, LKFUI", self.controller.kind)
-    }
-
-    fn vectors(&self) -> &'static Vectors {
-        &VECTORS
     }
 
     fn input_limits(&self) -> Vec<(f64, f64)> {

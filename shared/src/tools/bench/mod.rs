@@ -41,6 +41,7 @@ use crate::contract::clock::{TickTimer, now_ns};
 use crate::contract::msg::PlantState;
 use crate::contract::role::Role;
 use crate::launcher::{Binaries, Outcome, Summary};
+use crate::model::catalog::Catalog;
 use crate::runtime::signals::{Interrupted, StopFlag};
 use crate::tools::plot::latency as plot;
 
@@ -345,8 +346,14 @@ const LOOP_CONFIGS: [LoopConfig; 7] = [
     },
 ];
 
-/// One LoopLab run of the pendulum in real time.
-fn looplab_run(out: &Path, c: &LoopConfig, seconds: f64, binaries: &Binaries) -> Result<(Summary, PathBuf)> {
+/// One LoopLab run of the pendulum (of `catalog`) in real time.
+fn looplab_run(
+    out: &Path,
+    c: &LoopConfig,
+    seconds: f64,
+    binaries: &Binaries,
+    catalog: &Catalog,
+) -> Result<(Summary, PathBuf)> {
     let sets = [
         "mode=realtime".to_string(),
         format!("rate_hz={:?}", c.rate_hz),
@@ -359,7 +366,7 @@ fn looplab_run(out: &Path, c: &LoopConfig, seconds: f64, binaries: &Binaries) ->
         // SIGSTOP the monitor for the whole run once it is up: the loop runs without it.
         overrides.push(Override::fault(&format!("stop monitor at 0.001s for {}s", seconds + 1.0))?);
     }
-    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
+    let (config, scenario) = catalog.resolve("pendulum", &overrides)?;
     let mut n = 0;
     let dir = loop {
         let dir = out.join(format!("{}-{n}", c.label));
@@ -378,10 +385,10 @@ fn looplab_run(out: &Path, c: &LoopConfig, seconds: f64, binaries: &Binaries) ->
 
 /// Loops per second of a lockstep run of the pendulum through the five processes, with the given
 /// `wait.lockstep`.
-fn lockstep_run(out: &Path, method: &str, seconds: f64, binaries: &Binaries) -> Result<f64> {
+fn lockstep_run(out: &Path, method: &str, seconds: f64, binaries: &Binaries, catalog: &Catalog) -> Result<f64> {
     let sets = ["mode=lockstep".to_string(), format!("duration_s={seconds:?}"), format!("wait.lockstep={method}")];
     let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
-    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
+    let (config, scenario) = catalog.resolve("pendulum", &overrides)?;
     let dir = crate::launcher::create_run_dir(Some(&out.join(format!("lockstep-{method}"))), "pendulum")?;
     let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
     if outcome == Outcome::Interrupted {
@@ -392,23 +399,24 @@ fn lockstep_run(out: &Path, method: &str, seconds: f64, binaries: &Binaries) -> 
 
 /// The in-process twin (`runtime::in_process`: the same plant core, stage runners and tasks in
 /// one thread, nothing recorded): the ceiling of lockstep speed.
-fn in_process_loops_per_s(loops: u64, stop: &StopFlag) -> Result<f64> {
-    let (probe, _) = crate::scenarios::resolve("pendulum", &[])?;
+fn in_process_loops_per_s(loops: u64, stop: &StopFlag, catalog: &Catalog) -> Result<f64> {
+    let (probe, _) = catalog.resolve("pendulum", &[])?;
     let duration = format!("duration_s={}", loops as f64 / probe.rate_hz);
     let overrides = [Override::parse("mode=lockstep")?, Override::parse(&duration)?];
-    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
+    let (config, scenario) = catalog.resolve("pendulum", &overrides)?;
     let start = Instant::now();
     let reports = crate::runtime::in_process::run(&config, scenario.as_ref(), stop, |_| Ok(()))?;
     check(stop)?;
     Ok(reports.plant.loops as f64 / start.elapsed().as_secs_f64())
 }
 
-pub fn run(args: &BenchArgs) -> Result<()> {
+/// Runs the bench; its loops run the pendulum of `catalog`.
+pub fn run(args: &BenchArgs, catalog: &Catalog) -> Result<()> {
     // The ping-pongs' iceoryx2 files live in a run of their own (the loop runs clean up after
     // themselves); whatever happens to the parts, they go at the end.
     let run_id = crate::launcher::new_run_id();
     let lock = crate::runtime::ipc::create_run_storage(&run_id)?;
-    let result = run_parts(args, &run_id);
+    let result = run_parts(args, &run_id, catalog);
     let cleanup = crate::runtime::ipc::clean_up_run(&run_id);
     drop(lock);
     let leftover = cleanup?.leftover;
@@ -423,11 +431,11 @@ fn check(stop: &StopFlag) -> Result<()> {
     if stop.requested() { Err(Interrupted.into()) } else { Ok(()) }
 }
 
-fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
+fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
     let stop = StopFlag::install()?;
     if let Some(kills) = args.restarts {
         let out = crate::launcher::create_run_dir(args.out.as_deref(), "bench-restarts")?;
-        return restarts::run(kills, &out, &crate::launcher::locate_binaries()?);
+        return restarts::run(kills, &out, &crate::launcher::locate_binaries()?, catalog);
     }
     let began = Instant::now();
     let quick = args.quick;
@@ -477,7 +485,7 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
             check(&stop)?;
         }
         for c in &loop_configs {
-            let (summary, dir) = looplab_run(&out, c, segment, &binaries)?;
+            let (summary, dir) = looplab_run(&out, c, segment, &binaries, catalog)?;
             ours.entry(c.name).or_default().add_run(&summary, &dir)?;
         }
         let loops = (segment * 1000.0).round() as u64;
@@ -523,9 +531,9 @@ fn run_parts(args: &BenchArgs, run_id: &str) -> Result<()> {
     let mut lockstep_by_method = BTreeMap::new();
     for method in [LockstepWait::Poll, LockstepWait::Block] {
         let name: &'static str = method.into();
-        lockstep_by_method.insert(name.to_owned(), lockstep_run(&out, name, lockstep_seconds, &binaries)?);
+        lockstep_by_method.insert(name.to_owned(), lockstep_run(&out, name, lockstep_seconds, &binaries, catalog)?);
     }
-    let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 }, &stop)?;
+    let in_process = in_process_loops_per_s(if quick { 200_000 } else { 2_000_000 }, &stop, catalog)?;
     progress.finish_and_clear();
 
     let mut loops: Vec<LoopBench> =

@@ -15,6 +15,7 @@ use crate::config::launch::Override;
 use crate::contract::role::Role;
 use crate::launcher::summary::RestartSteps;
 use crate::launcher::{Binaries, Outcome};
+use crate::model::catalog::Catalog;
 use crate::runtime::signals::Interrupted;
 
 /// The processes killed in turn; one kill every `KILL_INTERVAL_S`.
@@ -99,7 +100,13 @@ impl Drop for Load {
     }
 }
 
-fn measure(condition: &str, kills: usize, out: &Path, binaries: &Binaries) -> Result<Vec<RestartBench>> {
+fn measure(
+    condition: &str,
+    kills: usize,
+    out: &Path,
+    binaries: &Binaries,
+    catalog: &Catalog,
+) -> Result<Vec<RestartBench>> {
     let duration = kills as f64 * KILL_INTERVAL_S + 1.0;
     let mut overrides = vec![
         Override::parse(&format!("duration_s={duration:?}"))?,
@@ -109,7 +116,7 @@ fn measure(condition: &str, kills: usize, out: &Path, binaries: &Binaries) -> Re
         let at = 0.5 + i as f64 * KILL_INTERVAL_S;
         overrides.push(Override::fault(&format!("kill {} at {at}s", TARGETS[i % TARGETS.len()]))?);
     }
-    let (config, scenario) = crate::scenarios::resolve("pendulum", &overrides)?;
+    let (config, scenario) = catalog.resolve("pendulum", &overrides)?;
     let dir = crate::launcher::create_run_dir(Some(&out.join(condition)), "pendulum")?;
     let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
     match outcome {
@@ -172,14 +179,14 @@ struct Steps {
 /// Measures restarts idle and under load, prints a table and writes `restarts.json`. The monitor
 /// is apart: it runs at nice 19 (it never takes a CPU from the loop), so under load it is slow
 /// to die and to start.
-pub fn run(kills: usize, out: &Path, binaries: &Binaries) -> Result<()> {
+pub fn run(kills: usize, out: &Path, binaries: &Binaries, catalog: &Catalog) -> Result<()> {
     if kills == 0 {
         return Err(anyhow!("--restarts needs at least one kill"));
     }
-    let idle = measure("idle", kills, out, binaries)?;
+    let idle = measure("idle", kills, out, binaries, catalog)?;
     let loaded = {
         let _load = Load::start(out, 2)?;
-        measure("loaded", kills, out, binaries)?
+        measure("loaded", kills, out, binaries, catalog)?
     };
     let mut text = String::from(
         "\nrestarts (ms; detected: SIGKILL → death seen; the others from the death seen; total: SIGKILL → ports up)\n",
