@@ -3,6 +3,7 @@
 
 pub mod autodiff;
 pub mod command_link;
+pub mod figure;
 pub mod integrate;
 pub mod mean;
 pub mod reference;

@@ -9,6 +9,7 @@ use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::schema::{ScenarioSchema, names};
 use crate::config::validate;
 use crate::contract::msg::SensorReading;
+use crate::model::figure::PaperFigures;
 use crate::model::reference::Reference;
 use crate::model::vectors::Vectors;
 
@@ -22,6 +23,8 @@ pub struct ScenarioEntry {
     /// Its vectors; the built scenario's [`Scenario::vectors`] returns the same.
     pub vectors: &'static Vectors,
     pub build: fn(&LaunchConfig) -> Result<Box<dyn Scenario>, LaunchError>,
+    /// The figures of the paper behind it, reproduced (`looplab plot --paper`), if it has any.
+    pub paper: Option<&'static PaperFigures>,
 }
 
 impl std::fmt::Debug for ScenarioEntry {

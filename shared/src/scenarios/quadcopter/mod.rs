@@ -12,6 +12,7 @@
 
 pub mod controller;
 pub mod estimator;
+mod paper;
 pub mod plant;
 pub mod reference;
 pub mod sensors;
@@ -41,6 +42,7 @@ pub const ENTRY: ScenarioEntry = ScenarioEntry {
     text: include_str!("../../../../launch/quadcopter.toml"),
     vectors: &VECTORS,
     build,
+    paper: Some(&paper::PAPER),
 };
 
 /// The true state: p, R (row-major), v, ω, m.

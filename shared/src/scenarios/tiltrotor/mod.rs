@@ -18,6 +18,7 @@ pub mod dynamics;
 pub mod estimator;
 pub mod gains;
 pub mod metrics;
+mod paper;
 pub mod params;
 pub mod plant;
 pub mod reference;
@@ -46,6 +47,7 @@ pub const ENTRY: ScenarioEntry = ScenarioEntry {
     text: include_str!("../../../../launch/tiltrotor.toml"),
     vectors: &VECTORS,
     build,
+    paper: Some(&paper::PAPER),
 };
 
 /// q = (x, y, z, φ, θ, ψ, α_R, α_L, γ₁, γ₂) and q̇.
