@@ -9,9 +9,9 @@ use std::path::Path;
 
 use common::{Run, fresh_dir, looplab, run};
 use figure_check::{Image, assert_charts};
-use looplab_shared::tools::plot::figure::Cell;
 use looplab_shared::contract::report::Stats;
 use looplab_shared::tools::compare::{metric_text, ratio_label};
+use looplab_shared::tools::plot::figure::Cell;
 
 /// The rows of the table below its column header: (label words, the cells after the label).
 struct Row {

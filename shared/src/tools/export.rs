@@ -69,7 +69,12 @@ where
 }
 
 /// The values of `columns` in `row`: None if every cell is empty, an error if only some are.
-fn values<T: Copy>(table: &Table, columns: &[Vec<Option<T>>], row: usize, what: &str) -> Result<Option<Vec<T>>, ToolError> {
+fn values<T: Copy>(
+    table: &Table,
+    columns: &[Vec<Option<T>>],
+    row: usize,
+    what: &str,
+) -> Result<Option<Vec<T>>, ToolError> {
     let cells: Vec<Option<T>> = columns.iter().map(|c| c[row]).collect();
     match cells.iter().filter(|c| c.is_some()).count() {
         0 => Ok(None),

@@ -4,7 +4,7 @@
 use anyhow::Context as _;
 
 use crate::model::figure::{
-    Colour, Curve, Figure, Line, NamedFigure, PaperCase, PaperFigures, PaperTarget, Panel, RunColumns, series,
+    Colour, Curve, Figure, Line, NamedFigure, Panel, PaperCase, PaperFigures, PaperTarget, RunColumns, series,
 };
 
 pub static PAPER: PaperFigures = PaperFigures {
@@ -70,7 +70,12 @@ fn draw(runs: &[&dyn RunColumns]) -> anyhow::Result<Vec<NamedFigure>> {
         let truth = stochastic.state(&format!("b_{axis}")).context("no true b")?;
         let estimate = stochastic.estimate(&format!("b_hat_{axis}")).context("no b̂")?;
         let curves = vec![
-            Curve::new(format!("b_{axis} estimate"), series(stochastic.t(), estimate), Colour::Series(0), Line::Solid(2)),
+            Curve::new(
+                format!("b_{axis} estimate"),
+                series(stochastic.t(), estimate),
+                Colour::Series(0),
+                Line::Solid(2),
+            ),
             Curve::new(format!("b_{axis} (true)"), series(stochastic.t(), truth), Colour::Truth, Line::Solid(1)),
         ];
         panels.push(Panel::new("", format!("b_{axis}, N"), curves));

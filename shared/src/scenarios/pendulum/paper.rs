@@ -6,7 +6,7 @@
 use anyhow::Context as _;
 
 use crate::model::figure::{
-    Colour, Curve, Figure, Line, NamedFigure, PaperCase, PaperFigures, PaperTarget, Panel, RunColumns, series,
+    Colour, Curve, Figure, Line, NamedFigure, Panel, PaperCase, PaperFigures, PaperTarget, RunColumns, series,
 };
 
 const BIAS: &str = "sensors.encoder.bias=0.05";

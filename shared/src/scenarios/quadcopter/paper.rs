@@ -3,7 +3,7 @@
 use anyhow::Context as _;
 
 use crate::model::figure::{
-    Colour, Curve, FaultMark, Figure, Line, NamedFigure, PaperCase, PaperFigures, PaperTarget, Panel, RunColumns,
+    Colour, Curve, FaultMark, Figure, Line, NamedFigure, Panel, PaperCase, PaperFigures, PaperTarget, RunColumns,
     series,
 };
 
@@ -34,7 +34,12 @@ fn draw(runs: &[&dyn RunColumns]) -> anyhow::Result<Vec<NamedFigure>> {
             Colour::Series(0),
             Line::Solid(2),
         ),
-        Curve::new("m (true)", series(run.t(), run.state("mass").context("no true mass")?), Colour::Truth, Line::Solid(1)),
+        Curve::new(
+            "m (true)",
+            series(run.t(), run.state("mass").context("no true mass")?),
+            Colour::Truth,
+            Line::Solid(1),
+        ),
     ];
     let figure = Figure {
         title: "Paper 001, Fig. 17, reproduced: the mass estimate as weight is added in hover (case 7, lockstep)"

@@ -6,7 +6,7 @@ use anyhow::Context as _;
 
 use super::Tethered;
 use crate::model::figure::{
-    Colour, Curve, Figure, Line, NamedFigure, PaperCase, PaperFigures, PaperTarget, Panel, RunColumns, series,
+    Colour, Curve, Figure, Line, NamedFigure, Panel, PaperCase, PaperFigures, PaperTarget, RunColumns, series,
 };
 use crate::model::reference::Reference as _;
 

@@ -5,7 +5,7 @@
 use anyhow::Context as _;
 
 use crate::model::figure::{
-    Colour, Curve, Figure, Line, NamedFigure, PaperCase, PaperFigures, PaperTarget, Panel, RunColumns, series,
+    Colour, Curve, Figure, Line, NamedFigure, Panel, PaperCase, PaperFigures, PaperTarget, RunColumns, series,
 };
 
 /// The paper's bound on the a-priori x error, m: ±3.81 cm with 99.8 % confidence.

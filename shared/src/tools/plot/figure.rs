@@ -48,7 +48,6 @@ impl Panel {
     }
 }
 
-
 /// The truth's look in every figure: a thin dark line drawn over the thicker estimate or held
 /// value, so both stay visible where they agree.
 const TRUTH: RGBColor = RGBColor(20, 20, 20);

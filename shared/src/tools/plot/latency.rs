@@ -414,7 +414,8 @@ mod tests {
         // k, t, 8 stamps, end to end, deadline miss, rejected, tick timing; loop 1 has no record.
         let stamps: Vec<String> = LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")).collect();
         let header = format!("k,t_s,{},end_to_end_ns,deadline_miss,rejected,ts,tw,tp\n", stamps.join(","));
-        let text = header + "\
+        let text = header
+            + "\
                     0,0,1000,1500,1600,2600,2700,4700,4800,9000,8000,0,0,900,950,0\n\
                     1,0.001,,,,,,,,,,,,1900,1950,1000\n\
                     2,0.002,3000,3100,3300,3400,3500,3600,3700,3800,800,0,0,2900,2950,1000\n";
@@ -430,7 +431,10 @@ mod tests {
         assert_eq!(legend_stats(&series[4].1), ["p50 0.80 µs", "p99 8.00 µs", "max 8.00 µs"]);
         let bad = Table::parse("loops.csv", &text.replacen("9000", "x", 1)).unwrap();
         let why = latencies_from_loops(&bad).unwrap_err().to_string();
-        assert_eq!(why, "loops.csv line 2: column \"plant_receive_ns\": \"x\" is not a number (invalid digit found in string)");
+        assert_eq!(
+            why,
+            "loops.csv line 2: column \"plant_receive_ns\": \"x\" is not a number (invalid digit found in string)"
+        );
         let no_column = Table::parse("loops.csv", "k,t_s\n").unwrap();
         let why = latencies_from_loops(&no_column).unwrap_err().to_string();
         assert_eq!(why, "loops.csv has no column \"plant_publish_ns\"");

@@ -18,7 +18,8 @@ use crate::tools::plot::latency;
 use crate::tools::run_folder::RunFolder;
 use crate::tools::{RUN_FILES, ToolError};
 
-/// Where each vector lies in trajectory.csv's columns.
+/// Where each vector lies among trajectory.csv's columns, in the layout's order (the order the
+/// monitor writes them: k, t, state, each sensor's components, estimate, command).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Columns {
     pub state: Range<usize>,
@@ -73,8 +74,7 @@ impl RunData {
         let columns = Columns::of(&layout);
         let summary = folder.summary()?;
         let table = folder.table("trajectory.csv")?;
-        let trajectory =
-            layout.trajectory_columns().iter().map(|name| table.floats(name)).collect::<Result<_, _>>()?;
+        let trajectory = layout.trajectory_columns().iter().map(|name| table.floats(name)).collect::<Result<_, _>>()?;
         let loops = folder.table("loops.csv")?;
         let ticks = Ticks {
             t: loops.floats("t_s")?,
@@ -219,7 +219,10 @@ fn commands_figure(data: &RunData) -> Figure {
                 vec![Curve::new("command", command, Colour::Series(0), Line::Solid(2))],
             );
             if let Some((lo, hi)) = limits.get(i) {
-                panel.bounds = vec![Curve::level("limit", *lo, &span, Colour::Limit), Curve::level("limit", *hi, &span, Colour::Limit)];
+                panel.bounds = vec![
+                    Curve::level("limit", *lo, &span, Colour::Limit),
+                    Curve::level("limit", *hi, &span, Colour::Limit),
+                ];
             }
             panel
         })
