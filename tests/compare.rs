@@ -3,12 +3,15 @@
 //! numbers it prints; and bad input.
 
 mod common;
+mod figure_check;
 
 use std::path::Path;
 
 use common::{Run, fresh_dir, looplab, run};
+use figure_check::{Image, assert_charts};
 use looplab_shared::contract::report::Stats;
 use looplab_shared::tools::compare::{metric_text, ratio_label};
+use looplab_shared::tools::plot::figure::Cell;
 
 /// The rows of the table below its column header: (label words, the cells after the label).
 struct Row {
@@ -74,7 +77,13 @@ fn two_wait_strategies_side_by_side_with_ratios_of_the_printed_numbers() {
     assert_eq!(lines[3], "");
     assert_eq!(lines[4].split_whitespace().collect::<Vec<_>>(), ["A", "B"]);
     assert_eq!(lines.last().unwrap(), &format!("chart: {}", chart.display()));
-    assert_eq!(&std::fs::read(&chart).unwrap()[..8], b"\x89PNG\r\n\x1a\n");
+    // The chart: end to end across the top (540 px above its legend of two lines, 62 px), then
+    // the four hops two to a row (360 px above a legend of 58 px); each chart has data.
+    let image = Image::read(&chart);
+    assert_eq!((image.width, image.height), (1200, 602 + 2 * 418));
+    let cell = |x: u32, y: u32, width: u32, height: u32| Cell { x: x..x + width, y: y..y + height };
+    let hops = [(0, 602), (600, 602), (0, 1020), (600, 1020)].map(|(x, y)| cell(x, y, 600, 360));
+    assert_charts(&chart, &[&[cell(0, 0, 1200, 540)][..], &hops].concat());
 
     // The table, less the blank line and the chart's path below it.
     assert_eq!(lines[lines.len() - 2], "");

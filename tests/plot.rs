@@ -1,26 +1,74 @@
 //! `looplab plot`: a real five-process run with `--plot` writes its figures as PNG into the run
-//! folder; `looplab plot` on something that is not a run folder says so and exits with 2.
+//! folder; `looplab plot` on something that is not a run folder says so and exits with 2. Each
+//! figure is decoded and checked: not blank, data in every panel (`figure_check`), a check shown
+//! to fail on a figure with an empty panel.
 
 mod common;
+mod figure_check;
 
-use common::{fresh_dir, looplab, png_size, run};
+use common::{fresh_dir, looplab, run};
+use figure_check::{Image, assert_charts, assert_figure, check, data_pixels};
+use looplab_shared::tools::plot::figure::{Cell, Colour, Curve, FaultMark, Figure, Line, Panel};
 
 #[test]
 fn a_real_time_run_with_a_kill_plots_its_figures() {
     let r = run("plot", &["pendulum", "--duration", "1", "--fault", "kill estimator at 0.5s", "--plot"]);
     let stdout = r.stdout();
     // Estimate: four components on a 2×2 grid; commands: one; sensors: two, stacked; tick period: one.
-    for (name, size) in [
-        ("estimate.png", (920, 624)),
-        ("commands.png", (1000, 524)),
-        ("sensors.png", (1000, 724)),
-        ("tick-period.png", (1000, 524)),
-        ("latency-cdf.png", (900, 654)),
-    ] {
+    for (name, panels) in [("estimate.png", 4), ("commands.png", 1), ("sensors.png", 2), ("tick-period.png", 1)] {
         let path = r.dir.join(name);
         assert!(stdout.contains(&format!("wrote {}", path.display())), "{name} not reported:\n{stdout}");
-        assert_eq!(png_size(&path), size, "{name}");
+        assert_figure(&path, panels, false);
     }
+    let path = r.dir.join("latency-cdf.png");
+    assert!(stdout.contains(&format!("wrote {}", path.display())), "latency-cdf.png not reported:\n{stdout}");
+    let image = Image::read(&path);
+    assert_eq!((image.width, image.height), (900, 654));
+    // The chart above its legend.
+    assert_charts(&path, &[Cell { x: 0..900, y: 0..520 }]);
+}
+
+/// A figure of two panels over 0 to 1 s, the second with `second` as its curves, and a fault
+/// marked on both.
+fn two_panels(second: Vec<Curve>) -> Figure {
+    let ramp: Vec<(f64, f64)> = (0..=100).map(|i| (i as f64 / 100.0, (i as f64 / 10.0).sin())).collect();
+    Figure {
+        title: "two panels".into(),
+        panels: vec![
+            Panel::new("one", "y", vec![Curve::new("a", ramp, Colour::Series(0), Line::Solid(2))]),
+            Panel::new("two", "y", second),
+        ],
+        x: 0.0..1.0,
+        x_desc: "t, s",
+        faults: vec![FaultMark { t: 0.5, label: "kill estimator".into() }],
+        faults_label: "fault injected",
+        caption: None,
+    }
+}
+
+/// The check itself: a figure with an empty panel (a fault marked on it, its axes drawn) fails
+/// it, naming the panel; the same figure with data in both passes; a blank image fails.
+#[test]
+fn the_figure_check_fails_on_an_empty_panel_and_a_blank_image() {
+    let dir = fresh_dir("figure-check");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("figure.png");
+    let truth_only = vec![Curve::new("truth", vec![(0.0, 0.0), (1.0, 1.0)], Colour::Truth, Line::Solid(1))];
+    for (second, expected) in [
+        (vec![], Err("panel 2 has 0 data pixels".to_string())),
+        // The truth's dark line alone is not data that the check can tell from the axes.
+        (truth_only, Err("panel 2 has 0 data pixels".to_string())),
+        (vec![Curve::new("b", vec![(0.0, 1.0), (1.0, -1.0)], Colour::Series(1), Line::Solid(2))], Ok(())),
+    ] {
+        let figure = two_panels(second);
+        figure.draw(&path).unwrap();
+        let image = Image::read(&path);
+        assert_eq!(check(&image, &figure.cells()), expected);
+        assert!(data_pixels(&image, &figure.cells())[0] > 200, "the first panel's curve");
+    }
+    let blank = Image { width: 100, height: 100, pixels: vec![[255, 255, 255]; 100 * 100] };
+    assert_eq!(check(&blank, &[]), Err("blank: 0 of 10000 pixels drawn".to_string()));
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -48,12 +96,13 @@ fn a_folder_that_is_not_a_run_is_bad_input() {
 /// lockstep in the process, one run folder each, and each figure is written where it says.
 #[test]
 fn every_paper_figure_is_drawn() {
-    let cases: [(&str, &[&str]); 5] = [
-        ("pendulum", &["paper-003-fig3-angle.png", "paper-003-fig4-flywheel-speed.png"]),
-        ("quadcopter", &["paper-001-fig17-mass-estimate.png"]),
-        ("tiltrotor", &["paper-004-fig4-x-prior-error.png"]),
-        ("fip", &["paper-000-fig2-speed-thrust.png", "paper-000-fig4-disturbance-estimate.png"]),
-        ("tethered", &["paper-002-fig8-noise.png"]),
+    // Each figure's file and its number of panels.
+    let cases: [(&str, &[(&str, usize)]); 5] = [
+        ("pendulum", &[("paper-003-fig3-angle.png", 1), ("paper-003-fig4-flywheel-speed.png", 1)]),
+        ("quadcopter", &[("paper-001-fig17-mass-estimate.png", 1)]),
+        ("tiltrotor", &[("paper-004-fig4-x-prior-error.png", 2)]),
+        ("fip", &[("paper-000-fig2-speed-thrust.png", 2), ("paper-000-fig4-disturbance-estimate.png", 3)]),
+        ("tethered", &[("paper-002-fig8-noise.png", 3)]),
     ];
     std::thread::scope(|s| {
         for (scenario, figures) in cases {
@@ -62,11 +111,10 @@ fn every_paper_figure_is_drawn() {
                 let output = looplab().args(["plot", "--paper", scenario, "--out"]).arg(&dir).output().unwrap();
                 let stdout = String::from_utf8_lossy(&output.stdout);
                 assert!(output.status.success(), "{scenario}: {stdout}\n{}", String::from_utf8_lossy(&output.stderr));
-                for name in figures {
+                for (name, panels) in figures {
                     let path = dir.join(name);
                     assert!(stdout.contains(&format!("wrote {}", path.display())), "{name} not reported:\n{stdout}");
-                    let (width, height) = png_size(&path);
-                    assert!(width >= 800 && height >= 500, "{name}: {width}×{height}");
+                    assert_figure(&path, *panels, true);
                 }
                 std::fs::remove_dir_all(&dir).unwrap();
             });

@@ -4,6 +4,7 @@
 pub mod autodiff;
 pub mod catalog;
 pub mod command_link;
+pub mod figure;
 pub mod integrate;
 pub mod mean;
 pub mod reference;

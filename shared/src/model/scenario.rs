@@ -10,6 +10,7 @@ use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::schema::{ScenarioSchema, names};
 use crate::config::validate;
 use crate::contract::msg::SensorReading;
+use crate::model::figure::PaperFigures;
 use crate::model::reference::Reference;
 use crate::model::vectors::Vectors;
 
@@ -27,6 +28,8 @@ pub struct ScenarioEntry {
     pub vectors: &'static Vectors,
     /// The scenario's code, configured by a launch file checked against [`Self::schema`].
     pub build: fn(&LaunchConfig) -> Result<Box<dyn ScenarioParts>, LaunchError>,
+    /// The figures of the paper behind it, reproduced (`looplab plot --paper`), if it has any.
+    pub paper: Option<&'static PaperFigures>,
 }
 
 impl std::fmt::Debug for ScenarioEntry {

@@ -13,10 +13,10 @@ use anyhow::Context as _;
 
 use crate::config::wait::WaitSettings;
 use crate::contract::role::Role;
-use crate::launcher::report::read_summary;
 use crate::launcher::summary::Summary;
+use crate::tools::ToolError;
 use crate::tools::plot::latency::{self, END_TO_END, Panel, Series, nearest_rank};
-use crate::tools::{ToolError, check_run_folder};
+use crate::tools::run_folder::RunFolder;
 
 /// The files of a run folder compare reads.
 const INPUTS: [&str; 3] = ["summary.json", "loops.csv", "launch.toml"];
@@ -54,21 +54,19 @@ pub fn compare(dirs: &[PathBuf], out: Option<&Path>) -> Result<(String, PathBuf)
 }
 
 fn read_run(dir: &Path) -> Result<Run, ToolError> {
-    let shown = dir.display();
-    let bad = |why: String| ToolError::BadInput(format!("{shown}: {why}"));
-    check_run_folder(dir, &INPUTS)?;
-    let summary = read_summary(dir).map_err(|e| ToolError::BadInput(format!("{e:#}")))?;
-    let wait = read_wait(dir).map_err(|e| bad(format!("launch.toml: {e:#}")))?;
-    let latencies = latency::read_run_latencies(dir).map_err(|e| ToolError::BadInput(format!("{e:#}")))?;
+    let folder = RunFolder::open(dir, &INPUTS)?;
+    let summary = folder.summary()?;
+    let wait = read_wait(&folder.text("launch.toml")?)
+        .map_err(|e| ToolError::BadInput(format!("{}: launch.toml: {e:#}", dir.display())))?;
+    let latencies = latency::latencies_from_loops(&folder.table("loops.csv")?)?;
     let canonical = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
-    let name = canonical.file_name().map_or_else(|| shown.to_string(), |n| n.to_string_lossy().into_owned());
+    let name = canonical.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
     Ok(Run { name, summary, wait, latencies })
 }
 
-/// The run's `[wait]` section, from its resolved launch file, in words.
-fn read_wait(dir: &Path) -> anyhow::Result<String> {
-    let text = std::fs::read_to_string(dir.join("launch.toml"))?;
-    let document: toml::Table = toml::from_str(&text)?;
+/// The run's `[wait]` section, from the text of its resolved launch file, in words.
+fn read_wait(launch: &str) -> anyhow::Result<String> {
+    let document: toml::Table = toml::from_str(launch)?;
     let wait: WaitSettings = match document.get("wait") {
         Some(section) => section.clone().try_into().context("[wait]")?,
         None => WaitSettings::default(),

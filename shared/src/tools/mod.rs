@@ -5,9 +5,8 @@ pub mod bench;
 pub mod compare;
 pub mod export;
 pub mod plot;
+pub mod run_folder;
 pub mod sweep;
-
-use std::path::Path;
 
 /// Why a tool (export, plot, compare) did not do its job.
 #[derive(Debug)]
@@ -24,17 +23,16 @@ impl From<anyhow::Error> for ToolError {
     }
 }
 
-/// The files of a finished run folder that export and plot read.
-pub const RUN_FILES: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];
-
-/// A bad-input error for `dir` unless it is a folder holding each of `files`.
-pub fn check_run_folder(dir: &Path, files: &[&str]) -> Result<(), ToolError> {
-    let bad = |why: String| Err(ToolError::BadInput(format!("{}: {why}", dir.display())));
-    if !dir.is_dir() {
-        return bad(if dir.exists() { "not a folder".into() } else { "no such run folder".into() });
-    }
-    match files.iter().find(|name| !dir.join(name).is_file()) {
-        Some(missing) => bad(format!("not a run folder (it has no {missing})")),
-        None => Ok(()),
+impl std::fmt::Display for ToolError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ToolError::BadInput(why) => f.write_str(why),
+            ToolError::Failed(e) => write!(f, "{e:#}"),
+        }
     }
 }
+
+impl std::error::Error for ToolError {}
+
+/// The files of a finished run folder that export and plot read.
+pub const RUN_FILES: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];

@@ -14,6 +14,7 @@ pub mod controller;
 pub mod disturbance;
 pub mod estimator;
 pub mod metrics;
+mod paper;
 pub mod params;
 pub mod plant;
 pub mod reference;
@@ -40,6 +41,7 @@ pub const ENTRY: ScenarioEntry = ScenarioEntry {
     text: include_str!("../../../../launch/fip.toml"),
     vectors: &VECTORS,
     build,
+    paper: Some(&paper::PAPER),
 };
 
 /// Where things are in the true state.

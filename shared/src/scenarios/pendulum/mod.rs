@@ -10,6 +10,7 @@
 pub mod controller;
 pub mod estimator;
 pub mod margin;
+mod paper;
 pub mod plant;
 pub mod reference;
 pub mod sensors;
@@ -39,6 +40,7 @@ pub const ENTRY: ScenarioEntry = ScenarioEntry {
     text: include_str!("../../../../launch/pendulum.toml"),
     vectors: &VECTORS,
     build,
+    paper: Some(&paper::PAPER),
 };
 
 pub static VECTORS: Vectors = Vectors {

@@ -13,6 +13,7 @@
 
 pub mod controller;
 pub mod estimator;
+mod paper;
 pub mod plant;
 pub mod reference;
 pub mod sensors;
@@ -43,6 +44,7 @@ pub const ENTRY: ScenarioEntry = ScenarioEntry {
     text: include_str!("../../../../launch/quadcopter.toml"),
     vectors: &VECTORS,
     build,
+    paper: Some(&paper::PAPER),
 };
 
 /// The true state: p, R (row-major), v, ω, m.

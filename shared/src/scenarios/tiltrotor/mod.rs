@@ -19,6 +19,7 @@ pub mod dynamics;
 pub mod estimator;
 pub mod gains;
 pub mod metrics;
+mod paper;
 pub mod params;
 pub mod plant;
 pub mod reference;
@@ -47,6 +48,7 @@ pub const ENTRY: ScenarioEntry = ScenarioEntry {
     text: include_str!("../../../../launch/tiltrotor.toml"),
     vectors: &VECTORS,
     build,
+    paper: Some(&paper::PAPER),
 };
 
 /// q = (x, y, z, φ, θ, ψ, α_R, α_L, γ₁, γ₂) and q̇.

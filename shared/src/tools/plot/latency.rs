@@ -1,16 +1,19 @@
 //! Latency charts: distributions on log-log axes (bench, a run's figure, compare) and latency
-//! against payload size (bench). A run's latencies are read from its loops.csv.
+//! against payload size (bench). A run's latencies are read from its loops.csv, through the run
+//! folder's reader.
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, Result, anyhow};
+use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::coord::combinators::{BindKeyPoints, LogCoord, WithKeyPoints};
 use plotters::prelude::*;
 
+use crate::contract::msg::LoopTrace;
 use crate::contract::report::HOPS;
-use crate::monitor::sinks::loops::column;
+use crate::tools::ToolError;
 use crate::tools::plot::{FONT, colour, legend_mark, plot_error, png};
+use crate::tools::run_folder::{RunFolder, Table};
 
 /// A series: its name and its samples in ns, sorted.
 pub type Series = (String, Vec<u64>);
@@ -36,30 +39,25 @@ fn transport_hops() -> impl Iterator<Item = (String, usize, usize)> {
 /// loops.csv rather than latency.hlog: it has every loop's exact value, so the chart reaches
 /// down to the single slowest loop and its percentiles are those of the samples drawn; the
 /// histogram log keeps three significant digits in buckets and splits them by second.
-pub fn read_run_latencies(run_dir: &Path) -> Result<Vec<Series>> {
-    let path = run_dir.join("loops.csv");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("{}: cannot read it", path.display()))?;
-    latencies_from_loops_csv(&text).with_context(|| format!("{}", path.display()))
+pub fn read_run_latencies(run_dir: &Path) -> Result<Vec<Series>, ToolError> {
+    latencies_from_loops(&RunFolder::open(run_dir, &["loops.csv"])?.table("loops.csv")?)
 }
 
-/// [`read_run_latencies`] on the text of a loops.csv.
-pub fn latencies_from_loops_csv(text: &str) -> Result<Vec<Series>> {
+/// [`read_run_latencies`] on a loops.csv, read by column name.
+pub fn latencies_from_loops(loops: &Table) -> Result<Vec<Series>, ToolError> {
     let hops: Vec<(String, usize, usize)> = transport_hops().collect();
+    let stamps = LoopTrace::STAMP_NAMES
+        .iter()
+        .map(|name| loops.column::<u64>(&format!("{name}_ns")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let end_to_end = loops.column::<u64>("end_to_end_ns")?;
     let mut samples: Vec<Vec<u64>> = vec![Vec::new(); hops.len() + 1];
-    for (i, line) in text.lines().enumerate().skip(1) {
-        let cells: Vec<&str> = line.split(',').collect();
-        let number = |column: usize| -> Result<Option<u64>> {
-            match cells.get(column).copied() {
-                None | Some("") => Ok(None),
-                Some(cell) => cell.parse().map(Some).map_err(|e| anyhow!("line {}: {cell:?}: {e}", i + 1)),
-            }
-        };
-        // A loop without a record has empty cells.
-        let Some(end_to_end) = number(column::END_TO_END)? else { continue };
+    // A loop without a record has empty cells.
+    for (row, end_to_end) in end_to_end.iter().enumerate() {
+        let Some(end_to_end) = *end_to_end else { continue };
         for (series, (_, from, to)) in samples.iter_mut().zip(&hops) {
-            let (Some(sent), Some(received)) = (number(column::FIRST_STAMP + from)?, number(column::FIRST_STAMP + to)?)
-            else {
-                return Err(anyhow!("line {}: a loop with an end-to-end latency but not every stamp", i + 1));
+            let (Some(sent), Some(received)) = (stamps[*from][row], stamps[*to][row]) else {
+                return Err(loops.error_at(row, "a loop with an end-to-end latency but not every stamp"));
             };
             // As the monitor counts a hop (monitor/join.rs).
             series.push(received.saturating_sub(sent));
@@ -85,7 +83,7 @@ pub fn nearest_rank(sorted: &[u64], per_mille: u64) -> Option<u64> {
 
 /// Writes the run's latency figure, `latency-cdf.png` in the run folder: per hop and end to end,
 /// from loops.csv. Returns its path.
-pub fn run_latency_figure(run_dir: &Path) -> Result<PathBuf> {
+pub fn run_latency_figure(run_dir: &Path) -> Result<PathBuf, ToolError> {
     let series = read_run_latencies(run_dir)?;
     let path = run_dir.join(RUN_FIGURE);
     let name = run_dir.canonicalize().ok().and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()));
@@ -414,11 +412,14 @@ mod tests {
     #[test]
     fn hops_come_from_the_stamps_of_loops_csv() {
         // k, t, 8 stamps, end to end, deadline miss, rejected, tick timing; loop 1 has no record.
-        let text = "k,t_s,a,b,c,d,e,f,g,h,e2e,miss,rej,ts,tw,tp\n\
+        let stamps: Vec<String> = LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")).collect();
+        let header = format!("k,t_s,{},end_to_end_ns,deadline_miss,rejected,ts,tw,tp\n", stamps.join(","));
+        let text = header
+            + "\
                     0,0,1000,1500,1600,2600,2700,4700,4800,9000,8000,0,0,900,950,0\n\
                     1,0.001,,,,,,,,,,,,1900,1950,1000\n\
                     2,0.002,3000,3100,3300,3400,3500,3600,3700,3800,800,0,0,2900,2950,1000\n";
-        let series = latencies_from_loops_csv(text).unwrap();
+        let series = latencies_from_loops(&Table::parse("loops.csv", &text).unwrap()).unwrap();
         let expected: Vec<Series> = vec![
             ("plant→sensors".into(), vec![100, 500]),
             ("sensors→estimator".into(), vec![100, 1000]),
@@ -428,6 +429,14 @@ mod tests {
         ];
         assert_eq!(series, expected);
         assert_eq!(legend_stats(&series[4].1), ["p50 0.80 µs", "p99 8.00 µs", "max 8.00 µs"]);
-        assert!(latencies_from_loops_csv("k\n0,0,1,2,3,4,5,6,7,8,x\n").unwrap_err().to_string().starts_with("line 2:"));
+        let bad = Table::parse("loops.csv", &text.replacen("9000", "x", 1)).unwrap();
+        let why = latencies_from_loops(&bad).unwrap_err().to_string();
+        assert_eq!(
+            why,
+            "loops.csv line 2: column \"plant_receive_ns\": \"x\" is not a number (invalid digit found in string)"
+        );
+        let no_column = Table::parse("loops.csv", "k,t_s\n").unwrap();
+        let why = latencies_from_loops(&no_column).unwrap_err().to_string();
+        assert_eq!(why, "loops.csv has no column \"plant_publish_ns\"");
     }
 }

@@ -1,7 +1,10 @@
 //! Figures as PNG (plotters' bitmap backend), with an embedded font so a figure renders the same
-//! on a machine with no fonts installed. `latency`: latency distributions (bench, plot, compare);
-//! `run`: a run folder's figures (`looplab plot`); `paper`: the papers' figures reproduced.
+//! on a machine with no fonts installed. `figure`: the engine that draws a figure of panels over
+//! time (`model/figure.rs` describes one); `latency`: latency distributions (bench, plot,
+//! compare); `run`: a run folder's figures (`looplab plot`); `paper`: the papers' figures
+//! reproduced, as each scenario declares them.
 
+pub mod figure;
 pub mod latency;
 pub mod paper;
 pub mod run;
