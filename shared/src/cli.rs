@@ -248,9 +248,9 @@ pub fn main() -> ExitCode {
     main_with(&scenarios::builtin())
 }
 
-/// The launcher with the scenarios of `catalog`: `run`, `show`, `list`, `sweep` and `bench`
-/// know these. Its loop processes must load the same catalog: how a crate of its own builds the
-/// six binaries is told at [`crate::runtime::child::process_main_with`].
+/// The launcher with the scenarios of `catalog`: every command (`run`, `show`, `list`, `sweep`,
+/// `bench`, `plot`, `export`) knows these. Its loop processes must load the same catalog: how a
+/// crate of its own builds the six binaries is told at [`crate::runtime::child::process_main_with`].
 pub fn main_with(catalog: &Catalog) -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
@@ -283,7 +283,7 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         },
         Some(Command::Sweep(args)) => sweep(args, catalog),
         Some(Command::Bench(args)) => report_failure(bench::run(&args, catalog)),
-        Some(Command::Export { run_dir, mcap: _ }) => match export::write_mcap(&run_dir) {
+        Some(Command::Export { run_dir, mcap: _ }) => match export::write_mcap(&run_dir, catalog) {
             Ok(path) => {
                 println!("wrote {}", path.display());
                 ExitCode::SUCCESS
@@ -291,9 +291,9 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
             Err(ToolError::BadInput(why)) => bad_input(why),
             Err(ToolError::Failed(e)) => report_failure(Err(e)),
         },
-        Some(Command::Plot { run_dir: Some(run_dir), .. }) => figures(plot::run::plot_run(&run_dir)),
+        Some(Command::Plot { run_dir: Some(run_dir), .. }) => figures(plot::run::plot_run(&run_dir, catalog)),
         Some(Command::Plot { paper: Some(scenario), out, .. }) => {
-            figures(plot::paper::paper_figures(&scenario, out.as_deref()))
+            figures(plot::paper::paper_figures(catalog, &scenario, out.as_deref()))
         }
         Some(Command::Plot { .. }) => bad_input("plot: give a run folder or --paper SCENARIO"),
         Some(Command::Compare { runs, out }) => match compare::compare(&runs, out.as_deref()) {
@@ -462,7 +462,7 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
             if let Some(error) = error {
                 eprintln!("error: {error}");
             }
-            let plotted = if args.plot { figures(plot::run::plot_run(&run_dir)) } else { ExitCode::SUCCESS };
+            let plotted = if args.plot { figures(plot::run::plot_run(&run_dir, catalog)) } else { ExitCode::SUCCESS };
             // A run that failed keeps its code; a failed plot fails a run that completed.
             if code == launcher::EXIT_OK { plotted } else { ExitCode::from(code) }
         }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use crate::contract::msg::{Command, Estimate, LoopRecord, LoopTrace, Measurements, PlantState, TickTiming};
 use crate::contract::report::FaultEffect;
+use crate::model::catalog::Catalog;
 use crate::monitor::join::LoopParts;
 use crate::monitor::layout::Layout;
 use crate::monitor::sinks::mcap::{Detail, FILE, McapRecording};
@@ -15,10 +16,10 @@ use crate::tools::run_folder::{RunFolder, Table};
 use crate::tools::{RUN_FILES, ToolError};
 
 /// Writes `run_dir/run.mcap` from the run folder's files; returns its path.
-pub fn write_mcap(run_dir: &Path) -> Result<PathBuf, ToolError> {
+pub fn write_mcap(run_dir: &Path, catalog: &Catalog) -> Result<PathBuf, ToolError> {
     let folder = RunFolder::open(run_dir, &RUN_FILES)?;
     let bad = |why: String| ToolError::BadInput(format!("{}: {why}", run_dir.display()));
-    let (config, scenario) = folder.launch()?;
+    let (config, scenario) = folder.launch(catalog)?;
     let layout = Layout::new(&config, scenario.as_ref());
     let summary: serde_json::Value =
         serde_json::from_str(&folder.text("summary.json")?).map_err(|e| bad(format!("summary.json: {e}")))?;

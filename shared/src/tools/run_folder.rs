@@ -12,7 +12,7 @@ use crate::config::launch::LaunchConfig;
 use crate::launcher::report::read_summary;
 use crate::launcher::summary::Summary;
 use crate::model::scenario::Scenario;
-use crate::scenarios;
+use crate::model::catalog::Catalog;
 use crate::tools::ToolError;
 
 /// A folder checked to hold the files a tool reads.
@@ -43,9 +43,9 @@ impl RunFolder {
         ToolError::BadInput(format!("{}: {why}", self.dir.display()))
     }
 
-    /// The run's launch.toml (resolved at the run's start) and its scenario.
-    pub fn launch(&self) -> Result<(LaunchConfig, Box<dyn Scenario>), ToolError> {
-        scenarios::load_resolved(&self.dir.join("launch.toml")).map_err(|e| self.bad(e))
+    /// The run's launch.toml (resolved at the run's start) and its scenario, built from `catalog`.
+    pub fn launch(&self, catalog: &Catalog) -> Result<(LaunchConfig, Box<dyn Scenario>), ToolError> {
+        catalog.load_resolved(&self.dir.join("launch.toml")).map_err(|e| self.bad(e))
     }
 
     /// The run's summary.json.

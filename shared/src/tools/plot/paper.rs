@@ -12,36 +12,36 @@ use crate::config::launch::Override;
 use crate::launcher::create_run_dir;
 use crate::launcher::in_process::run_in_process;
 use crate::model::figure::{PaperCase, PaperTarget, RunColumns};
-use crate::scenarios;
+use crate::model::catalog::Catalog;
 use crate::tools::ToolError;
 use crate::tools::plot::run::RunData;
 
 /// Runs `case` in this process into `out/<name>` and reads the run folder back.
-fn run_case(case: &PaperCase, out: &Path) -> anyhow::Result<RunData> {
+fn run_case(case: &PaperCase, out: &Path, catalog: &Catalog) -> anyhow::Result<RunData> {
     let overrides = std::iter::once(&"mode=lockstep")
         .chain(case.overrides)
         .map(|text| Override::parse(text))
         .collect::<Result<Vec<_>, _>>()?;
     let resolved = match case.target {
-        PaperTarget::Scenario(name) => scenarios::resolve(name, &overrides),
+        PaperTarget::Scenario(name) => catalog.resolve(name, &overrides),
         PaperTarget::File(file, text) => {
             let path = out.join(file);
             std::fs::write(&path, text).with_context(|| format!("write {}", path.display()))?;
-            scenarios::resolve(&path.to_string_lossy(), &overrides)
+            catalog.resolve(&path.to_string_lossy(), &overrides)
         }
     };
     let (config, scenario) = resolved?;
     let dir = create_run_dir(Some(&out.join(case.name)), &config.scenario)?;
     println!("running {} ({}, {} s in lockstep) ...", case.name, scenario.title(), config.duration_s);
     run_in_process(&config, scenario.as_ref(), &dir)?;
-    Ok(RunData::read(&dir)?)
+    Ok(RunData::read(&dir, catalog)?)
 }
 
 /// Runs the experiments behind `scenario`'s paper figure into `out` (a new or empty folder; by
 /// default `runs/<time>-paper-<scenario>`) and draws the figures there. Returns their paths.
-pub fn paper_figures(scenario: &str, out: Option<&Path>) -> Result<Vec<PathBuf>, ToolError> {
-    let Some(paper) = scenarios::builtin(scenario).and_then(|entry| entry.paper) else {
-        let with_figures: Vec<&str> = scenarios::ALL.iter().filter(|e| e.paper.is_some()).map(|e| e.name).collect();
+pub fn paper_figures(catalog: &Catalog, scenario: &str, out: Option<&Path>) -> Result<Vec<PathBuf>, ToolError> {
+    let Some(paper) = catalog.find(scenario).and_then(|entry| entry.paper) else {
+        let with_figures: Vec<&str> = catalog.entries().iter().filter(|e| e.paper.is_some()).map(|e| e.name).collect();
         return Err(ToolError::BadInput(format!(
             "--paper {scenario}: no paper figure for it; allowed: {}",
             with_figures.join(", ")
@@ -62,7 +62,7 @@ pub fn paper_figures(scenario: &str, out: Option<&Path>) -> Result<Vec<PathBuf>,
         }
     };
     std::fs::create_dir_all(&out).with_context(|| format!("create {}", out.display()))?;
-    let runs = paper.cases.iter().map(|case| run_case(case, &out)).collect::<anyhow::Result<Vec<_>>>()?;
+    let runs = paper.cases.iter().map(|case| run_case(case, &out, catalog)).collect::<anyhow::Result<Vec<_>>>()?;
     let columns: Vec<&dyn RunColumns> = runs.iter().map(|run| run as &dyn RunColumns).collect();
     let mut written = Vec::new();
     for (name, figure) in (paper.draw)(&columns)? {

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::config::schema::Component;
+use crate::model::catalog::Catalog;
 use crate::model::figure::RunColumns;
 use crate::model::scenario::Scenario;
 use crate::monitor::layout::Layout;
@@ -67,9 +68,9 @@ pub struct RunData {
 }
 
 impl RunData {
-    pub fn read(run_dir: &Path) -> Result<Self, ToolError> {
+    pub fn read(run_dir: &Path, catalog: &Catalog) -> Result<Self, ToolError> {
         let folder = RunFolder::open(run_dir, &RUN_FILES)?;
-        let (config, scenario) = folder.launch()?;
+        let (config, scenario) = folder.launch(catalog)?;
         let layout = Layout::new(&config, scenario.as_ref());
         let columns = Columns::of(&layout);
         let summary = folder.summary()?;
@@ -324,8 +325,8 @@ fn tick_period_figure(data: &RunData) -> Option<Figure> {
 
 /// The figures of a run folder, written into it: estimate.png, commands.png, sensors.png, in real
 /// time tick-period.png, and latency-cdf.png. Returns the paths written.
-pub fn plot_run(run_dir: &Path) -> Result<Vec<PathBuf>, ToolError> {
-    let data = RunData::read(run_dir)?;
+pub fn plot_run(run_dir: &Path, catalog: &Catalog) -> Result<Vec<PathBuf>, ToolError> {
+    let data = RunData::read(run_dir, catalog)?;
     let mut written = Vec::new();
     let mut figures = vec![
         ("estimate.png", estimate_figure(&data)),
