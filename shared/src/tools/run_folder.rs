@@ -9,10 +9,11 @@ use std::str::FromStr;
 use anyhow::Context as _;
 
 use crate::config::launch::LaunchConfig;
+use crate::contract::msg::LoopTrace;
 use crate::launcher::report::read_summary;
 use crate::launcher::summary::Summary;
-use crate::model::scenario::Scenario;
 use crate::model::catalog::Catalog;
+use crate::model::scenario::Scenario;
 use crate::tools::ToolError;
 
 /// A folder checked to hold the files a tool reads.
@@ -138,6 +139,12 @@ impl Table {
                 .map_err(|e| self.error_at(row, format_args!("column {name:?}: {text:?} is not a number ({e})"))),
         };
         self.rows.iter().enumerate().map(cell).collect()
+    }
+
+    /// The eight stamps of loops.csv, a column each in [`LoopTrace::STAMP_NAMES`]' order; None
+    /// where a loop has no record.
+    pub fn stamps(&self) -> Result<Vec<Vec<Option<u64>>>, ToolError> {
+        LoopTrace::STAMP_NAMES.iter().map(|name| self.column::<u64>(&format!("{name}_ns"))).collect()
     }
 
     /// The column of this name as floats, NaN where a cell is empty.

@@ -31,19 +31,20 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Result, anyhow};
 use serde::Serialize;
 
 use self::pingpong::Transport;
 use crate::config::launch::Override;
 use crate::config::wait::{CPUS_TO_POLL, LockstepWait, Strategy, WaitSettings};
 use crate::contract::clock::{TickTimer, now_ns};
-use crate::contract::msg::PlantState;
+use crate::contract::msg::{LoopTrace, PlantState};
 use crate::contract::role::Role;
 use crate::launcher::{Binaries, Outcome, Summary};
 use crate::model::catalog::Catalog;
 use crate::runtime::signals::{Interrupted, StopFlag};
 use crate::tools::plot::latency as plot;
+use crate::tools::run_folder::RunFolder;
 
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
@@ -203,21 +204,13 @@ fn timer_fd(timer: &TickTimer) -> i32 {
     unsafe { timer.file_descriptor().native_handle() }
 }
 
-/// Reads the eight stamps of every recorded loop from a run's loops.csv.
+/// The eight stamps of every recorded loop of a run (its loops.csv); a loop without a record
+/// has none.
 fn traces(run_dir: &Path) -> Result<Vec<[u64; 8]>> {
-    let text = std::fs::read_to_string(run_dir.join("loops.csv")).context("loops.csv")?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let columns: Vec<usize> = crate::contract::msg::LoopTrace::STAMP_NAMES
-        .iter()
-        .map(|name| header.iter().position(|h| *h == format!("{name}_ns")).ok_or_else(|| anyhow!("no {name}_ns")))
-        .collect::<Result<_>>()?;
-    Ok(lines
-        .filter_map(|line| {
-            let fields: Vec<&str> = line.split(',').collect();
-            let stamps: Option<Vec<u64>> = columns.iter().map(|&c| fields.get(c)?.parse().ok()).collect();
-            stamps.and_then(|s| s.try_into().ok())
-        })
+    let loops = RunFolder::open(run_dir, &["loops.csv"])?.table("loops.csv")?;
+    let stamps = loops.stamps()?;
+    Ok((0..loops.len())
+        .filter_map(|row| stamps.iter().map(|column| column[row]).collect::<Option<Vec<u64>>>()?.try_into().ok())
         .collect())
 }
 
@@ -244,7 +237,7 @@ impl LoopAccumulator {
     }
 
     fn finish(self, name: &str, rate_hz: f64) -> LoopBench {
-        let e2e = sorted(self.traces.iter().map(|s| s[7].saturating_sub(s[0])).collect());
+        let e2e = sorted(self.traces.iter().map(|s| LoopTrace::from_stamps(*s).end_to_end_ns()).collect());
         let hop = |from: usize, to: usize| {
             Dist::of(&sorted(self.traces.iter().map(|s| s[to].saturating_sub(s[from])).collect()))
         };

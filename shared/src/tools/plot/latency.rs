@@ -9,7 +9,6 @@ use plotters::coord::Shift;
 use plotters::coord::combinators::{BindKeyPoints, LogCoord, WithKeyPoints};
 use plotters::prelude::*;
 
-use crate::contract::msg::LoopTrace;
 use crate::contract::report::HOPS;
 use crate::tools::ToolError;
 use crate::tools::plot::{FONT, colour, legend_mark, plot_error, png};
@@ -46,10 +45,7 @@ pub fn read_run_latencies(run_dir: &Path) -> Result<Vec<Series>, ToolError> {
 /// [`read_run_latencies`] on a loops.csv, read by column name.
 pub fn latencies_from_loops(loops: &Table) -> Result<Vec<Series>, ToolError> {
     let hops: Vec<(String, usize, usize)> = transport_hops().collect();
-    let stamps = LoopTrace::STAMP_NAMES
-        .iter()
-        .map(|name| loops.column::<u64>(&format!("{name}_ns")))
-        .collect::<Result<Vec<_>, _>>()?;
+    let stamps = loops.stamps()?;
     let end_to_end = loops.column::<u64>("end_to_end_ns")?;
     let mut samples: Vec<Vec<u64>> = vec![Vec::new(); hops.len() + 1];
     // A loop without a record has empty cells.
@@ -412,7 +408,8 @@ mod tests {
     #[test]
     fn hops_come_from_the_stamps_of_loops_csv() {
         // k, t, 8 stamps, end to end, deadline miss, rejected, tick timing; loop 1 has no record.
-        let stamps: Vec<String> = LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")).collect();
+        let stamps: Vec<String> =
+            crate::contract::msg::LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")).collect();
         let header = format!("k,t_s,{},end_to_end_ns,deadline_miss,rejected,ts,tw,tp\n", stamps.join(","));
         let text = header
             + "\

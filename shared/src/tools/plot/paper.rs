@@ -11,8 +11,8 @@ use anyhow::Context as _;
 use crate::config::launch::Override;
 use crate::launcher::create_run_dir;
 use crate::launcher::in_process::run_in_process;
-use crate::model::figure::{PaperCase, PaperTarget, RunColumns};
 use crate::model::catalog::Catalog;
+use crate::model::figure::{PaperCase, PaperTarget, RunColumns};
 use crate::tools::ToolError;
 use crate::tools::plot::run::RunData;
 
