@@ -13,14 +13,16 @@
 
 pub mod controller;
 pub mod estimator;
+pub mod law;
 pub mod metrics;
 pub mod params;
 pub mod plant;
 pub mod reference;
 pub mod sensors;
 
-use self::controller::{ControllerSection, FlatnessController, Law};
+use self::controller::{ControllerSection, FlatnessController};
 use self::estimator::{EstimatorSection, HighGainObserver, Inputs};
+use self::law::Law;
 use self::metrics::TetheredMetrics;
 use self::params::{Equilibrium, Model};
 use self::plant::{Body, PlantSection, TetheredPlant};
