@@ -25,6 +25,7 @@ use super::layout;
 use super::params::Model;
 use crate::contract::msg::SensorReading;
 use crate::model::scenario::{Calibration, Estimator};
+use crate::model::so3::{rotation, skew};
 
 type Vector9 = SVector<f64, 9>;
 type Matrix9 = SMatrix<f64, 9, 9>;
@@ -84,10 +85,6 @@ pub struct KalmanBucy {
 
 fn vector(reading: &SensorReading) -> Vector3<f64> {
     Vector3::from_column_slice(&reading.value[..3])
-}
-
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    v.cross_matrix()
 }
 
 impl KalmanBucy {
@@ -174,7 +171,7 @@ impl Estimator for KalmanBucy {
         let (load, uav) = (&readings[i.load_position], &readings[i.uav_position]);
         let (p_load, p_uav) = (vector(load), vector(uav));
         let q = (p_load - p_uav).try_normalize(1e-9).unwrap_or(self.held_direction);
-        let r = Matrix3::from_row_slice(&readings[i.attitude].value[..9]);
+        let r = rotation(&readings[i.attitude].value[..9]);
         let v_uav = vector(&readings[i.uav_velocity]);
 
         if let Some(last) = self.last_t

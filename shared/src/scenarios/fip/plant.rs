@@ -19,7 +19,7 @@ use super::params::Model;
 use super::{INPUTS, STATE_LEN, state};
 use crate::model::command_link::CommandLink;
 use crate::model::scenario::Plant;
-use crate::scenarios::quadcopter::plant::{orthonormalise, rotation, write_rotation};
+use crate::model::so3::{exp_so3, orthonormalise, rotation, write_rotation};
 
 /// `[plant]`.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -49,16 +49,6 @@ impl Initial {
         let (theta, phi) = (self.tilt_deg.to_radians(), self.tilt_azimuth_deg.to_radians());
         [theta.sin() * phi.cos(), theta.sin() * phi.sin(), -theta.cos()]
     }
-}
-
-/// exp(S(w)) by Rodrigues' formula.
-pub fn exp_so3(w: &Vector3<f64>) -> Matrix3<f64> {
-    let angle = w.norm();
-    let s = w.cross_matrix();
-    if angle < 1e-9 {
-        return Matrix3::identity() + s + s * s * 0.5;
-    }
-    Matrix3::identity() + s * (angle.sin() / angle) + s * s * ((1.0 - angle.cos()) / (angle * angle))
 }
 
 /// (p_L, v_L, q, ω).

@@ -29,7 +29,7 @@
 use nalgebra::{Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::plant::Model;
+use super::params::Model;
 use crate::contract::msg::SensorReading;
 use crate::model::integrate::rk4;
 use crate::model::scenario::Estimator;
@@ -172,7 +172,7 @@ impl Estimator for PendulumEstimator {
 mod tests {
     use super::*;
     use crate::contract::msg::MAX_SENSOR_DIM;
-    use crate::scenarios::pendulum::plant::tests::paper_model;
+    use crate::scenarios::pendulum::params::tests::paper_model;
 
     fn max_real_part(m: nalgebra::Matrix3<f64>) -> f64 {
         m.complex_eigenvalues().iter().map(|p| p.re).fold(f64::MIN, f64::max)

@@ -21,6 +21,7 @@ use super::Pendulum;
 use super::estimator::Kind;
 use crate::config::launch::{LaunchConfig, SensorSpec};
 use crate::model::integrate::rk4;
+use crate::model::poly::wrap_to_turn;
 
 /// The exact search gives up here: a second of delay at 1 kHz.
 const MAX_DELAY_TICKS: u32 = 1000;
@@ -381,7 +382,7 @@ pub fn crossovers(p: &Pendulum, lags: Lags) -> Vec<Crossover> {
                 }
             }
             let omega = (0.5 * (lo + hi)).exp();
-            let phase = (loop_gain(p, omega, lags).arg() + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU);
+            let phase = wrap_to_turn(loop_gain(p, omega, lags).arg() + std::f64::consts::PI);
             Crossover { omega, phase, delay_s: phase / omega }
         })
         .collect()

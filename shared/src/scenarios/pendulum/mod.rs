@@ -11,6 +11,7 @@ pub mod controller;
 pub mod estimator;
 pub mod margin;
 mod paper;
+pub mod params;
 pub mod plant;
 pub mod reference;
 pub mod sensors;
@@ -22,7 +23,8 @@ use serde::Deserialize;
 
 use self::controller::StateFeedback;
 use self::estimator::{Kind, PendulumEstimator};
-use self::plant::{Model, PendulumPlant};
+use self::params::Model;
+use self::plant::PendulumPlant;
 use self::reference::Upright;
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{positive, positive_as};

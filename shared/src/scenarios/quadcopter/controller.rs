@@ -21,10 +21,11 @@ use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 
 use super::layout;
-use super::plant::{Model, rotation, skew};
+use super::params::Model;
 use super::reference::Reference;
 use crate::model::reference::Reference as _;
 use crate::model::scenario::Controller;
+use crate::model::so3::{rotation, skew};
 
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(rename_all = "kebab-case")]

@@ -23,9 +23,10 @@ use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use serde::Deserialize;
 
 use super::layout;
-use super::plant::{Model, orthonormalise, rotation};
+use super::params::Model;
 use crate::contract::msg::SensorReading;
 use crate::model::scenario::{Calibration, Estimator};
+use crate::model::so3::{log_so3, orthonormalise, rotation};
 
 type Vector16 = SVector<f64, 16>;
 type Matrix16 = SMatrix<f64, 16, 16>;
@@ -130,14 +131,6 @@ fn a_xi(s: &Sample, thrust: f64, torque: &Vector3<f64>) -> Matrix6x10 {
 fn b_xi(s: &Sample, g: f64) -> SVector<f64, 6> {
     let dv = -s.w.cross(&s.v) + g * s.r.transpose() * Vector3::z();
     SVector::<f64, 6>::from_fn(|i, _| if i < 3 { dv[i] } else { 0.0 })
-}
-
-/// The SO(3) logarithm as a rotation vector.
-fn log_so3(r: &Matrix3<f64>) -> Vector3<f64> {
-    let vee = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]);
-    let cos = ((r.trace() - 1.0) / 2.0).clamp(-1.0, 1.0);
-    let angle = cos.acos();
-    if angle < 1e-8 { vee / 2.0 } else { vee * (angle / (2.0 * angle.sin())) }
 }
 
 pub struct ParameterEstimator {
@@ -376,13 +369,5 @@ mod tests {
             exact.step(xi, 0.1);
         }
         assert!((exact.estimate - 0.2).abs() < 1e-12 && (exact.p - 0.2).abs() < 1e-12);
-    }
-
-    #[test]
-    fn log_so3_inverts_the_exponential() {
-        for w in [Vector3::new(0.3, -0.2, 0.5), Vector3::new(1e-10, 0.0, 0.0), Vector3::new(0.0, 2.5, 1.0)] {
-            let r = nalgebra::Rotation3::from_scaled_axis(w).into_inner();
-            assert!((log_so3(&r) - w).norm() < 1e-9, "{w}");
-        }
     }
 }

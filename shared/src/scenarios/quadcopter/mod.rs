@@ -14,6 +14,7 @@
 pub mod controller;
 pub mod estimator;
 mod paper;
+pub mod params;
 pub mod plant;
 pub mod reference;
 pub mod sensors;
@@ -24,7 +25,8 @@ use serde::Deserialize;
 
 use self::controller::{Backstepping, ControllerSection, Parameters};
 use self::estimator::{EstimatorSection, Inputs, ParameterEstimator};
-use self::plant::{Actuation, Model, PlantSection, QuadcopterPlant};
+use self::params::{Actuation, Model};
+use self::plant::{PlantSection, QuadcopterPlant};
 use self::reference::{Reference, ReferenceSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::{not_negative, positive, within_si};

@@ -18,89 +18,12 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
+use super::params::{Actuation, Model};
 use super::{INPUTS, STATE_LEN};
 use crate::model::command_link::CommandLink;
 use crate::model::integrate::rk4;
 use crate::model::scenario::Plant;
-
-/// Skew-symmetric matrix: S(x) y = x × y (1).
-pub fn skew(x: &Vector3<f64>) -> Matrix3<f64> {
-    x.cross_matrix()
-}
-
-/// The nearest rotation to an almost-orthonormal matrix (polar factor by Newton iteration,
-/// which converges in one or two steps this close to SO(3)).
-pub fn orthonormalise(r: &Matrix3<f64>) -> Matrix3<f64> {
-    let mut q = *r;
-    for _ in 0..3 {
-        let inverse_t = q.try_inverse().map_or(q, |i| i.transpose());
-        q = (q + inverse_t) * 0.5;
-    }
-    q
-}
-
-/// Row-major R from a state slice, and back.
-pub fn rotation(x: &[f64]) -> Matrix3<f64> {
-    Matrix3::from_row_slice(x)
-}
-
-pub fn write_rotation(r: &Matrix3<f64>, out: &mut [f64]) {
-    for i in 0..3 {
-        for j in 0..3 {
-            out[3 * i + j] = r[(i, j)];
-        }
-    }
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Actuation {
-    /// Thrust and body torque act directly (the paper's simulations).
-    Torque,
-    /// Thrust and a body-rate command; the vehicle's own rate loop tracks it (the lab).
-    RateLoop,
-}
-
-/// The true vehicle [paper Table 1; §8 for the lab's BLADE 200QX].
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Model {
-    pub mass_kg: f64,
-    /// Principal moments of inertia j, kg·m² (Assumption 1: J = diag(j)).
-    pub inertia_kg_m2: [f64; 3],
-    pub g: f64,
-    /// Constant external force b in {I}, N.
-    pub disturbance_n: [f64; 3],
-    pub actuation: Actuation,
-    /// Rate loop: time constant τ_r of the first-order lag, s.
-    pub rate_loop_time_constant_s: f64,
-    /// The command link takes a new command every this many seconds and holds it (0: every tick).
-    pub command_period_s: f64,
-    /// Accepted command ranges: 0 ≤ T ≤ thrust_max, |τᵢ| ≤ torque_max, |ω_cmd,ᵢ| ≤ rate_max.
-    pub thrust_max_n: f64,
-    pub torque_max_nm: f64,
-    pub rate_max_rad_s: f64,
-}
-
-impl Model {
-    /// The true parameter vector ξ = (1/m, b/m, ξ₃, 1/j) of (22) for mass m.
-    pub fn xi(&self, mass: f64) -> [f64; 10] {
-        let [j1, j2, j3] = self.inertia_kg_m2;
-        let b = self.disturbance_n;
-        [
-            1.0 / mass,
-            b[0] / mass,
-            b[1] / mass,
-            b[2] / mass,
-            (j2 - j3) / j1,
-            (j3 - j1) / j2,
-            (j1 - j2) / j3,
-            1.0 / j1,
-            1.0 / j2,
-            1.0 / j3,
-        ]
-    }
-}
+use crate::model::so3::{orthonormalise, rotation, skew, write_rotation};
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -170,7 +93,7 @@ fn derivative(
     noise: &(Vector3<f64>, Vector3<f64>),
     x: &State,
 ) -> State {
-    let r = Matrix3::from_row_slice(&x.as_slice()[3..12]);
+    let r = rotation(&x.as_slice()[3..12]);
     let v = Vector3::new(x[12], x[13], x[14]);
     let w = Vector3::new(x[15], x[16], x[17]);
     let j = Vector3::from(model.inertia_kg_m2);
@@ -185,11 +108,7 @@ fn derivative(
     } + noise.1;
     let mut dx = State::zeros();
     dx.fixed_rows_mut::<3>(0).copy_from(&p_dot);
-    for i in 0..3 {
-        for k in 0..3 {
-            dx[3 + 3 * i + k] = r_dot[(i, k)];
-        }
-    }
+    write_rotation(&r_dot, &mut dx.as_mut_slice()[3..12]);
     dx.fixed_rows_mut::<3>(12).copy_from(&v_dot);
     dx.fixed_rows_mut::<3>(15).copy_from(&w_dot);
     dx
@@ -223,7 +142,7 @@ impl Plant for QuadcopterPlant {
         let mut x = State::from_column_slice(&self.x[..18]);
         for _ in 0..substeps {
             x = rk4(&f, &x, h, 1);
-            let r = orthonormalise(&Matrix3::from_row_slice(&x.as_slice()[3..12]));
+            let r = orthonormalise(&rotation(&x.as_slice()[3..12]));
             write_rotation(&r, &mut x.as_mut_slice()[3..12]);
         }
         self.x[..18].copy_from_slice(x.as_slice());

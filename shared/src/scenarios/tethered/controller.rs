@@ -15,22 +15,13 @@
 
 use serde::Deserialize;
 
-use super::estimator::coefficients_of_roots;
+use super::law::Law;
 use super::layout;
 use super::params::Model;
 use super::reference::{Point, TetheredReference};
+use crate::model::poly::coefficients_of_roots;
 use crate::model::reference::Reference;
 use crate::model::scenario::Controller;
-
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, strum::Display)]
-#[serde(rename_all = "kebab-case")]
-#[strum(serialize_all = "kebab-case")]
-pub enum Law {
-    /// Γa′: ϕ and ϑ.
-    GammaA,
-    /// Γb: ϕ and f_L.
-    GammaB,
-}
 
 /// `[controller]`.
 #[derive(Debug, Clone, Deserialize, PartialEq)]

@@ -24,6 +24,7 @@ use super::layout;
 use super::params::Model;
 use crate::contract::msg::SensorReading;
 use crate::model::integrate::rk4;
+use crate::model::poly::{coefficients_of_roots, wrap};
 use crate::model::scenario::{Calibration, Estimator};
 
 /// `[estimator]`.
@@ -74,28 +75,6 @@ pub enum Branch {
 pub struct Inputs {
     pub accelerometer: usize,
     pub gyro: usize,
-}
-
-/// s³ + c₂s² + c₁s + c₀ = Π(s − rᵢ) (any degree): the coefficients [c₀, c₁, …], lowest first.
-pub fn coefficients_of_roots(roots: &[f64]) -> Vec<f64> {
-    // Multiply out with the highest power last: p = [1] then p ← p·(s − r).
-    let mut p = vec![1.0];
-    for r in roots {
-        let mut next = vec![0.0; p.len() + 1];
-        for (i, c) in p.iter().enumerate() {
-            next[i + 1] += c;
-            next[i] -= r * c;
-        }
-        p = next;
-    }
-    p.pop();
-    p
-}
-
-/// The angle in (−π, π].
-pub fn wrap(angle: f64) -> f64 {
-    let a = (angle + PI).rem_euclid(2.0 * PI) - PI;
-    if a == -PI { PI } else { a }
 }
 
 /// One sign's observer.
@@ -313,24 +292,5 @@ impl Estimator for HighGainObserver {
         }
         self.active = if c[8] > 0.5 { 1 } else { 0 };
         self.last = Some(Sample { t: c[9], u3: c[10], eta: c[11], w: c[12] });
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_observer_polynomial_is_the_papers() {
-        // (s + 6)(s + 4.5)(s + 3) = s³ + 13.5s² + 58.5s + 81, so H = [135, 5850, 81000].
-        assert_eq!(coefficients_of_roots(&[-6.0, -4.5, -3.0]), [81.0, 58.5, 13.5]);
-        assert_eq!(coefficients_of_roots(&[-1.0, -1.5, -2.0, -2.5]), [7.5, 19.25, 17.75, 7.0]);
-    }
-
-    #[test]
-    fn angles_wrap_into_minus_pi_to_pi() {
-        for (a, w) in [(0.5, 0.5), (PI, PI), (-PI, PI), (3.0 * PI / 2.0, -PI / 2.0), (-7.0, -7.0 + 2.0 * PI)] {
-            assert!((wrap(a) - w).abs() < 1e-12, "{a} → {}", wrap(a));
-        }
     }
 }

@@ -16,10 +16,10 @@
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
-use super::estimator::wrap;
 use super::reference::TetheredReference;
 use super::{layout, state};
 use crate::model::mean::Mean;
+use crate::model::poly::wrap;
 use crate::model::reference::Reference;
 use crate::model::scenario::{Metrics, Row};
 

@@ -13,6 +13,7 @@
 
 pub mod controller;
 pub mod estimator;
+pub mod law;
 pub mod metrics;
 mod paper;
 pub mod params;
@@ -20,8 +21,9 @@ pub mod plant;
 pub mod reference;
 pub mod sensors;
 
-use self::controller::{ControllerSection, FlatnessController, Law};
+use self::controller::{ControllerSection, FlatnessController};
 use self::estimator::{EstimatorSection, HighGainObserver, Inputs};
+use self::law::Law;
 use self::metrics::TetheredMetrics;
 use self::params::{Equilibrium, Model};
 use self::plant::{Body, PlantSection, TetheredPlant};

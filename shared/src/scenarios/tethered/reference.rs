@@ -12,7 +12,7 @@
 
 use serde::Deserialize;
 
-use super::controller::Law;
+use super::law::Law;
 use super::state;
 use crate::model::reference::Reference;
 

@@ -32,18 +32,11 @@
 //! NLLS-3L (the three-loop cascade of the paper's ref. [22]) is not here: the paper gives
 //! neither its structure nor its gains.
 
+use crate::model::poly::coefficients_of_roots;
+
 /// Π(s − pᵢ) = sᴺ + a_(N−1)s^(N−1) + … + a₀, returned as [a₀ … a_(N−1)].
-pub fn characteristic<const N: usize>(poles: [f64; N]) -> [f64; N] {
-    // Coefficients of the monic product, lowest first, with the leading 1 at index `len`.
-    let mut c = vec![1.0];
-    for p in poles {
-        let mut next = vec![0.0; c.len() + 1];
-        for (k, ck) in c.iter().enumerate() {
-            next[k + 1] += ck;
-            next[k] -= p * ck;
-        }
-        c = next;
-    }
+fn characteristic<const N: usize>(poles: [f64; N]) -> [f64; N] {
+    let c = coefficients_of_roots(&poles);
     std::array::from_fn(|k| c[k])
 }
 
