@@ -40,9 +40,11 @@ impl Supervisor<'_> {
     pub(super) fn continue_stopped(&mut self, now: u64) {
         for i in self.faults.take_continues_due(now) {
             let role = inject::target(self.faults.spec(i));
+            // Stamped before the signal: the process may run, and the monitor stamp it resumed,
+            // before this thread reads the clock again.
+            let ns = now_ns();
             self.processes[role].signal(libc::SIGCONT);
             self.processes[role].stopped = false;
-            let ns = now_ns();
             self.faults.continued(i, ns);
             self.note(ns, format!("SIGCONT {role}"));
         }
