@@ -29,6 +29,45 @@ pub struct ProcessArgs {
     pub incarnation: u32,
 }
 
+/// The environment a user's own stage (`[stages.<role>] command`) is started with: the same
+/// arguments, by name, since its command line is the user's.
+pub mod stage_env {
+    /// Which stage it runs: sensors, estimator or controller.
+    pub const ROLE: &str = "LOOPLAB_ROLE";
+    pub const LAUNCH: &str = "LOOPLAB_LAUNCH";
+    pub const RUN_ID: &str = "LOOPLAB_RUN_ID";
+    pub const RUN_DIR: &str = "LOOPLAB_RUN_DIR";
+    pub const INCARNATION: &str = "LOOPLAB_INCARNATION";
+}
+
+impl ProcessArgs {
+    /// The arguments as the launcher's environment gives them to a user's own stage, with the
+    /// role it started; None where the variables are missing (not started by the launcher).
+    pub fn from_env() -> Option<(String, Self)> {
+        let var = |name| std::env::var(name).ok();
+        Some((
+            var(stage_env::ROLE)?,
+            Self {
+                launch: var(stage_env::LAUNCH)?.into(),
+                run_id: var(stage_env::RUN_ID)?,
+                run_dir: var(stage_env::RUN_DIR)?.into(),
+                incarnation: var(stage_env::INCARNATION)?.parse().ok()?,
+            },
+        ))
+    }
+
+    /// The variables [`Self::from_env`] reads, for `role`.
+    pub fn to_env(&self, role: &str) -> Vec<(&'static str, String)> {
+        vec![
+            (stage_env::ROLE, role.to_owned()),
+            (stage_env::LAUNCH, self.launch.display().to_string()),
+            (stage_env::RUN_ID, self.run_id.clone()),
+            (stage_env::RUN_DIR, self.run_dir.display().to_string()),
+            (stage_env::INCARNATION, self.incarnation.to_string()),
+        ]
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum ChildEvent {

@@ -49,15 +49,37 @@ pub struct Context {
 /// `[[bin]]`s do; under `cargo run` the launcher builds its package's binaries first). Every
 /// process must get the same catalog: each reads the run's launch file by scenario name.
 pub fn process_main_with(role: Role, body: fn(&Context) -> Result<ChildEvent>, catalog: &Catalog) -> ExitCode {
-    let name = role.name();
     use clap::Parser;
-    let args = ProcessArgs::parse();
+    run_process(role, &ProcessArgs::parse(), catalog, body)
+}
+
+/// Connects the process of `role` to its run as `args` say, runs `body`, reports what it
+/// returns, and tidies up (see [`process_main_with`]).
+pub fn run_process(
+    role: Role,
+    args: &ProcessArgs,
+    catalog: &Catalog,
+    body: impl FnOnce(&Context) -> Result<ChildEvent>,
+) -> ExitCode {
+    run_process_as(role, args, catalog, crate::contract::msg::layout_fingerprint(), body)
+}
+
+/// [`run_process`] with the message layouts of fingerprint `layout` (a user's stage may come
+/// from another build, and a test plays one).
+pub(crate) fn run_process_as(
+    role: Role,
+    args: &ProcessArgs,
+    catalog: &Catalog,
+    layout: &str,
+    body: impl FnOnce(&Context) -> Result<ChildEvent>,
+) -> ExitCode {
+    let name = role.name();
     // SAFETY: getppid has no preconditions.
     let launcher = unsafe { libc::getppid() };
     let result = (|| -> Result<()> {
         let stop = StopFlag::install()?;
         let (config, scenario) = catalog.load_resolved(Path::new(&args.launch))?;
-        let ipc = Ipc::new(name, &args.run_id, config.mode)?;
+        let ipc = Ipc::with_layout(name, &args.run_id, config.mode, layout)?;
         let context = Context {
             config,
             scenario,
@@ -106,11 +128,38 @@ pub fn wait(ws: &WaitSet<ipc::Service>) -> Result<()> {
         .map_err(|e| anyhow!("WaitSet wait failed: {e:?}"))
 }
 
+/// Where the event lines go when stdout is not theirs (see [`keep_stdout_for_events`]).
+static EVENTS: std::sync::OnceLock<std::sync::Mutex<std::fs::File>> = std::sync::OnceLock::new();
+
+/// Keeps the launcher's pipe for the event lines alone and sends whatever else the process
+/// writes on stdout (a user's `print` in their stage) to its stderr, its log: a stray line on
+/// the pipe would be read as a broken event.
+pub fn keep_stdout_for_events() -> Result<()> {
+    use std::os::fd::FromRawFd;
+    // SAFETY: dup and dup2 on the process's own standard descriptors; the duplicate is owned by
+    // the File from here on.
+    let events = unsafe { libc::dup(1) };
+    if events < 0 || unsafe { libc::dup2(2, 1) } < 0 {
+        return Err(std::io::Error::last_os_error()).context("keep stdout for the event lines");
+    }
+    let _ = EVENTS.set(std::sync::Mutex::new(unsafe { std::fs::File::from_raw_fd(events) }));
+    Ok(())
+}
+
 /// Writes one event line on stdout for the launcher.
 pub fn emit(event: &ChildEvent) -> Result<()> {
     let line = serde_json::to_string(event).context("encode event")?;
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "{line}").and_then(|_| out.flush()).context("write event to the launcher")
+    let written = match EVENTS.get() {
+        Some(events) => {
+            let mut out = events.lock().unwrap_or_else(|e| e.into_inner());
+            writeln!(out, "{line}").and_then(|_| out.flush())
+        }
+        None => {
+            let mut out = std::io::stdout().lock();
+            writeln!(out, "{line}").and_then(|_| out.flush())
+        }
+    };
+    written.context("write event to the launcher")
 }
 
 /// Blocks until the launcher writes `expected` as a line on stdin. Returns false if a stop was

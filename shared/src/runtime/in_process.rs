@@ -41,11 +41,11 @@ pub fn refusal(config: &LaunchConfig) -> Option<String> {
 }
 
 /// Handles the input of one stage and stamps its output, as the stage's process would.
-fn pass<T: Task>(runner: &mut StageRunner<T>, role: Role, input: &T::In) -> T::Out {
+fn pass<T: Task>(runner: &mut StageRunner<T>, role: Role, input: &T::In) -> Result<T::Out> {
     let received = now_ns();
-    let mut out = runner.handle(input).output.expect("lockstep sends a dropped output marked lost");
+    let mut out = runner.handle(input)?.output.expect("lockstep sends a dropped output marked lost");
     out.header_mut().trace.stamp(role, received, now_ns());
-    out
+    Ok(out)
 }
 
 /// Runs every loop of `config` in order, handing each message to `observe` as the monitor
@@ -67,11 +67,11 @@ pub fn run(
     while plant.k < loops && !stop.requested() {
         let state = plant.state_message(TickTiming::default(), now_ns());
         observe(LoopMessage::State(state))?;
-        let measurements = pass(&mut sensors, Role::Sensors, &state);
+        let measurements = pass(&mut sensors, Role::Sensors, &state)?;
         observe(LoopMessage::Measurements(measurements))?;
-        let estimate = pass(&mut estimator, Role::Estimator, &measurements);
+        let estimate = pass(&mut estimator, Role::Estimator, &measurements)?;
         observe(LoopMessage::Estimate(estimate))?;
-        let command = pass(&mut controller, Role::Controller, &estimate);
+        let command = pass(&mut controller, Role::Controller, &estimate)?;
         observe(LoopMessage::Command(command))?;
         let record = plant.accept(&command, now_ns());
         observe(LoopMessage::Loop(record))?;

@@ -21,7 +21,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -31,11 +31,13 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+use iceoryx2::service::builder::publish_subscribe::{PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError};
 use iceoryx2::waitset::{WaitSet, WaitSetGuard};
 
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
-use crate::contract::msg::MONITOR_BUFFER;
+use crate::contract::msg::{MONITOR_BUFFER, layout_fingerprint};
 use crate::runtime::reader_state::ReaderState;
 use crate::runtime::signals::StopFlag;
 use crate::runtime::wait::{sleep_until, timespec};
@@ -107,17 +109,38 @@ fn quiet_logs() {
     set_log_level_from_env_or(LogLevel::Error);
 }
 
+/// The service attribute that carries the message layouts' fingerprint.
+const LAYOUT_KEY: &str = "looplab.layout";
+
 /// One process's connection to the run's services.
 pub struct Ipc {
     node: Node<ipc::Service>,
+    config: Config,
     run_id: String,
     mode: Mode,
+    /// The message layouts this process was built with ([`layout_fingerprint`]).
+    layout: String,
 }
 
 impl Ipc {
     pub fn new(process: &str, run_id: &str, mode: Mode) -> Result<Self> {
-        let node = node(process, &run_config(run_id)?)?;
-        Ok(Self { node, run_id: run_id.to_owned(), mode })
+        Self::with_layout(process, run_id, mode, layout_fingerprint())
+    }
+
+    /// As a process built with message layouts of fingerprint `layout` would connect: only a
+    /// test that plays a stage from another build has a reason to call it.
+    #[doc(hidden)]
+    pub fn with_layout(process: &str, run_id: &str, mode: Mode, layout: &str) -> Result<Self> {
+        let config = run_config(run_id)?;
+        let node = node(process, &config)?;
+        Ok(Self { node, config, run_id: run_id.to_owned(), mode, layout: layout.to_owned() })
+    }
+
+    /// The fingerprint the service `name` was created with, if it exists and has one.
+    fn layout_of(&self, name: &ServiceName) -> Option<String> {
+        let details = ipc::Service::details(name, &self.config, MessagingPattern::PublishSubscribe).ok()??;
+        let key = AttributeKey::try_from(LAYOUT_KEY).ok()?;
+        details.static_details.attributes().key_value(&key, 0).map(|v| v.to_string())
     }
 
     fn pubsub<T: Debug + ZeroCopySend + 'static>(
@@ -126,7 +149,10 @@ impl Ipc {
     ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>> {
         let name = service_name(&self.run_id, topic)?;
         let safe_overflow = self.mode == Mode::Realtime;
-        retry(&format!("service {name}"), || {
+        let key = AttributeKey::try_from(LAYOUT_KEY).map_err(|e| anyhow!("attribute key: {e:?}"))?;
+        let value = AttributeValue::try_from(self.layout.as_str()).map_err(|e| anyhow!("attribute value: {e:?}"))?;
+        let layout = AttributeVerifier::new().require(&key, &value).map_err(|e| anyhow!("attribute: {e:?}"))?;
+        let open = || {
             self.node
                 .service_builder(&name)
                 .publish_subscribe::<T>()
@@ -137,8 +163,22 @@ impl Ipc {
                 .max_publishers(2)
                 .max_subscribers(MAX_SUBSCRIBERS)
                 .max_nodes(MAX_NODES)
-                .open_or_create()
-        })
+                .open_or_create_with_attributes(&layout)
+        };
+        // Another build's layouts: refused at once, naming both fingerprints.
+        if let Err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            PublishSubscribeOpenError::IncompatibleAttributes,
+        )) = open()
+        {
+            let theirs = self.layout_of(&name).unwrap_or_else(|| "none".into());
+            bail!(
+                "the run's {} messages have layout fingerprint {theirs}, this process was built with {}: build it \
+                 from the same LoopLab as the launcher (the Python package: pip install ./services/python)",
+                topic.name(),
+                self.layout
+            );
+        }
+        retry(&format!("service {name}"), open)
     }
 
     fn event(&self, topic: Topic) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>> {

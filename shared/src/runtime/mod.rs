@@ -13,4 +13,5 @@ pub mod shared_file;
 pub mod signals;
 pub mod snapshot;
 pub mod task;
+pub mod user_stage;
 pub mod wait;

@@ -17,8 +17,8 @@ use crate::runtime::snapshot::Snapshot;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
-/// Runs `task` as the process of `role` until a stop is requested.
-fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {
+/// Runs `task` as the process of `role` until a stop is requested (or the task fails).
+pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {
     let (input, output) = (role.input().expect("a stage has an input"), role.output().expect("and an output"));
     let (wait_settings, realtime) = (&context.config.wait, context.config.mode == Mode::Realtime);
     let subscriber: TopicSubscriber<T::In> =
@@ -33,7 +33,7 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
     if context.incarnation > 0
         && let Some(frozen) = kept.as_mut().and_then(|k| k.read())
     {
-        runner.task.thaw(&frozen);
+        runner.task.thaw(&frozen)?;
     }
     subscriber.connect(&context.stop)?;
     emit(&ChildEvent::Ready)?;
@@ -58,12 +58,12 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
             let input: &T::In = &sample;
             let header = *input.header();
             arrivals.observe(header.k, header.trace.get(Stamp::PlantPublish), received);
-            let handled = runner.handle(input);
+            let handled = runner.handle(input)?;
             // Lockstep: the state is kept before the output goes out, so that a kill injected
             // at a later loop (with the plant holding the loop) always finds this loop's state;
             // real time: after the send, off the hop's path.
             if !realtime {
-                keep(&mut kept, &runner.task);
+                keep(&mut kept, &runner.task)?;
             }
             if let Some(hold) = handled.hold {
                 std::thread::sleep(hold);
@@ -76,7 +76,7 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
             // After the send, off the hop's path: the input's chunk goes back.
             drop(sample);
             if realtime {
-                keep(&mut kept, &runner.task);
+                keep(&mut kept, &runner.task)?;
             }
         }
     }
@@ -87,10 +87,13 @@ fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> 
 }
 
 /// Writes the task's frozen state to its snapshot, if it has one.
-fn keep<T: Task>(kept: &mut Option<Snapshot<Calibration>>, task: &T) {
-    if let (Some(kept), Some(frozen)) = (kept.as_mut(), task.freeze()) {
+fn keep<T: Task>(kept: &mut Option<Snapshot<Calibration>>, task: &T) -> Result<()> {
+    if let Some(kept) = kept.as_mut()
+        && let Some(frozen) = task.freeze()?
+    {
         kept.write(&frozen);
     }
+    Ok(())
 }
 
 pub fn sensors(context: &Context) -> Result<ChildEvent> {

@@ -8,6 +8,8 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use anyhow::Result;
+
 use crate::config::faults::CorruptValue;
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState};
@@ -23,15 +25,18 @@ pub trait Task {
     type Out: Message;
     /// Whether the task has state to freeze (the process runner then keeps a snapshot).
     const FREEZES: bool = false;
-    /// Computes this loop's output from its input (the header is the runner's business).
-    fn process(&mut self, input: &Self::In, output: &mut Self::Out);
+    /// Computes this loop's output from its input (the header is the runner's business). An
+    /// error (a user's stage that raised) ends the process's incarnation.
+    fn process(&mut self, input: &Self::In, output: &mut Self::Out) -> Result<()>;
     /// State worth keeping across a restart: an estimator's calibrated bias, a controller's
     /// integrators.
-    fn freeze(&self) -> Option<Calibration> {
-        None
+    fn freeze(&self) -> Result<Option<Calibration>> {
+        Ok(None)
     }
     /// A restarted task gets its predecessor's frozen state before its first input.
-    fn thaw(&mut self, _frozen: &Calibration) {}
+    fn thaw(&mut self, _frozen: &Calibration) -> Result<()> {
+        Ok(())
+    }
     /// Replaces the output by a corrupt value (`corrupt` faults, which target the command).
     fn corrupt(&self, _output: &mut Self::Out, _value: CorruptValue) {}
 }
@@ -57,11 +62,12 @@ impl SensorsTask {
 impl Task for SensorsTask {
     type In = PlantState;
     type Out = Measurements;
-    fn process(&mut self, state: &PlantState, out: &mut Measurements) {
+    fn process(&mut self, state: &PlantState, out: &mut Measurements) -> Result<()> {
         let (k, t) = (state.header.k, state.header.t);
         let u_applied = &state.u_applied[..self.inputs];
         self.emulator.tick(k, t, &state.x, u_applied, &mut out.readings[..self.sensors]);
         out.u_applied = state.u_applied;
+        Ok(())
     }
 }
 
@@ -75,8 +81,13 @@ pub struct EstimatorTask {
 
 impl EstimatorTask {
     pub fn new(config: &LaunchConfig, scenario: &dyn Scenario) -> Self {
+        Self::with(scenario.estimator(), config, scenario)
+    }
+
+    /// Runs `estimator` (a user's own, `runtime::user_stage`) in place of the scenario's.
+    pub fn with(estimator: Box<dyn Estimator>, config: &LaunchConfig, scenario: &dyn Scenario) -> Self {
         Self {
-            estimator: scenario.estimator(),
+            estimator,
             sensors: config.sensors.len(),
             inputs: scenario.vectors().input.len(),
             estimates: scenario.vectors().estimate.len(),
@@ -88,15 +99,17 @@ impl Task for EstimatorTask {
     type In = Measurements;
     type Out = Estimate;
     const FREEZES: bool = true;
-    fn process(&mut self, meas: &Measurements, out: &mut Estimate) {
+    fn process(&mut self, meas: &Measurements, out: &mut Estimate) -> Result<()> {
         let readings = &meas.readings[..self.sensors];
         self.estimator.update(meas.header.t, readings, &meas.u_applied[..self.inputs], &mut out.x[..self.estimates]);
+        Ok(())
     }
-    fn freeze(&self) -> Option<Calibration> {
-        self.estimator.calibration()
+    fn freeze(&self) -> Result<Option<Calibration>> {
+        Ok(self.estimator.calibration())
     }
-    fn thaw(&mut self, frozen: &Calibration) {
+    fn thaw(&mut self, frozen: &Calibration) -> Result<()> {
         self.estimator.resume(frozen);
+        Ok(())
     }
 }
 
@@ -109,11 +122,12 @@ pub struct ControllerTask {
 
 impl ControllerTask {
     pub fn new(scenario: &dyn Scenario) -> Self {
-        Self {
-            controller: scenario.controller(),
-            estimates: scenario.vectors().estimate.len(),
-            limits: scenario.input_limits(),
-        }
+        Self::with(scenario.controller(), scenario)
+    }
+
+    /// Runs `controller` (a user's own, `runtime::user_stage`) in place of the scenario's.
+    pub fn with(controller: Box<dyn Controller>, scenario: &dyn Scenario) -> Self {
+        Self { controller, estimates: scenario.vectors().estimate.len(), limits: scenario.input_limits() }
     }
 }
 
@@ -121,24 +135,31 @@ impl Task for ControllerTask {
     type In = Estimate;
     type Out = Command;
     const FREEZES: bool = true;
-    fn process(&mut self, est: &Estimate, out: &mut Command) {
+    fn process(&mut self, est: &Estimate, out: &mut Command) -> Result<()> {
         let m = self.limits.len();
         self.controller.update(est.header.t, &est.x[..self.estimates], &mut out.u[..m]);
+        Ok(())
     }
-    fn freeze(&self) -> Option<Calibration> {
-        self.controller.freeze()
+    fn freeze(&self) -> Result<Option<Calibration>> {
+        Ok(self.controller.freeze())
     }
-    fn thaw(&mut self, frozen: &Calibration) {
+    fn thaw(&mut self, frozen: &Calibration) -> Result<()> {
         self.controller.thaw(frozen);
+        Ok(())
     }
     fn corrupt(&self, out: &mut Command, value: CorruptValue) {
-        for (u, (_, hi)) in out.u.iter_mut().zip(&self.limits) {
-            *u = match value {
-                CorruptValue::Nan => f64::NAN,
-                CorruptValue::Inf => f64::INFINITY,
-                CorruptValue::OutOfRange => 10.0 * hi.abs().max(1.0),
-            };
-        }
+        corrupt_command(out, &self.limits, value);
+    }
+}
+
+/// A `corrupt` fault's command: every input NaN, infinite, or ten times its limit.
+pub fn corrupt_command(out: &mut Command, limits: &[(f64, f64)], value: CorruptValue) {
+    for (u, (_, hi)) in out.u.iter_mut().zip(limits) {
+        *u = match value {
+            CorruptValue::Nan => f64::NAN,
+            CorruptValue::Inf => f64::INFINITY,
+            CorruptValue::OutOfRange => 10.0 * hi.abs().max(1.0),
+        };
     }
 }
 
@@ -191,8 +212,8 @@ impl<T: Task> StageRunner<T> {
         }
     }
 
-    /// Handles the input of one loop.
-    pub fn handle(&mut self, input: &T::In) -> Handled<T::Out> {
+    /// Handles the input of one loop; an error of the task's computation ends the stage.
+    pub fn handle(&mut self, input: &T::In) -> Result<Handled<T::Out>> {
         let header = *input.header();
         let k = header.k;
         let mut seen = header.incarnations;
@@ -207,7 +228,7 @@ impl<T: Task> StageRunner<T> {
         // real time, this stage does not run for it.
         let mut out = if header.lost == 0 {
             let mut out = T::Out::default();
-            self.task.process(input, &mut out);
+            self.task.process(input, &mut out)?;
             if let Some(value) = self.faults.corrupt(k) {
                 self.task.corrupt(&mut out, value);
             }
@@ -233,7 +254,7 @@ impl<T: Task> StageRunner<T> {
         if self.faults.drops(k) {
             self.report.dropped_by_fault += 1;
             if !self.drop_sends_lost {
-                return Handled { hold, output: None };
+                return Ok(Handled { hold, output: None });
             }
             out.header_mut().lost = 1;
         }
@@ -242,7 +263,7 @@ impl<T: Task> StageRunner<T> {
             self.report.skipped += k.saturating_sub(last + 1);
         }
         self.last_k = Some(k);
-        Handled { hold, output: Some(out) }
+        Ok(Handled { hold, output: Some(out) })
     }
 }
 

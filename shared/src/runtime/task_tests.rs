@@ -14,9 +14,10 @@ struct Echo {
 impl Task for Echo {
     type In = Estimate;
     type Out = Command;
-    fn process(&mut self, input: &Estimate, output: &mut Command) {
+    fn process(&mut self, input: &Estimate, output: &mut Command) -> anyhow::Result<()> {
         self.calls += 1;
         output.u[0] = input.x[0];
+        Ok(())
     }
     fn corrupt(&self, output: &mut Command, value: CorruptValue) {
         output.u[0] = match value {
@@ -49,7 +50,7 @@ fn input(k: u64) -> Estimate {
 
 /// The first command value of each loop in `ks` (None: nothing was sent).
 fn outputs(runner: &mut StageRunner<Echo>, ks: impl IntoIterator<Item = u64>) -> Vec<Option<f64>> {
-    ks.into_iter().map(|k| runner.handle(&input(k)).output.map(|c| c.u[0])).collect()
+    ks.into_iter().map(|k| runner.handle(&input(k)).unwrap().output.map(|c| c.u[0])).collect()
 }
 
 const MODES: [&str; 2] = ["realtime", "lockstep"];
@@ -61,7 +62,7 @@ fn the_output_carries_the_inputs_header_and_the_stages_incarnation() {
         let mut estimate = input(5);
         estimate.header.incarnations = [1, 0, 3, 0];
         estimate.header.trace.stamp_published(Role::Plant, 42);
-        let out = r.handle(&estimate).output.unwrap();
+        let out = r.handle(&estimate).unwrap().output.unwrap();
         let mut expected = estimate.header;
         expected.set_incarnation(Role::Controller, 2);
         assert_eq!(out.header, expected, "{mode}");
@@ -77,16 +78,16 @@ fn a_restart_upstream_is_counted_when_its_incarnation_changes() {
         e.header.incarnations = incarnations;
         e
     };
-    r.handle(&with(0, [0, 0, 0, 0]));
-    r.handle(&with(1, [0, 0, 0, 0]));
+    r.handle(&with(0, [0, 0, 0, 0])).unwrap();
+    r.handle(&with(1, [0, 0, 0, 0])).unwrap();
     assert_eq!(r.report.upstream_restarts, 0);
-    r.handle(&with(2, [0, 1, 0, 0]));
-    r.handle(&with(3, [0, 1, 0, 0]));
+    r.handle(&with(2, [0, 1, 0, 0])).unwrap();
+    r.handle(&with(3, [0, 1, 0, 0])).unwrap();
     assert_eq!(r.report.upstream_restarts, 1, "the sensors restarted once");
     // Its own slot and the ones after are not upstream.
-    r.handle(&with(4, [0, 1, 0, 7]));
+    r.handle(&with(4, [0, 1, 0, 7])).unwrap();
     assert_eq!(r.report.upstream_restarts, 1);
-    r.handle(&with(5, [1, 1, 1, 0]));
+    r.handle(&with(5, [1, 1, 1, 0])).unwrap();
     assert_eq!(r.report.upstream_restarts, 2, "the plant and the estimator, seen in one loop");
 }
 
@@ -116,7 +117,7 @@ fn a_drop_sends_nothing_in_real_time_and_a_lost_loop_in_lockstep() {
     assert_eq!((r.report.dropped_by_fault, r.report.processed), (2, 2));
 
     let mut r = runner("lockstep", &drop, 0);
-    let lost: Vec<_> = (9..13).map(|k| r.handle(&input(k)).output.unwrap().header.lost).collect();
+    let lost: Vec<_> = (9..13).map(|k| r.handle(&input(k)).unwrap().output.unwrap().header.lost).collect();
     assert_eq!(lost, [0, 1, 1, 0], "the loop goes on, marked lost");
     assert_eq!((r.report.dropped_by_fault, r.report.processed), (2, 4));
 }
@@ -125,7 +126,7 @@ fn a_drop_sends_nothing_in_real_time_and_a_lost_loop_in_lockstep() {
 fn a_drop_with_a_probability_depends_only_on_the_seed() {
     let drop = ["drop controller 50% at 10ms for 200ms"];
     let pattern = |r: &mut StageRunner<Echo>, ks: std::ops::Range<u64>| -> Vec<bool> {
-        ks.map(|k| r.handle(&input(k)).output.is_none()).collect()
+        ks.map(|k| r.handle(&input(k)).unwrap().output.is_none()).collect()
     };
     let first = pattern(&mut runner("realtime", &drop, 0), 10..210);
     // A restarted stage (another incarnation) that also saw the loops before the window draws
@@ -140,10 +141,10 @@ fn a_drop_with_a_probability_depends_only_on_the_seed() {
 #[test]
 fn a_loop_lost_upstream_is_passed_on_without_running_the_task() {
     let mut r = runner("lockstep", &[], 0);
-    r.handle(&input(0));
+    r.handle(&input(0)).unwrap();
     let mut lost = input(1);
     lost.header.lost = 1;
-    let out = r.handle(&lost).output.unwrap();
+    let out = r.handle(&lost).unwrap().output.unwrap();
     assert_eq!((out.u[0], out.header.lost, out.header.k), (0.0, 1, 1), "the last output, marked lost");
     assert_eq!((r.task.calls, r.report.processed), (1, 2));
 }
@@ -160,7 +161,7 @@ fn a_lockstep_delay_sends_what_was_computed_that_many_loops_ago() {
     // A delay in seconds is whole ticks in lockstep.
     let mut r = runner("lockstep", &["delay controller by 2ms at 10ms for 1ms"], 0);
     assert_eq!(outputs(&mut r, 0..12)[9..], [9.0, 8.0, 11.0].map(Some));
-    assert!(r.handle(&input(12)).hold.is_none());
+    assert!(r.handle(&input(12)).unwrap().hold.is_none());
 }
 
 #[test]
@@ -169,11 +170,11 @@ fn a_real_time_delay_holds_the_current_output() {
     // Holds in whole microseconds (seconds from floats need not be whole nanoseconds).
     let micros = |hold: Option<Duration>| hold.map(|d| (d.as_secs_f64() * 1e6).round() as u64);
     let handled: Vec<_> =
-        (9..13).map(|k| r.handle(&input(k))).map(|h| (micros(h.hold), h.output.map(|c| c.u[0]))).collect();
+        (9..13).map(|k| r.handle(&input(k)).unwrap()).map(|h| (micros(h.hold), h.output.map(|c| c.u[0]))).collect();
     let held = Some(3000);
     assert_eq!(handled, [(None, Some(9.0)), (held, Some(10.0)), (held, Some(11.0)), (None, Some(12.0))]);
     let mut r = runner("realtime", &["delay controller by 1.5ms at 0s"], 0);
-    assert_eq!(micros(r.handle(&input(0)).hold), Some(1500));
+    assert_eq!(micros(r.handle(&input(0)).unwrap().hold), Some(1500));
 }
 
 #[test]
@@ -186,7 +187,7 @@ fn faults_of_other_processes_and_kills_leave_the_stage_alone() {
     ];
     for mode in MODES {
         let mut r = runner(mode, &others, 0);
-        let handled: Vec<_> = (0..20).map(|k| r.handle(&input(k))).collect();
+        let handled: Vec<_> = (0..20).map(|k| r.handle(&input(k)).unwrap()).collect();
         assert!(handled.iter().all(|h| h.hold.is_none()), "{mode}");
         let out: Vec<_> = handled.iter().map(|h| h.output.map(|c| c.u[0])).collect();
         assert_eq!(out, (0..20).map(|k| Some(k as f64)).collect::<Vec<_>>(), "{mode}");
@@ -210,20 +211,20 @@ fn restart_controller(scenario_name: &str, at: u64, after: u64) -> (bool, bool) 
     for k in 0..at + after {
         let state = plant.state_message(Default::default(), 0);
         let mut measurements = Measurements { header: state.header, ..Default::default() };
-        sensors.process(&state, &mut measurements);
+        sensors.process(&state, &mut measurements).unwrap();
         let mut estimate = Estimate { header: measurements.header, ..Default::default() };
-        estimator.process(&measurements, &mut estimate);
+        estimator.process(&measurements, &mut estimate).unwrap();
         if k == at
-            && let Some(frozen) = controller.freeze()
+            && let Some(frozen) = controller.freeze().unwrap()
         {
-            thawed.thaw(&frozen);
+            thawed.thaw(&frozen).unwrap();
         }
         let mut command = Command { header: estimate.header, ..Default::default() };
-        controller.process(&estimate, &mut command);
+        controller.process(&estimate, &mut command).unwrap();
         if k >= at {
             let (mut a, mut b) = (command, command);
-            thawed.process(&estimate, &mut a);
-            fresh.process(&estimate, &mut b);
+            thawed.process(&estimate, &mut a).unwrap();
+            fresh.process(&estimate, &mut b).unwrap();
             thawed_same &= bits(&a) == bits(&command);
             fresh_same &= bits(&b) == bits(&command);
         }
@@ -249,5 +250,5 @@ fn a_static_controller_resumes_too() {
         assert!(restart_controller(name, 300, 100).0, "{name}");
     }
     let (_, scenario) = crate::scenarios::resolve("pendulum", &[]).unwrap();
-    assert!(ControllerTask::new(scenario.as_ref()).freeze().is_none(), "nothing to keep");
+    assert!(ControllerTask::new(scenario.as_ref()).freeze().unwrap().is_none(), "nothing to keep");
 }
