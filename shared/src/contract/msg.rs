@@ -513,6 +513,14 @@ mod tests {
     }
 }
 
+/// What a process built with message layouts `ours` says when the run's are `theirs`.
+pub fn layout_mismatch(what: &str, theirs: &str, ours: &str) -> String {
+    format!(
+        "{what} layout fingerprint {theirs}, this process was built with {ours}: build it from the same LoopLab as \
+         the launcher (the Python package: pip install ./services/python)"
+    )
+}
+
 /// The fingerprint of the message layouts: every message's size, alignment and field offsets,
 /// the message limits and LoopLab's version, hashed. iceoryx2 0.10 checks a payload's type name,
 /// size and alignment only, so two builds whose layouts differ inside the same size would

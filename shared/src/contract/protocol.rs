@@ -38,6 +38,8 @@ pub mod stage_env {
     pub const RUN_ID: &str = "LOOPLAB_RUN_ID";
     pub const RUN_DIR: &str = "LOOPLAB_RUN_DIR";
     pub const INCARNATION: &str = "LOOPLAB_INCARNATION";
+    /// The launcher's message-layout fingerprint (`contract::msg::layout_fingerprint`).
+    pub const LAYOUT: &str = "LOOPLAB_LAYOUT";
 }
 
 impl ProcessArgs {
@@ -64,6 +66,7 @@ impl ProcessArgs {
             (stage_env::RUN_ID, self.run_id.clone()),
             (stage_env::RUN_DIR, self.run_dir.display().to_string()),
             (stage_env::INCARNATION, self.incarnation.to_string()),
+            (stage_env::LAYOUT, crate::contract::msg::layout_fingerprint().to_owned()),
         ]
     }
 }

@@ -171,12 +171,8 @@ impl Ipc {
         )) = open()
         {
             let theirs = self.layout_of(&name).unwrap_or_else(|| "none".into());
-            bail!(
-                "the run's {} messages have layout fingerprint {theirs}, this process was built with {}: build it \
-                 from the same LoopLab as the launcher (the Python package: pip install ./services/python)",
-                topic.name(),
-                self.layout
-            );
+            let what = format!("the run's {} messages have", topic.name());
+            bail!(crate::contract::msg::layout_mismatch(&what, &theirs, &self.layout));
         }
         retry(&format!("service {name}"), open)
     }

@@ -20,7 +20,7 @@ use anyhow::{Context as _, Result, anyhow, bail};
 
 use crate::config::faults::CorruptValue;
 use crate::config::launch::LaunchConfig;
-use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState, layout_fingerprint};
+use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState, layout_fingerprint, layout_mismatch};
 use crate::contract::protocol::{ChildEvent, ProcessArgs, stage_env};
 use crate::contract::role::Role;
 use crate::model::scenario::{Calibration, Controller, Estimator, Scenario};
@@ -120,6 +120,14 @@ fn run_stage(roles: &[Role], layout: &str, body: impl FnOnce(&Context, Role) -> 
             return ExitCode::from(2);
         }
     };
+    // The launcher's build against this one's, before anything connects: a stage from another
+    // build is the one refused (every port checks it too, `runtime::ipc`).
+    if let Ok(theirs) = std::env::var(stage_env::LAYOUT)
+        && theirs != layout
+    {
+        eprintln!("{role}: error: {}", layout_mismatch("the launcher's messages have", &theirs, layout));
+        return ExitCode::FAILURE;
+    }
     if let Err(e) = keep_stdout_for_events() {
         eprintln!("{role}: error: {e:#}");
         return ExitCode::FAILURE;

@@ -265,7 +265,7 @@ impl<'a> Supervisor<'a> {
     }
 
     fn ended_in_start_up(&self, role: Role) -> String {
-        format!("{} during start-up; see logs/{role}.log", self.exit_said(role))
+        format!("{} during start-up{}; see logs/{role}.log", self.processes[role].exit_text(), self.last_words(role))
     }
 
     /// Why start-up timed out: who was late. A stage of the user's own that never said ready
@@ -292,14 +292,13 @@ impl<'a> Supervisor<'a> {
         }
     }
 
-    /// How `role` ended, with the last line it wrote on stderr when it failed (a user's stage
-    /// that raised: the exception).
-    fn exit_said(&self, role: Role) -> String {
-        let exit = self.processes[role].exit_text();
+    /// The last line `role` wrote on stderr (`": <line>"`), if it failed: a user's stage that
+    /// raised says what.
+    pub(super) fn last_words(&self, role: Role) -> String {
         let failed = matches!(self.processes[role].runs.last().map(|r| r.exit), Some(Exit::Status(code)) if code != 0);
         match last_line(&self.run_dir.join("logs").join(format!("{role}.log"))).filter(|_| failed) {
-            Some(line) => format!("{exit}: {line}"),
-            None => exit,
+            Some(line) => format!(": {line}"),
+            None => String::new(),
         }
     }
 
