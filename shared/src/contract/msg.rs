@@ -427,6 +427,53 @@ macro_rules! zeroed_default {
 }
 zeroed_default!(PlantState, Measurements, Estimate, Command, LoopRecord);
 
+/// What a process built with message layouts `ours` says when the run's are `theirs`.
+pub fn layout_mismatch(what: &str, theirs: &str, ours: &str) -> String {
+    format!(
+        "{what} layout fingerprint {theirs}, this process was built with {ours}: build it from the same LoopLab as \
+         the launcher (the Python package: pip install ./services/python)"
+    )
+}
+
+/// The fingerprint of the message layouts: every message's size, alignment and field offsets,
+/// the message limits and LoopLab's version, hashed. iceoryx2 0.10 checks a payload's type name,
+/// size and alignment only, so two builds whose layouts differ inside the same size would
+/// exchange garbage; every port requires this value as a service attribute (`runtime::ipc`), and
+/// a process from another build is refused when it connects.
+pub fn layout_fingerprint() -> &'static str {
+    static FINGERPRINT: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    FINGERPRINT.get_or_init(|| {
+        use sha2::Digest;
+        use std::fmt::Write;
+        let mut layout = format!(
+            "looplab {} limits state {MAX_STATE} input {MAX_INPUT} sensors {MAX_SENSORS} sensor_dim {MAX_SENSOR_DIM} \
+             estimate {MAX_ESTIMATE}",
+            env!("CARGO_PKG_VERSION")
+        );
+        macro_rules! describe {
+            ($($t:ident { $($field:ident),* })*) => {$(
+                let _ = write!(layout, "; {} {}/{}", stringify!($t), size_of::<$t>(), align_of::<$t>());
+                $(let _ = write!(layout, " {}@{}", stringify!($field), std::mem::offset_of!($t, $field));)*
+            )*};
+        }
+        describe! {
+            LoopTrace { plant_publish, sensors_receive, sensors_publish, estimator_receive, estimator_publish,
+                controller_receive, controller_publish, plant_receive }
+            Header { k, t, trace, incarnations, lost, _reserved }
+            TickTiming { scheduled_ns, wake_ns, period_ns }
+            PlantCounters { deadline_misses, rejected_commands, skipped_ticks, stale_ticks, lost_commands }
+            PlantState { header, x, u_applied, timing, counters }
+            SensorReading { value, sample_time, seq, fresh, valid }
+            Measurements { header, readings, u_applied }
+            Estimate { header, x }
+            Command { header, u }
+            LoopRecord { header, deadline_miss, rejected, lost, _reserved, sequence }
+        }
+        let digest = sha2::Sha256::digest(layout.as_bytes());
+        digest[..8].iter().map(|b| format!("{b:02x}")).collect()
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -511,51 +558,4 @@ mod tests {
         }
         assert_eq!(header.incarnations, [1, 2, 3, 4]);
     }
-}
-
-/// What a process built with message layouts `ours` says when the run's are `theirs`.
-pub fn layout_mismatch(what: &str, theirs: &str, ours: &str) -> String {
-    format!(
-        "{what} layout fingerprint {theirs}, this process was built with {ours}: build it from the same LoopLab as \
-         the launcher (the Python package: pip install ./services/python)"
-    )
-}
-
-/// The fingerprint of the message layouts: every message's size, alignment and field offsets,
-/// the message limits and LoopLab's version, hashed. iceoryx2 0.10 checks a payload's type name,
-/// size and alignment only, so two builds whose layouts differ inside the same size would
-/// exchange garbage; every port requires this value as a service attribute (`runtime::ipc`), and
-/// a process from another build is refused when it connects.
-pub fn layout_fingerprint() -> &'static str {
-    static FINGERPRINT: std::sync::OnceLock<String> = std::sync::OnceLock::new();
-    FINGERPRINT.get_or_init(|| {
-        use sha2::Digest;
-        use std::fmt::Write;
-        let mut layout = format!(
-            "looplab {} limits state {MAX_STATE} input {MAX_INPUT} sensors {MAX_SENSORS} sensor_dim {MAX_SENSOR_DIM} \
-             estimate {MAX_ESTIMATE}",
-            env!("CARGO_PKG_VERSION")
-        );
-        macro_rules! describe {
-            ($($t:ident { $($field:ident),* })*) => {$(
-                let _ = write!(layout, "; {} {}/{}", stringify!($t), size_of::<$t>(), align_of::<$t>());
-                $(let _ = write!(layout, " {}@{}", stringify!($field), std::mem::offset_of!($t, $field));)*
-            )*};
-        }
-        describe! {
-            LoopTrace { plant_publish, sensors_receive, sensors_publish, estimator_receive, estimator_publish,
-                controller_receive, controller_publish, plant_receive }
-            Header { k, t, trace, incarnations, lost, _reserved }
-            TickTiming { scheduled_ns, wake_ns, period_ns }
-            PlantCounters { deadline_misses, rejected_commands, skipped_ticks, stale_ticks, lost_commands }
-            PlantState { header, x, u_applied, timing, counters }
-            SensorReading { value, sample_time, seq, fresh, valid }
-            Measurements { header, readings, u_applied }
-            Estimate { header, x }
-            Command { header, u }
-            LoopRecord { header, deadline_miss, rejected, lost, _reserved, sequence }
-        }
-        let digest = sha2::Sha256::digest(layout.as_bytes());
-        digest[..8].iter().map(|b| format!("{b:02x}")).collect()
-    })
 }

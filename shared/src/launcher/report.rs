@@ -144,7 +144,8 @@ pub fn render(s: &Summary) -> String {
         .iter()
         .map(|p| {
             let again = if p.incarnation > 0 { format!(" restart {}", p.incarnation) } else { String::new() };
-            format!("{}{again} (pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s)
+            let own = p.command.as_ref().map(|c| format!("your own: `{c}`, ")).unwrap_or_default();
+            format!("{}{again} ({own}pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s)
         })
         .collect();
     let processes =

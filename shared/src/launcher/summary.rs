@@ -170,6 +170,9 @@ pub struct ProcessInfo {
     pub processed: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub skipped: Option<u64>,
+    /// A stage of the user's own (`[stages.<role>] command`): its command, as one line.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command: Option<String>,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
@@ -379,7 +382,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         wall_time_s,
         loops_per_s: if wall_ns > 0 { plant.loops.saturating_sub(1) as f64 / wall_time_s } else { 0.0 },
         restarts: starts.iter().map(|(&role, runs)| (role, runs.len().saturating_sub(1) as u32)).collect(),
-        processes: processes(starts, reports, &monitor),
+        processes: processes(config, starts, reports, &monitor),
         adaptive_waits: adaptive_waits(&plant, reports),
         latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
         jitter_ns: Jitter {
@@ -414,7 +417,12 @@ pub fn write(summary: &Summary, run_dir: &Path) -> Result<()> {
 
 /// One entry per start, in start order; a stage's with that incarnation's own counts: from its
 /// report, or (killed, no report) the loop records the monitor received with its mark.
-fn processes(starts: &BTreeMap<Role, Vec<Start>>, reports: &Reports, monitor: &MonitorReport) -> Vec<ProcessInfo> {
+fn processes(
+    config: &LaunchConfig,
+    starts: &BTreeMap<Role, Vec<Start>>,
+    reports: &Reports,
+    monitor: &MonitorReport,
+) -> Vec<ProcessInfo> {
     let mut processes = vec![];
     for role in Role::BRIDGES.into_iter().chain(Role::START_ORDER) {
         let recorded = monitor.records_by_incarnation.get(&role);
@@ -429,6 +437,7 @@ fn processes(starts: &BTreeMap<Role, Vec<Start>>, reports: &Reports, monitor: &M
                 cpu_s: start.cpu_s,
                 processed: report.map(|r| r.processed).or_else(|| recorded.map(|r| r.get(n).copied().unwrap_or(0))),
                 skipped: report.map(|r| r.skipped),
+                command: config.stages.command(role).map(|stage| stage.text()),
             });
         }
     }
@@ -719,6 +728,7 @@ pub(crate) mod tests {
             cpu_s: 0.0,
             processed: None,
             skipped: None,
+            command: None,
         }];
         let json = serde_json::to_value(&s).unwrap();
         let keys: Vec<&String> = json["restarts"].as_object().unwrap().keys().collect();

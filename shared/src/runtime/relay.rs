@@ -35,6 +35,16 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
     {
         runner.task.thaw(&frozen)?;
     }
+    // Lockstep: the input being handled, kept until its output is out. The loop waits for this
+    // stage's output, so a predecessor that died in the middle of a loop (its step failed) left
+    // an input nobody will send again: its successor handles it first.
+    let mut in_flight: Option<Snapshot<InFlight<T::In>>> =
+        if realtime { None } else { Some(Snapshot::open(&context.run_id, &format!("{}-input", role.name()))?) };
+    let mut replay = in_flight
+        .as_ref()
+        .and_then(|j| j.read())
+        .filter(|j| j.pending != 0 && context.incarnation > 0)
+        .map(|j| j.input);
     subscriber.connect(&context.stop)?;
     emit(&ChildEvent::Ready)?;
 
@@ -45,19 +55,30 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
     while !context.stop.requested() {
         let due = last_k.and_then(|k| arrivals.due(k + 1));
         let slice_end = now_ns() + WAIT_SLICE.as_nanos() as u64;
-        waiter.wait(
-            due,
-            slice_end,
-            || subscriber.has_samples(),
-            |until| subscriber.doze_until(until),
-            || subscriber.asleep(|| wait(&ws)),
-        )?;
+        if replay.is_none() {
+            waiter.wait(
+                due,
+                slice_end,
+                || subscriber.has_samples(),
+                |until| subscriber.doze_until(until),
+                || subscriber.asleep(|| wait(&ws)),
+            )?;
+        }
         let mut cleared = false;
-        while let Some(sample) = subscriber.next(&mut cleared)? {
+        loop {
+            let replayed = replay.take();
+            let sample = if replayed.is_none() { subscriber.next(&mut cleared)? } else { None };
+            let input: &T::In = match (&replayed, &sample) {
+                (Some(input), _) => input,
+                (None, Some(sample)) => sample,
+                (None, None) => break,
+            };
             let received = now_ns();
-            let input: &T::In = &sample;
             let header = *input.header();
             arrivals.observe(header.k, header.trace.get(Stamp::PlantPublish), received);
+            if let Some(journal) = in_flight.as_mut() {
+                journal.write(&InFlight { input: *input, pending: 1 });
+            }
             let handled = runner.handle(input)?;
             // Lockstep: the state is kept before the output goes out, so that a kill injected
             // at a later loop (with the plant holding the loop) always finds this loop's state;
@@ -73,6 +94,9 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
                 publisher.send(&out)?;
                 last_k = Some(header.k);
             }
+            if let Some(journal) = in_flight.as_mut() {
+                journal.write(&InFlight { input: *input, pending: 0 });
+            }
             // After the send, off the hop's path: the input's chunk goes back.
             drop(sample);
             if realtime {
@@ -84,6 +108,15 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
     (report.waited, report.dropped) = publisher.backpressure();
     report.wait = waiter.counts;
     Ok(ChildEvent::StageReport(report))
+}
+
+/// A lockstep stage's input while it is handled.
+#[derive(Clone, Copy)]
+#[repr(C)]
+struct InFlight<I> {
+    input: I,
+    /// 1 from its arrival until its output is sent.
+    pending: u32,
 }
 
 /// Writes the task's frozen state to its snapshot, if it has one.

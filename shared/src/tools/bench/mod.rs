@@ -21,6 +21,7 @@
 
 pub mod anatomy;
 pub mod codec;
+pub mod own_stage;
 pub mod pingpong;
 pub mod raw_floor;
 pub mod restarts;
@@ -34,6 +35,7 @@ use std::time::Instant;
 use anyhow::{Result, anyhow};
 use serde::Serialize;
 
+use self::own_stage::OwnController;
 use self::pingpong::Transport;
 use crate::config::launch::Override;
 use crate::config::wait::{CPUS_TO_POLL, LockstepWait, Strategy, WaitSettings};
@@ -102,6 +104,8 @@ pub struct LoopBench {
     pub hops_us: [Dist; 4],
     /// Per loop, the three stages' own time, receive to publish, summed.
     pub stage_compute_us: Dist,
+    /// The controller's own time, receive to publish.
+    pub controller_compute_us: Dist,
     /// Per process, percent of one core.
     pub cpu_percent: BTreeMap<String, f64>,
     /// Of the loop's processes (the monitor apart).
@@ -254,6 +258,7 @@ impl LoopAccumulator {
             end_to_end_us: Dist::of(&e2e),
             hops_us: [hop(0, 1), hop(2, 3), hop(4, 5), hop(6, 7)],
             stage_compute_us: Dist::of(&sorted(compute)),
+            controller_compute_us: hop(5, 6),
             cpu_percent,
             loop_cpu_percent,
             e2e,
@@ -271,6 +276,8 @@ struct LoopConfig {
     /// SIGSTOP the monitor for the whole run.
     stop_monitor: bool,
     pin: bool,
+    /// A controller of the user's own in place of the built-in one.
+    own: Option<OwnController>,
 }
 
 impl LoopConfig {
@@ -280,7 +287,7 @@ impl LoopConfig {
     }
 }
 
-const LOOP_CONFIGS: [LoopConfig; 7] = [
+const LOOP_CONFIGS: [LoopConfig; 9] = [
     LoopConfig {
         name: "looplab block",
         label: "block",
@@ -288,6 +295,7 @@ const LOOP_CONFIGS: [LoopConfig; 7] = [
         rate_hz: 1000.0,
         stop_monitor: false,
         pin: false,
+        own: None,
     },
     LoopConfig {
         name: "looplab spin",
@@ -296,6 +304,7 @@ const LOOP_CONFIGS: [LoopConfig; 7] = [
         rate_hz: 1000.0,
         stop_monitor: false,
         pin: false,
+        own: None,
     },
     LoopConfig {
         name: "looplab spin, pinned",
@@ -304,6 +313,7 @@ const LOOP_CONFIGS: [LoopConfig; 7] = [
         rate_hz: 1000.0,
         stop_monitor: false,
         pin: true,
+        own: None,
     },
     LoopConfig {
         name: "looplab adaptive",
@@ -312,6 +322,7 @@ const LOOP_CONFIGS: [LoopConfig; 7] = [
         rate_hz: 1000.0,
         stop_monitor: false,
         pin: false,
+        own: None,
     },
     LoopConfig {
         name: "looplab adaptive, pinned",
@@ -320,6 +331,7 @@ const LOOP_CONFIGS: [LoopConfig; 7] = [
         rate_hz: 1000.0,
         stop_monitor: false,
         pin: true,
+        own: None,
     },
     LoopConfig {
         name: "looplab adaptive 10 kHz",
@@ -328,6 +340,7 @@ const LOOP_CONFIGS: [LoopConfig; 7] = [
         rate_hz: 10_000.0,
         stop_monitor: false,
         pin: false,
+        own: None,
     },
     LoopConfig {
         name: "looplab adaptive, monitor stopped",
@@ -336,24 +349,49 @@ const LOOP_CONFIGS: [LoopConfig; 7] = [
         rate_hz: 1000.0,
         stop_monitor: true,
         pin: false,
+        own: None,
+    },
+    LoopConfig {
+        name: BLOCK_PYTHON,
+        label: "block-python",
+        strategy: Strategy::Block,
+        rate_hz: 1000.0,
+        stop_monitor: false,
+        pin: false,
+        own: Some(OwnController::Python),
+    },
+    LoopConfig {
+        name: BLOCK_C,
+        label: "block-c",
+        strategy: Strategy::Block,
+        rate_hz: 1000.0,
+        stop_monitor: false,
+        pin: false,
+        own: Some(OwnController::C),
     },
 ];
 
+const BLOCK_PYTHON: &str = "looplab block, Python controller";
+const BLOCK_C: &str = "looplab block, C controller";
+
 /// One LoopLab run of the pendulum (of `catalog`) in real time.
+/// `own`: the override that runs its controller of the user's own.
 fn looplab_run(
     out: &Path,
     c: &LoopConfig,
+    own: Option<&String>,
     seconds: f64,
     binaries: &Binaries,
     catalog: &Catalog,
 ) -> Result<(Summary, PathBuf)> {
-    let sets = [
+    let mut sets = vec![
         "mode=realtime".to_string(),
         format!("rate_hz={:?}", c.rate_hz),
         format!("duration_s={seconds:?}"),
         format!("wait.strategy={}", c.strategy.name()),
         format!("wait.pin={}", c.pin),
     ];
+    sets.extend(own.cloned());
     let mut overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
     if c.stop_monitor {
         // SIGSTOP the monitor for the whole run once it is up: the loop runs without it.
@@ -449,6 +487,22 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
     if cpus < 2 {
         skipped.push("the raw floor and the spinning ping-pong: need 2 CPUs".to_owned());
     }
+    // A controller of the user's own runs only where its stage can be prepared and resolved.
+    let mut own: BTreeMap<&'static str, String> = BTreeMap::new();
+    for c in LOOP_CONFIGS.iter() {
+        let Some(language) = c.own else { continue };
+        let resolved = language.command_override(&out).and_then(|set| {
+            let overrides = [Override::parse(&set).map_err(|e| e.to_string())?];
+            catalog.resolve("pendulum", &overrides).map_err(|e| format!("{e:#}"))?;
+            Ok(set)
+        });
+        match resolved {
+            Ok(set) => {
+                own.insert(c.name, set);
+            }
+            Err(why) => skipped.push(format!("{}: {why}", c.name)),
+        }
+    }
     let loop_configs: Vec<&LoopConfig> = LOOP_CONFIGS
         .iter()
         .filter(|c| {
@@ -456,7 +510,7 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
             if !enough {
                 skipped.push(format!("{}: needs {} CPUs", c.name, c.needs_cpus()));
             }
-            enough
+            enough && (c.own.is_none() || own.contains_key(c.name))
         })
         .collect();
     let floor_rounds = if quick { 500 } else { 2000 };
@@ -478,7 +532,7 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
             check(&stop)?;
         }
         for c in &loop_configs {
-            let (summary, dir) = looplab_run(&out, c, segment, &binaries, catalog)?;
+            let (summary, dir) = looplab_run(&out, c, own.get(c.name), segment, &binaries, catalog)?;
             ours.entry(c.name).or_default().add_run(&summary, &dir)?;
         }
         let loops = (segment * 1000.0).round() as u64;
@@ -684,6 +738,7 @@ fn render(r: &BenchReport) -> String {
             l.name, h[0].p50, h[1].p50, h[2].p50, h[3].p50, l.stage_compute_us.p50
         );
     }
+    own_stage::render(&mut s, "looplab block", &r.loops, &[BLOCK_PYTHON, BLOCK_C]);
     if let Some(monitor) =
         r.loops.iter().find(|l| l.name == "looplab adaptive").and_then(|l| l.cpu_percent.get(Role::Monitor.name()))
     {
