@@ -189,6 +189,75 @@ int main(void) { return looplab_run(step, 0); }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The C example's law with a count of its steps kept across a restart (freeze and thaw).
+const COUNTING_CONTROLLER: &str = r#"#include <stdio.h>
+#include <string.h>
+#include "looplab_stage.h"
+struct law { double gains[3], limit; unsigned long long steps; };
+static int step(void *user, double t, const double *x, size_t n_x, double *u, size_t n_u) {
+    (void)t, (void)n_x, (void)n_u;
+    struct law *k = user;
+    k->steps++;
+    double current = -(k->gains[0] * x[0] + k->gains[1] * x[1] + k->gains[2] * x[2]);
+    u[0] = current < -k->limit ? -k->limit : current > k->limit ? k->limit : current;
+    return 0;
+}
+static size_t freeze(void *user, uint8_t *buf, size_t cap) {
+    const struct law *k = user;
+    if (cap < sizeof k->steps) return 0;
+    memcpy(buf, &k->steps, sizeof k->steps);
+    return sizeof k->steps;
+}
+static int thaw(void *user, const uint8_t *buf, size_t len) {
+    struct law *k = user;
+    if (len != sizeof k->steps) return 3;
+    memcpy(&k->steps, buf, len);
+    fprintf(stderr, "thawed after %llu steps\n", k->steps);
+    return 0;
+}
+int main(void) {
+    struct law k = {.steps = 0};
+    if (looplab_config_f64("controller.gains.0", &k.gains[0]) || looplab_config_f64("controller.gains.1", &k.gains[1])
+        || looplab_config_f64("controller.gains.2", &k.gains[2]) || looplab_config_f64("model.current_limit_a", &k.limit))
+        return 2;
+    return looplab_run_with_state(step, freeze, thaw, &k);
+}
+"#;
+
+#[test]
+fn a_killed_c_controller_gets_its_frozen_state_back_and_the_run_matches_the_builtins() {
+    let dir = fresh_dir("c-freeze");
+    std::fs::create_dir_all(&dir).unwrap();
+    let source = dir.join("counting_controller.c");
+    std::fs::write(&source, COUNTING_CONTROLLER).unwrap();
+    let program = compile_c("counting_controller", &source);
+    let kill = "kill controller at 1s";
+    let args = |launch: &str| {
+        vec![
+            launch.to_owned(),
+            "--mode".into(),
+            "lockstep".into(),
+            "--duration".into(),
+            "2".into(),
+            "--fault".into(),
+            kill.into(),
+        ]
+    };
+    let builtin = run("c-freeze-builtin", &args("pendulum").iter().map(String::as_str).collect::<Vec<_>>());
+    let launch = Path::new(REPO).join("services/examples/c/pendulum_c.toml").display().to_string();
+    let command = controller_command(&program);
+    let own_args = [args(&launch), vec!["--set".into(), command]].concat();
+    let own = run("c-freeze", &own_args.iter().map(String::as_str).collect::<Vec<_>>());
+    let incarnations = own.summary().processes.iter().filter(|p| p.name == Role::Controller).count();
+    assert_eq!(incarnations, 2, "the controller was killed once and restarted: {:?}", own.summary().processes);
+    let log = std::fs::read_to_string(own.dir.join("logs/controller.log")).expect("logs/controller.log");
+    assert!(log.contains("thawed after 1000 steps"), "the restarted controller did not get its count back: {log}");
+    let trajectory = |r: &Run| std::fs::read(r.dir.join("trajectory.csv")).expect("trajectory.csv");
+    assert!(trajectory(&builtin) == trajectory(&own), "trajectory.csv differs from the built-in's with the same kill");
+    assert_no_files_left(own.summary());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn the_c_header_compiles_on_its_own_under_strict_warnings() {
     let dir = fresh_dir("c-header");
