@@ -135,6 +135,52 @@ fn run_stage(roles: &[Role], layout: &str, body: impl FnOnce(&Context, Role) -> 
     run_process_as(role, &args, &crate::scenarios::builtin(), layout, |context| body(context, role))
 }
 
+/// The names of `role`'s step input and output numbers, in order (what [`StageInfo`] says; the
+/// C library computes them before its stage runs).
+pub fn stage_names(role: Role, config: &LaunchConfig, scenario: &dyn Scenario) -> (Vec<String>, Vec<String>) {
+    let names = |list: &[&str]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    let applied: Vec<String> = scenario.input_names().iter().map(|n| format!("u_applied.{n}")).collect();
+    let mut readings = Vec::new();
+    for (name, spec) in &config.sensors {
+        for c in config.signal_of(spec).components {
+            readings.push(format!("{name}.{}", c.name));
+        }
+        readings.extend(["valid", "fresh", "sample_time"].map(|extra| format!("{name}.{extra}")));
+    }
+    match role {
+        Role::Sensors => ([names(&scenario.state_names()), applied].concat(), readings),
+        Role::Estimator => ([readings, applied].concat(), names(&scenario.estimate_names())),
+        _ => (names(&scenario.estimate_names()), names(&scenario.input_names())),
+    }
+}
+
+/// The number at dotted `key` of a launch document (`"controller.gains.1"`: tables by name,
+/// arrays by index); an integer reads as its float. None if missing or not a number.
+pub fn config_number(document: &toml::Table, key: &str) -> Option<f64> {
+    let mut parts = key.split('.');
+    let mut value = document.get(parts.next()?)?;
+    for part in parts {
+        value = match value {
+            toml::Value::Table(table) => table.get(part)?,
+            toml::Value::Array(array) => array.get(part.parse::<usize>().ok()?)?,
+            _ => return None,
+        };
+    }
+    match value {
+        toml::Value::Float(x) => Some(*x),
+        toml::Value::Integer(i) => Some(*i as f64),
+        _ => None,
+    }
+}
+
+impl StageInfo<'_> {
+    /// The number at dotted `key` of the run's launch file ([`config_number`]), or an error
+    /// naming the key.
+    pub fn number(&self, key: &str) -> Result<f64> {
+        config_number(&self.config.document, key).ok_or_else(|| anyhow!("the launch file has no number at {key}"))
+    }
+}
+
 /// Where each stage's numbers are in its messages.
 struct Layout {
     state: usize,
@@ -164,20 +210,7 @@ impl Layout {
 
     fn info<'a>(&self, role: Role, context: &'a Context) -> StageInfo<'a> {
         let (config, scenario) = (&context.config, context.scenario.as_ref());
-        let names = |list: &[&str]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>();
-        let applied: Vec<String> = scenario.input_names().iter().map(|n| format!("u_applied.{n}")).collect();
-        let mut readings = Vec::new();
-        for (name, spec) in &config.sensors {
-            for c in config.signal_of(spec).components {
-                readings.push(format!("{name}.{}", c.name));
-            }
-            readings.extend(["valid", "fresh", "sample_time"].map(|extra| format!("{name}.{extra}")));
-        }
-        let (input_names, output_names) = match role {
-            Role::Sensors => ([names(&scenario.state_names()), applied].concat(), readings),
-            Role::Estimator => ([readings, applied].concat(), names(&scenario.estimate_names())),
-            _ => (names(&scenario.estimate_names()), names(&scenario.input_names())),
-        };
+        let (input_names, output_names) = stage_names(role, config, scenario);
         StageInfo { role, config, scenario, incarnation: context.incarnation, input_names, output_names }
     }
 
@@ -359,6 +392,17 @@ fn unpack(frozen: &Calibration) -> Result<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn config_numbers_by_dotted_key() {
+        let document: toml::Table = toml::from_str("[controller]\ngains = [-378.0, -55, -1.5]\nkind = \"x\"").unwrap();
+        let number = |key| config_number(&document, key);
+        assert_eq!((number("controller.gains.0"), number("controller.gains.1")), (Some(-378.0), Some(-55.0)));
+        assert_eq!(number("controller.gains.2"), Some(-1.5));
+        for missing in ["controller.gains.3", "controller.gains", "controller.kind", "controller.x", "model", ""] {
+            assert_eq!(number(missing), None, "{missing}");
+        }
+    }
 
     #[test]
     fn frozen_bytes_survive_a_snapshot_and_too_many_are_refused() {
