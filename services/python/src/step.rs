@@ -56,9 +56,12 @@ impl Step for PyStep {
         let Some(freeze) = &self.freeze else { return Ok(None) };
         Python::attach(|py| {
             let frozen = freeze.call0(py).map_err(|e| python_error(py, e))?;
+            if frozen.is_none(py) {
+                return Ok(None);
+            }
             let bytes = frozen.bind(py).cast::<PyBytes>().map_err(|_| {
                 let kind = frozen.bind(py).get_type().name().map_or("?".to_string(), |n| n.to_string());
-                anyhow!("freeze must return bytes, not {kind}")
+                anyhow!("freeze must return bytes (or None), not {kind}")
             })?;
             Ok(Some(bytes.as_bytes().to_vec()))
         })
