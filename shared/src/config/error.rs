@@ -4,8 +4,19 @@
 use std::fmt;
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-pub const COMMON_KEYS: [&str; 10] =
-    ["scenario", "mode", "rate_hz", "duration_s", "seed", "sensors", "faults", "supervision", "wait", "hosts"];
+pub const COMMON_KEYS: [&str; 11] = [
+    "scenario",
+    "mode",
+    "rate_hz",
+    "duration_s",
+    "seed",
+    "sensors",
+    "faults",
+    "supervision",
+    "wait",
+    "hosts",
+    "stages",
+];
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LaunchError {

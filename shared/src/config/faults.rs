@@ -270,6 +270,8 @@ pub struct Supervision {
     /// Lockstep: if command k has not come after this many wall-clock seconds, the run ends as
     /// stalled instead of hanging.
     pub lockstep_stall_s: f64,
+    /// Every process must say it is ready within this many wall-clock seconds of its start.
+    pub ready_timeout_s: f64,
     pub plant: ProcessPolicy,
     pub sensors: ProcessPolicy,
     pub estimator: ProcessPolicy,
@@ -290,6 +292,7 @@ impl Default for Supervision {
             command_timeout_s: 0.02,
             on_stale: OnStale::Hold,
             lockstep_stall_s: 10.0,
+            ready_timeout_s: 20.0,
             plant: ProcessPolicy::default(),
             sensors: ProcessPolicy::default(),
             estimator: ProcessPolicy::default(),

@@ -7,5 +7,6 @@ pub mod hosts;
 pub mod launch;
 pub mod schema;
 pub mod seed;
+pub mod stages;
 pub mod validate;
 pub mod wait;

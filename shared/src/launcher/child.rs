@@ -10,7 +10,8 @@ use std::process::{ChildStdin, Stdio};
 use anyhow::{Context as _, Result, anyhow, bail};
 use crossbeam_channel::Sender;
 
-use crate::contract::protocol::ChildEvent;
+use crate::config::stages::StageCommand;
+use crate::contract::protocol::{ChildEvent, ProcessArgs};
 use crate::contract::role::Role;
 use crate::launcher::outcome::Exit;
 
@@ -116,6 +117,18 @@ pub fn supervised(command: &mut std::process::Command) {
     }
 }
 
+/// `program` run through `prefix` (the command that runs it on its host), or directly.
+fn prefixed(prefix: &[String], program: &std::ffi::OsStr) -> std::process::Command {
+    match prefix.split_first() {
+        Some((first, rest)) => {
+            let mut command = std::process::Command::new(first);
+            command.args(rest).arg(program);
+            command
+        }
+        None => std::process::Command::new(program),
+    }
+}
+
 /// One start of a process.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Start {
@@ -194,11 +207,19 @@ pub struct Spawned {
     pub reader: std::thread::JoinHandle<()>,
 }
 
-/// Starts `role` from `binary` with its stderr appended to `logs/<role>.log`; every line of its
+/// What runs a loop process: LoopLab's binary, or a stage of the user's own.
+#[derive(Clone, Copy)]
+pub enum Program<'a> {
+    Binary(&'a Path),
+    /// Started in its folder, with the run's arguments in its environment.
+    Stage(&'a StageCommand),
+}
+
+/// Starts `role` from `program` with its stderr appended to `logs/<role>.log`; every line of its
 /// stdout goes to `lines`, as `into` makes it, then `Closed`.
 pub fn spawn<E: Send + 'static>(
     role: Role,
-    binary: &Path,
+    program: Program,
     args: &ChildArgs,
     lines: Sender<E>,
     into: fn(ChildLine) -> E,
@@ -210,33 +231,51 @@ pub fn spawn<E: Send + 'static>(
         .append(true)
         .open(&log_path)
         .with_context(|| format!("create {}", log_path.display()))?;
-    let mut command = match args.prefix.split_first() {
-        Some((program, prefix)) => {
-            let mut command = std::process::Command::new(program);
-            command.args(prefix).arg(binary);
-            command
-        }
-        None => std::process::Command::new(binary),
+    let process_args = ProcessArgs {
+        launch: args.launch_file.to_path_buf(),
+        run_id: args.run_id.to_owned(),
+        run_dir: args.run_dir.to_path_buf(),
+        incarnation: args.incarnation,
     };
-    if Role::BRIDGES.contains(&role) {
-        command.arg("--role").arg(role.name());
-    }
-    command
-        .arg("--launch")
-        .arg(args.launch_file)
-        .arg("--run-id")
-        .arg(args.run_id)
-        .arg("--run-dir")
-        .arg(args.run_dir)
-        .arg("--incarnation")
-        .arg(args.incarnation.to_string())
-        .stdin(if role == Role::Plant { Stdio::piped() } else { Stdio::null() })
-        .stdout(Stdio::piped())
-        .stderr(log);
+    let (mut command, what) = match program {
+        Program::Binary(binary) => {
+            let mut command = prefixed(args.prefix, binary.as_os_str());
+            if Role::BRIDGES.contains(&role) {
+                command.arg("--role").arg(role.name());
+            }
+            command
+                .arg("--launch")
+                .arg(args.launch_file)
+                .arg("--run-id")
+                .arg(args.run_id)
+                .arg("--run-dir")
+                .arg(args.run_dir)
+                .arg("--incarnation")
+                .arg(args.incarnation.to_string());
+            (command, binary.display().to_string())
+        }
+        Program::Stage(stage) => {
+            let env = process_args.to_env(role.name());
+            let command = if args.prefix.is_empty() {
+                let mut command = std::process::Command::new(&stage.command[0]);
+                command.args(&stage.command[1..]).current_dir(&stage.dir).envs(env);
+                command
+            } else {
+                // On another host the prefix runs `env`, which sets the folder and the variables
+                // there (a prefix such as ssh passes neither).
+                let mut command = prefixed(args.prefix, "env".as_ref());
+                command.arg("-C").arg(&stage.dir);
+                command.args(env.iter().map(|(k, v)| format!("{k}={v}"))).args(&stage.command);
+                command
+            };
+            (command, format!("`{}` (in {})", stage.text(), stage.dir.display()))
+        }
+    };
+    command.stdin(if role == Role::Plant { Stdio::piped() } else { Stdio::null() }).stdout(Stdio::piped()).stderr(log);
     supervised(&mut command);
     let mut child = command.spawn().with_context(|| match args.prefix.first() {
-        Some(program) => format!("cannot start {} with {program}", binary.display()),
-        None => format!("cannot start {}", binary.display()),
+        Some(prefix) => format!("cannot start {what} with {prefix}"),
+        None => format!("cannot start {what}"),
     })?;
     let stdout = child.stdout.take().expect("stdout is piped");
     let incarnation = args.incarnation;

@@ -33,6 +33,9 @@ pub fn refusal(config: &LaunchConfig) -> Option<String> {
     if let Some((host, _)) = config.hosts.remote() {
         return Some(format!("the launch file places a stage on host {host}; one process runs on one machine"));
     }
+    if let Some((role, stage)) = config.stages.commands.iter().next() {
+        return Some(format!("stages.{role}.command runs the {role} as a process of its own (`{}`)", stage.text()));
+    }
     config
         .faults
         .iter()

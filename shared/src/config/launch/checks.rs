@@ -218,6 +218,7 @@ pub(super) fn check_supervision(s: &Supervision, c: &LaunchConfig) -> Result<(),
     timeout("stall_timeout_s", s.stall_timeout_s)?;
     timeout("command_timeout_s", s.command_timeout_s)?;
     timeout("lockstep_stall_s", s.lockstep_stall_s)?;
+    timeout("ready_timeout_s", s.ready_timeout_s)?;
     timeout("backoff_reset_s", s.backoff_reset_s)?;
     for role in Role::ALL {
         // The key to blame: the process's own, or the default it took.

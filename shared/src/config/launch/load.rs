@@ -15,6 +15,7 @@ use crate::config::launch::checks::{
 use crate::config::launch::overrides::{Override, merge, set_dotted};
 use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
 use crate::config::schema::ScenarioSchema;
+use crate::config::stages::Stages;
 use crate::config::wait::WaitSettings;
 
 /// The keys every scenario shares, as the document has them.
@@ -37,6 +38,9 @@ struct CommonKeys {
     /// Read by `Hosts::parse`, for errors that name the key.
     #[serde(default)]
     hosts: toml::Table,
+    /// Read by `Stages::parse`, likewise.
+    #[serde(default)]
+    stages: toml::Table,
 }
 
 /// The names of the scenarios of `catalog`, for error messages.
@@ -61,7 +65,7 @@ pub fn resolve_config(
     let looks_like_path = find(catalog, target).is_none()
         && !Path::new(target).is_dir()
         && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
-    let (origin, document) = if looks_like_path {
+    let (origin, document, launch_folder) = if looks_like_path {
         let text = std::fs::read_to_string(target)
             .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;
         let user: toml::Table = toml::from_str(&text).map_err(|e| toml_error(target, &text, &e))?;
@@ -91,7 +95,7 @@ pub fn resolve_config(
         })?;
         let mut document = schema.defaults();
         merge(&mut document, user);
-        (target.to_owned(), document)
+        (target.to_owned(), document, Path::new(target).parent().map(Path::to_path_buf))
     } else if Path::new(target).is_dir() {
         return Err(LaunchError::new(
             target,
@@ -109,9 +113,14 @@ pub fn resolve_config(
                 ),
             )
         })?;
-        (schema.file.to_owned(), schema.defaults())
+        (schema.file.to_owned(), schema.defaults(), None)
     };
-    from_document(document, &origin, overrides, catalog)
+    let config = from_document(document, &origin, overrides, catalog, launch_folder.as_deref())?;
+    // A user's stage that cannot start is bad input, found before anything starts.
+    for (role, stage) in &config.stages.commands {
+        stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
+    }
+    Ok(config)
 }
 
 /// Reads a resolved launch file written by the launcher (what each loop process does).
@@ -120,14 +129,17 @@ pub fn load_resolved_config(path: &Path, catalog: &[ScenarioSchema]) -> Result<L
     let text = std::fs::read_to_string(path)
         .map_err(|e| LaunchError::new(&origin, None, format!("cannot read the launch file: {e}")))?;
     let document: toml::Table = toml::from_str(&text).map_err(|e| toml_error(&origin, &text, &e))?;
-    from_document(document, &origin, &[], catalog)
+    from_document(document, &origin, &[], catalog, None)
 }
 
+/// `launch_folder`: the launch file's folder, where a stage's command given in it starts (one
+/// given on the command line starts in the current folder).
 fn from_document(
     mut document: toml::Table,
     origin: &str,
     overrides: &[Override],
     catalog: &[ScenarioSchema],
+    launch_folder: Option<&Path>,
 ) -> Result<LaunchConfig, LaunchError> {
     let mut origins = Origins { file: origin.to_owned(), set_keys: BTreeMap::new() };
     for o in overrides {
@@ -170,6 +182,19 @@ fn from_document(
     }
     let common: CommonKeys = deserialize_at(&origins, "", toml::Value::Table(common_table))?;
     let hosts = Hosts::parse(&common.hosts, |key, message| origins.error(key, message))?;
+    let current = std::env::current_dir().unwrap_or_default();
+    let launch_folder = launch_folder.map(|f| current.join(f));
+    let stages = Stages::parse(
+        &common.stages,
+        |key| match &launch_folder {
+            Some(folder) if origins.of(key) == origins.file => folder.clone(),
+            _ => current.clone(),
+        },
+        |key, message| origins.error(key, message),
+    )?;
+    if let Some(toml::Value::Table(table)) = document.get_mut("stages") {
+        stages.write_dirs(table);
+    }
 
     let config = LaunchConfig {
         scenario: common.scenario,
@@ -182,6 +207,7 @@ fn from_document(
         supervision: common.supervision,
         wait: common.wait,
         hosts,
+        stages,
         document,
         schema: schema.clone(),
         origins,

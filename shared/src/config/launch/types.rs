@@ -10,6 +10,7 @@ use crate::config::error::LaunchError;
 use crate::config::faults::{FaultSpec, Supervision};
 use crate::config::hosts::Hosts;
 use crate::config::schema::{ScenarioSchema, SignalLayout};
+use crate::config::stages::Stages;
 use crate::config::wait::WaitSettings;
 
 /// The longest run allowed, s (one week): it keeps every time and tick count of a run far
@@ -109,6 +110,8 @@ pub struct LaunchConfig {
     pub wait: WaitSettings,
     /// Stages placed on another host (none: the whole loop runs here).
     pub hosts: Hosts,
+    /// Stages of the user's own, run in place of the built-in ones.
+    pub stages: Stages,
     /// The whole resolved document, as written to the run folder.
     pub document: toml::Table,
     /// The scenario it was checked against.
@@ -125,7 +128,7 @@ pub(super) struct Origins {
 }
 
 impl Origins {
-    fn of(&self, key: &str) -> String {
+    pub(super) fn of(&self, key: &str) -> String {
         for (set_key, set_text) in &self.set_keys {
             let within = |a: &str, b: &str| a == b || a.starts_with(&format!("{b}."));
             if within(key, set_key) || within(set_key, key) {

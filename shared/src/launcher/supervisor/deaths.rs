@@ -27,7 +27,7 @@ impl Supervisor<'_> {
         {
             return Some(plant_finished(report, self.config.supervision.lockstep_stall_s));
         }
-        let exit = self.processes[role].exit_text();
+        let exit = self.exit_said(role);
         self.faults.detect(role, DetectedBy::ProcessExited, ns);
         // Free what the dead process held in shared memory before its successor opens it, on the
         // clean-up thread.

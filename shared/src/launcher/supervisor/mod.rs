@@ -25,7 +25,8 @@ use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 use crate::config::launch::LaunchConfig;
 use crate::contract::clock::now_ns;
 use crate::contract::role::Role;
-use crate::launcher::child::{self, Binaries, ChildArgs, ChildLine, Start};
+use crate::launcher::child::{self, Binaries, ChildArgs, ChildLine, Program, Start};
+use crate::launcher::outcome::Exit;
 use crate::launcher::outcome::Outcome;
 use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
@@ -38,8 +39,6 @@ use live::Live;
 pub use live::LiveView;
 use processes::{Process, Processes};
 
-/// Longest start-up: every process must report ready within it.
-const READY_TIMEOUT: Duration = Duration::from_secs(20);
 /// Longest wait between two looks at the fault schedule.
 const SUPERVISE_TICK: Duration = Duration::from_millis(2);
 
@@ -67,6 +66,17 @@ pub fn run_with(
     Supervisor::run(&decided, scenario, binaries, run_dir, view)
 }
 
+/// The last line of a file that is not blank (a process's log), read from its end.
+fn last_line(path: &Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut file = std::fs::File::open(path).ok()?;
+    let len = file.metadata().ok()?.len();
+    file.seek(SeekFrom::Start(len.saturating_sub(4096))).ok()?;
+    let mut tail = Vec::new();
+    file.read_to_end(&mut tail).ok()?;
+    String::from_utf8_lossy(&tail).lines().rev().map(str::trim).find(|l| !l.is_empty()).map(str::to_owned)
+}
+
 /// What reaches the supervision loop.
 enum Event {
     Child(ChildLine),
@@ -83,7 +93,7 @@ enum NotReady {
     Stopped(Outcome),
     /// The output of this process ended.
     Ended(Role),
-    /// These were not ready within `READY_TIMEOUT`.
+    /// These were not ready within `supervision.ready_timeout_s`.
     Late(Vec<Role>),
 }
 
@@ -222,7 +232,7 @@ impl<'a> Supervisor<'a> {
                 self.wait_ready(&[role]).map_err(|not| match not {
                     NotReady::Stopped(_) => anyhow!("stopped while {role} started"),
                     NotReady::Ended(ended) => anyhow!(self.ended_in_start_up(ended)),
-                    NotReady::Late(_) => anyhow!("{role} not ready after {} s", READY_TIMEOUT.as_secs()),
+                    NotReady::Late(late) => anyhow!(self.not_ready(&late)),
                 })?;
             }
         }
@@ -232,7 +242,7 @@ impl<'a> Supervisor<'a> {
     /// Handles events until every process of `roles` is ready (start-up, before the supervision
     /// loop).
     fn wait_ready(&mut self, roles: &[Role]) -> Result<(), NotReady> {
-        let deadline = Instant::now() + READY_TIMEOUT;
+        let deadline = Instant::now() + Duration::from_secs_f64(self.config.supervision.ready_timeout_s);
         loop {
             let late: Vec<Role> = roles.iter().copied().filter(|&r| !self.processes[r].ready).collect();
             if late.is_empty() {
@@ -255,7 +265,42 @@ impl<'a> Supervisor<'a> {
     }
 
     fn ended_in_start_up(&self, role: Role) -> String {
-        format!("{} during start-up; see logs/{role}.log", self.processes[role].exit_text())
+        format!("{} during start-up; see logs/{role}.log", self.exit_said(role))
+    }
+
+    /// Why start-up timed out: who was late. A stage of the user's own that never said ready
+    /// is the cause (the processes that wait for its topic are late because of it): its command.
+    fn not_ready(&self, late: &[Role]) -> String {
+        let timeout = self.config.supervision.ready_timeout_s;
+        let own: Vec<String> = late
+            .iter()
+            .filter_map(|&role| self.config.stages.command(role).map(|stage| (role, stage)))
+            .map(|(role, stage)| {
+                format!(
+                    "{role}: the command `{}` (started in {}) never said ready; it must hand its step to \
+                     LoopLab's runner (looplab.run, looplab_run, run_step); its stderr is in logs/{role}.log",
+                    stage.text(),
+                    stage.dir.display()
+                )
+            })
+            .collect();
+        if own.is_empty() {
+            let names: Vec<&str> = late.iter().map(|r| r.name()).collect();
+            format!("not ready after {timeout} s (supervision.ready_timeout_s): {}", names.join(", "))
+        } else {
+            format!("not ready after {timeout} s (supervision.ready_timeout_s): {}", own.join("; "))
+        }
+    }
+
+    /// How `role` ended, with the last line it wrote on stderr when it failed (a user's stage
+    /// that raised: the exception).
+    fn exit_said(&self, role: Role) -> String {
+        let exit = self.processes[role].exit_text();
+        let failed = matches!(self.processes[role].runs.last().map(|r| r.exit), Some(Exit::Status(code)) if code != 0);
+        match last_line(&self.run_dir.join("logs").join(format!("{role}.log"))).filter(|_| failed) {
+            Some(line) => format!("{exit}: {line}"),
+            None => exit,
+        }
     }
 
     /// Starts the next incarnation of `role`.
@@ -272,7 +317,11 @@ impl<'a> Supervisor<'a> {
             incarnation: self.processes[role].runs.len() as u32,
             prefix: remote.map(|(_, host)| host.command.as_slice()).unwrap_or_default(),
         };
-        let spawned = child::spawn(role, &binary, &args, self.tx.clone(), Event::Child)?;
+        let program = match self.config.stages.command(role) {
+            Some(stage) => Program::Stage(stage),
+            None => Program::Binary(&binary),
+        };
+        let spawned = child::spawn(role, program, &args, self.tx.clone(), Event::Child)?;
         self.readers.push(spawned.reader);
         self.processes[role].started(spawned.start, spawned.stdin);
         Ok(())
@@ -308,10 +357,7 @@ impl<'a> Supervisor<'a> {
             Ok(()) => {}
             Err(NotReady::Stopped(outcome)) => return outcome,
             Err(NotReady::Ended(role)) => return Outcome::Failed(self.ended_in_start_up(role)),
-            Err(NotReady::Late(late)) => {
-                let names: Vec<&str> = late.iter().map(|r| r.name()).collect();
-                return Outcome::Failed(format!("not ready after {} s: {}", READY_TIMEOUT.as_secs(), names.join(", ")));
-            }
+            Err(NotReady::Late(late)) => return Outcome::Failed(self.not_ready(&late)),
         }
         if !self.processes[Role::Plant].write_line("start") {
             return Outcome::Failed("cannot tell the plant to start".into());

@@ -1,0 +1,233 @@
+//! Stages of the user's own: the `[stages]` section of a launch file.
+//!
+//! ```toml
+//! [stages.controller]
+//! command = ["python3", "my_controller.py"]   # the program and its arguments
+//! # dir = "/home/me/loop"                     # where it starts (default: the launch file's folder)
+//! ```
+//!
+//! The launcher starts the command in place of the built-in stage, with the run's arguments in
+//! its environment (`contract::protocol::stage_env`); the program hands its computation to
+//! LoopLab's runner (`runtime::user_stage`: the `looplab` Python module, the `looplab_stage` C
+//! library, or the Rust library), so it is stamped, supervised and faulted as a built-in stage is.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::contract::role::Role;
+
+/// The stages a launch file may replace.
+pub const REPLACEABLE: [Role; 3] = Role::STAGES;
+
+/// One stage's command.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StageCommand {
+    /// The program, then its arguments.
+    pub command: Vec<String>,
+    /// The folder it starts in: relative paths in the command are relative to it.
+    pub dir: PathBuf,
+}
+
+/// The `[stages]` section, checked.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Stages {
+    pub commands: BTreeMap<Role, StageCommand>,
+}
+
+impl Stages {
+    /// Reads `[stages]`. `default_dir(key)` is the folder a command given at dotted `key` starts
+    /// in when its table has no `dir`; `error(key, message)` makes the error for a dotted key.
+    pub fn parse<E>(
+        table: &toml::Table,
+        default_dir: impl Fn(&str) -> PathBuf,
+        error: impl Fn(&str, String) -> E,
+    ) -> Result<Self, E> {
+        let allowed = || REPLACEABLE.iter().map(|r| r.name()).collect::<Vec<_>>().join(", ");
+        let mut stages = Stages::default();
+        for (name, value) in table {
+            let key = format!("stages.{name}");
+            let role = name
+                .parse::<Role>()
+                .ok()
+                .filter(|r| REPLACEABLE.contains(r))
+                .ok_or_else(|| error(&key, format!("unknown stage; allowed: {}", allowed())))?;
+            let toml::Value::Table(spec) = value else {
+                return Err(error(&key, format!("expected a table with `command`, got a {}", value.type_str())));
+            };
+            if let Some(unknown) = spec.keys().find(|k| !["command", "dir"].contains(&k.as_str())) {
+                return Err(error(&format!("{key}.{unknown}"), "unknown key; allowed: command, dir".into()));
+            }
+            let command_key = format!("{key}.command");
+            let command: Vec<String> = match spec.get("command") {
+                Some(toml::Value::Array(items)) => {
+                    items.iter().map(|item| item.as_str().map(str::to_owned)).collect::<Option<_>>().ok_or_else(
+                        || error(&command_key, "must be a list of strings: the program, then its arguments".into()),
+                    )?
+                }
+                Some(other) => {
+                    return Err(error(
+                        &command_key,
+                        format!(
+                            "must be a list of strings (the program, then its arguments), got a {}",
+                            other.type_str()
+                        ),
+                    ));
+                }
+                None => return Err(error(&command_key, "missing: the program and its arguments, as a list".into())),
+            };
+            if command.first().is_none_or(|program| program.is_empty()) {
+                return Err(error(&command_key, "must name a program: [\"python3\", \"my_stage.py\"]".into()));
+            }
+            let dir = match spec.get("dir") {
+                Some(toml::Value::String(dir)) => PathBuf::from(dir),
+                Some(other) => {
+                    return Err(error(
+                        &format!("{key}.dir"),
+                        format!("must be a folder's path, got a {}", other.type_str()),
+                    ));
+                }
+                None => default_dir(&command_key),
+            };
+            stages.commands.insert(role, StageCommand { command, dir });
+        }
+        Ok(stages)
+    }
+
+    pub fn command(&self, role: Role) -> Option<&StageCommand> {
+        self.commands.get(&role)
+    }
+
+    /// Writes each stage's folder into `table` (the document's `[stages]`), so that the resolved
+    /// launch file in the run folder starts each stage where this one does.
+    pub fn write_dirs(&self, table: &mut toml::Table) {
+        for (role, stage) in &self.commands {
+            if let Some(toml::Value::Table(spec)) = table.get_mut(role.name()) {
+                spec.insert("dir".into(), toml::Value::String(stage.dir.display().to_string()));
+            }
+        }
+    }
+}
+
+impl StageCommand {
+    /// The program as it will be run: a path with a `/` is taken from the stage's folder, a bare
+    /// name from PATH. Err: what is wrong, in words.
+    pub fn program(&self) -> Result<PathBuf, String> {
+        let program = &self.command[0];
+        if program.contains('/') {
+            let path = self.dir.join(program);
+            return if is_executable(&path) {
+                Ok(path)
+            } else {
+                Err(format!("program {program} is not an executable file in {}", self.dir.display()))
+            };
+        }
+        let path = std::env::var_os("PATH").unwrap_or_default();
+        std::env::split_paths(&path)
+            .map(|folder| folder.join(program))
+            .find(|candidate| is_executable(candidate))
+            .ok_or_else(|| format!("program {program} is not found on PATH"))
+    }
+
+    /// Checks, before anything starts, that the command can run: its program exists, every
+    /// script it names (`.py`) exists, and a Python interpreter can import LoopLab's module.
+    pub fn check(&self) -> Result<(), String> {
+        let program = self.program()?;
+        for script in self.command[1..].iter().filter(|a| a.ends_with(".py")) {
+            if !self.dir.join(script).is_file() {
+                return Err(format!("script {script} is not found in {}", self.dir.display()));
+            }
+        }
+        let is_python =
+            Path::new(&self.command[0]).file_name().is_some_and(|n| n.to_string_lossy().starts_with("python"));
+        if is_python {
+            let imported = std::process::Command::new(&program)
+                .args(["-c", "import looplab"])
+                .current_dir(&self.dir)
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .output()
+                .map_err(|e| format!("cannot run {}: {e}", program.display()))?;
+            if !imported.status.success() {
+                let why = String::from_utf8_lossy(&imported.stderr);
+                let last = why.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("it failed");
+                return Err(format!(
+                    "{} cannot import LoopLab's Python module ({last}); install it: pip install ./services/python",
+                    self.command[0]
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The command as one line for messages: `python3 my_controller.py`.
+    pub fn text(&self) -> String {
+        self.command.join(" ")
+    }
+}
+
+fn is_executable(path: &Path) -> bool {
+    use std::os::unix::fs::PermissionsExt;
+    path.metadata().is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Stages, String> {
+        let table: toml::Table = toml::from_str(text).unwrap();
+        Stages::parse(&table, |_| PathBuf::from("/launch"), |key, message| format!("{key}: {message}"))
+    }
+
+    #[test]
+    fn a_stage_command_is_a_program_and_its_arguments_started_in_the_launch_folder() {
+        let stages = parse("[controller]\ncommand = [\"python3\", \"c.py\"]\n").unwrap();
+        let c = stages.command(Role::Controller).unwrap();
+        assert_eq!((c.command.clone(), c.dir.clone()), (vec!["python3".into(), "c.py".into()], "/launch".into()));
+        assert_eq!(
+            parse("[sensors]\ncommand = [\"./s\"]\ndir = \"/x\"\n").unwrap().commands[&Role::Sensors].dir,
+            Path::new("/x")
+        );
+    }
+
+    #[test]
+    fn a_bad_stages_section_is_one_line_naming_the_key_and_what_is_allowed() {
+        let cases = [
+            ("[plant]\ncommand = [\"x\"]\n", "stages.plant: unknown stage; allowed: sensors, estimator, controller"),
+            ("[controller]\n", "stages.controller.command: missing: the program and its arguments, as a list"),
+            (
+                "[controller]\ncommand = \"python3 c.py\"\n",
+                "stages.controller.command: must be a list of strings (the program, then its arguments), got a string",
+            ),
+            (
+                "[controller]\ncommand = []\n",
+                "stages.controller.command: must name a program: [\"python3\", \"my_stage.py\"]",
+            ),
+            (
+                "[controller]\ncommand = [\"x\"]\nargs = 1\n",
+                "stages.controller.args: unknown key; allowed: command, dir",
+            ),
+            ("controller = 3\n", "stages.controller: expected a table with `command`, got a integer"),
+        ];
+        for (text, expected) in cases {
+            assert_eq!(parse(text).unwrap_err(), expected, "{text}");
+        }
+    }
+
+    #[test]
+    fn a_missing_program_or_script_is_found_before_anything_starts() {
+        let stage = |command: &[&str]| StageCommand {
+            command: command.iter().map(|s| s.to_string()).collect(),
+            dir: std::env::temp_dir(),
+        };
+        assert_eq!(
+            stage(&["no-such-program-ll"]).check().unwrap_err(),
+            "program no-such-program-ll is not found on PATH"
+        );
+        assert!(stage(&["sh", "-c", "true"]).check().is_ok());
+        let missing = stage(&["sh", "no-such-script-ll.py"]).check().unwrap_err();
+        assert!(missing.starts_with("script no-such-script-ll.py is not found in "), "{missing}");
+        let relative = stage(&["./no-such-binary-ll"]).check().unwrap_err();
+        assert!(relative.starts_with("program ./no-such-binary-ll is not an executable file in "), "{relative}");
+    }
+}
