@@ -219,3 +219,50 @@ fn a_python_step_that_raises_ends_the_run_with_its_last_line() {
     assert_clean(&s);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_python_step_gets_the_stage_and_the_same_two_float64_views_every_loop() {
+    let dir = fresh_dir("views");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("checking_controller.py");
+    // Any failed check raises in the stage, which ends the run.
+    std::fs::write(
+        &script,
+        r#"import looplab
+
+
+class Checking:
+    def __init__(self, stage):
+        assert stage.role == "controller" and stage.incarnation == 0, stage
+        assert stage.input_names == ["theta", "theta_dot", "wheel_speed", "bias"], stage.input_names
+        assert stage.output_names == ["current"], stage.output_names
+        assert stage.config["scenario"] == "pendulum" and stage.config["model"]["current_limit_a"] == 5.0
+        self.k = stage.config["controller"]["gains"]
+        self.views = None
+
+    def step(self, t, x, u):
+        if self.views is None:
+            self.views = (x, u)
+            assert x.format == "d" and u.format == "d" and x.readonly and not u.readonly
+            assert (len(x), len(u)) == (4, 1)
+            try:
+                x[0] = 1.0
+                raise AssertionError("x is writable")
+            except TypeError:
+                pass
+        assert x is self.views[0] and u is self.views[1], "new views"
+        assert u[0] == 0.0, "u starts at zero every loop"
+        u[0] = min(max(-(self.k[0] * x[0] + self.k[1] * x[1] + self.k[2] * x[2]), -5.0), 5.0)
+
+
+looplab.run(Checking)
+"#,
+    )
+    .unwrap();
+    let stage = python_stage("controller", script.to_str().unwrap());
+    let r = run_from(launcher(), "views", &["pendulum", "--mode", "lockstep", "--duration", "1", "--set", &stage]);
+    assert!(r.summary().completed, "{:?}", r.summary().stopped_because);
+    assert!(r.metric("theta_max_abs_rad") < 0.1, "the views' command reached the plant");
+    assert_clean(r.summary());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
