@@ -74,7 +74,7 @@ fn run(py: Python<'_>, cls: Py<PyAny>) -> PyResult<()> {
     // step; with the default action the runner's handler alone sees it, as a stop request.
     let signal = py.import("signal")?;
     signal.call_method1("signal", (signal.getattr("SIGINT")?, signal.getattr("SIG_DFL")?))?;
-    let code = py.detach(move || run_step(move |info| Python::attach(|py| step::PyStep::new(py, cls.bind(py), info))));
+    let code = py.detach(move || run_step(move |info| Python::attach(|py| step::PyStep::make(py, cls.bind(py), info))));
     if code == ExitCode::SUCCESS {
         return Ok(());
     }

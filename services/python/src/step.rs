@@ -24,7 +24,7 @@ pub struct PyStep {
 
 impl PyStep {
     /// Makes the user's object from `cls(stage)` and finds its methods once.
-    pub fn new(py: Python<'_>, cls: &Bound<'_, PyAny>, info: &StageInfo) -> Result<Box<dyn Step>> {
+    pub fn make(py: Python<'_>, cls: &Bound<'_, PyAny>, info: &StageInfo) -> Result<Box<dyn Step>> {
         let made = (|| -> PyResult<_> {
             let stage = Bound::new(py, Stage::new(py, info)?)?;
             let user = cls.call1((stage,))?;
@@ -92,7 +92,7 @@ fn python_error(py: Python<'_>, err: PyErr) -> anyhow::Error {
     match formatted {
         Ok((full, last)) => {
             eprint!("{full}");
-            anyhow!("{}", last.trim_end().lines().last().unwrap_or_default().to_string())
+            anyhow!("{}", last.trim_end().lines().last().unwrap_or_default())
         }
         Err(_) => anyhow!("{err}"),
     }
