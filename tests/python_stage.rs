@@ -1,0 +1,268 @@
+//! Stages of the user's own in Python (issue 28): the examples in services/examples/python run
+//! by a real python3 with the `looplab` module that cargo built, as five real processes over real
+//! shared memory. Numbers come from lockstep runs; real-time runs are checked for what happened.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use common::*;
+
+const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/python");
+
+/// Gains other than the defaults that still hold the pendulum up.
+const OTHER_GAINS: &str = "controller.gains=[-450.0, -65.0, -1.2]";
+
+/// A folder from which Python imports the `looplab` module that cargo builds: the workspace's
+/// `liblooplab.so` under the name Python looks for, `looplab.so` (no maturin needed).
+fn module_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let target = Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher's folder");
+        // The module is not a dependency of these tests, so cargo may not have built it (or not
+        // since the last change): build it, a no-op when it is fresh.
+        if let Some(cargo) = std::env::var_os("CARGO") {
+            let mut build = std::process::Command::new(cargo);
+            build.args(["build", "--quiet", "-p", "looplab-python"]).current_dir(env!("CARGO_MANIFEST_DIR"));
+            if target.file_name().is_some_and(|name| name == "release") {
+                build.arg("--release");
+            }
+            let status = build.status().expect("start cargo");
+            assert!(status.success(), "cargo build -p looplab-python failed: {status}");
+        }
+        let built = target.join("liblooplab.so");
+        assert!(
+            built.exists(),
+            "{} is missing: build the workspace first (`cargo build --release --workspace`)",
+            built.display()
+        );
+        let dir = target.join("python-module");
+        std::fs::create_dir_all(&dir).unwrap();
+        let module = dir.join("looplab.so");
+        let _ = std::fs::remove_file(&module);
+        std::os::unix::fs::symlink(&built, &module).unwrap();
+        dir
+    })
+}
+
+/// The launcher, with the module importable by the stages it starts.
+fn launcher() -> std::process::Command {
+    let mut command = looplab();
+    command.env("PYTHONPATH", module_dir());
+    command
+}
+
+fn example(file: &str) -> String {
+    format!("{EXAMPLES}/{file}")
+}
+
+/// `--set` for a Python stage running `script`.
+fn python_stage(role: &str, script: &str) -> String {
+    format!("stages.{role}.command=[\"python3\", \"{script}\"]")
+}
+
+fn trajectory_bytes(run: &Run) -> Vec<u8> {
+    std::fs::read(run.dir.join("trajectory.csv")).expect("trajectory.csv")
+}
+
+/// Nothing of the run is left: no shared memory file, no process.
+fn assert_clean(s: &Summary) {
+    assert!(s.shared_memory.clean, "{:?}", s.shared_memory);
+    let left = looplab_shared::runtime::ipc::files_of_run(&s.run_id);
+    assert!(left.is_empty(), "files left behind: {left:?}");
+    for p in &s.processes {
+        assert!(!alive(i64::from(p.pid)), "{p:?} is still running");
+    }
+}
+
+fn log(run: &Run, role: &str) -> String {
+    std::fs::read_to_string(run.dir.join("logs").join(format!("{role}.log"))).unwrap_or_default()
+}
+
+#[test]
+fn the_python_controller_port_is_byte_identical_to_the_builtin_with_default_and_other_gains() {
+    let launch = example("pendulum_python.toml");
+    for gains in [None, Some(OTHER_GAINS)] {
+        let mut args = vec!["--mode", "lockstep", "--duration", "3"];
+        args.extend(gains.iter().flat_map(|g| ["--set", g]));
+        let builtin = run_from(launcher(), "builtin-controller", &[&["pendulum"], args.as_slice()].concat());
+        let python = run_from(launcher(), "python-controller", &[&[launch.as_str()], args.as_slice()].concat());
+        assert!(python.summary().completed, "{:?}", python.summary().stopped_because);
+        assert!(python.metric("theta_max_abs_rad") < 0.1, "{gains:?} should hold the pendulum up");
+        assert!(trajectory_bytes(&python) == trajectory_bytes(&builtin), "{gains:?}: the trajectories differ");
+        assert_clean(python.summary());
+    }
+    // The stage that ran was the Python one: without the module it cannot start.
+    let dir = fresh_dir("python-without-module");
+    let output = looplab()
+        .env("PYTHONPATH", &dir)
+        .args(["run", &launch, "--duration", "1", "-q", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert!(said.contains("No module named 'looplab'"), "{said}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_python_bias_observer_gives_the_builtin_estimates() {
+    let common = ["pendulum", "--mode", "lockstep", "--duration", "3"];
+    let builtin = run_from(launcher(), "builtin-estimator", &common);
+    let stage = python_stage("estimator", &example("pendulum_estimator.py"));
+    let python = run_from(launcher(), "python-estimator", &[&common[..], &["--set", &stage]].concat());
+    let (ours, theirs) = (python.trajectory(), builtin.trajectory());
+    assert_eq!(ours.rows.len(), 3000);
+    for column in ["est.theta_rad", "est.theta_dot_rad_per_s", "est.wheel_speed_rad_per_s", "est.bias_rad"] {
+        let worst = ours.col(column).iter().zip(theirs.col(column)).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(worst <= 1e-9, "{column}: the Python estimate is {worst} from the built-in's");
+    }
+    // The same arithmetic in the same order: the whole run is the built-in one, byte for byte.
+    assert!(trajectory_bytes(&python) == trajectory_bytes(&builtin), "within 1e-9 but not byte-identical");
+    assert_clean(python.summary());
+}
+
+#[test]
+fn an_integrating_python_controller_killed_in_lockstep_resumes_its_integrator() {
+    // The plant holds the loop while the controller is replaced, so a restarted controller that
+    // thawed its integrator continues the very run without the kill; one that started from
+    // zero would command otherwise.
+    let stage = python_stage("controller", &example("integrating_controller.py"));
+    let common = ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", &stage];
+    let nominal = run_from(launcher(), "integrating-nominal", &common);
+    let killed =
+        run_from(launcher(), "integrating-killed", &[&common[..], &["--fault", "kill controller at 2s"]].concat());
+    let s = killed.summary();
+    assert_eq!(s.restarts[&Role::Controller], 1, "{:?}", s.restarts);
+    assert!(log(&killed, "controller").contains("thawed: integral"), "{}", log(&killed, "controller"));
+    assert!(trajectory_bytes(&killed) == trajectory_bytes(&nominal), "the restarted controller did not resume");
+    assert_clean(s);
+}
+
+/// The thawed integrator's (integral, t) from the controller's log.
+fn thawed(log: &str) -> Option<(f64, f64)> {
+    let line = log.lines().find_map(|l| l.strip_prefix("thawed: integral "))?;
+    let (integral, rest) = line.split_once(" rad·s at t = ")?;
+    Some((integral.parse().ok()?, rest.strip_suffix(" s")?.parse().ok()?))
+}
+
+#[test]
+fn an_integrating_python_controller_in_real_time_survives_a_kill_a_stop_and_a_delay() {
+    let stage = python_stage("controller", &example("integrating_controller.py"));
+    let faults = ["kill controller at 2s", "stop controller at 2s for 150ms", "delay controller by 3ms at 2s for 0.5s"];
+    for fault in faults {
+        let r = run_from(
+            launcher(),
+            "integrating-realtime",
+            &["pendulum", "--duration", "3", "--set", &stage, "--fault", fault],
+        );
+        let s = r.summary();
+        assert!(s.completed, "{fault}: {:?}", s.stopped_because);
+        let f = &s.faults[0];
+        let log = log(&r, "controller");
+        if fault.starts_with("kill") {
+            assert_eq!(s.restarts[&Role::Controller], 1, "{fault}: {:?}", s.restarts);
+            assert_eq!(f.detected_by, Some(DetectedBy::ProcessExited), "{f:?}");
+            assert!(f.restarted_after_ms.is_some(), "{f:?}");
+            // The restarted controller thawed its predecessor's integrator as it was near the kill.
+            let (integral, t) = thawed(&log).unwrap_or_else(|| panic!("no thaw in the log:\n{log}"));
+            assert!(integral != 0.0 && t > 1.0 && t < 3.0, "thawed {integral} at {t} s");
+        } else {
+            assert_eq!(s.restarts[&Role::Controller], 0, "{fault}: a live process is not restarted");
+            assert!(!log.contains("thawed"), "{fault}: {log}");
+        }
+        if fault.starts_with("stop") {
+            assert_eq!(f.detected_by, Some(DetectedBy::InputDeadline), "{f:?}");
+        }
+        assert!(f.effect.is_some(), "{fault}: no effect recorded: {f:?}");
+        for p in last_incarnations(s).values() {
+            assert_eq!(p.exit, Exit::Status(0), "{fault}: {:?}", s.processes);
+        }
+        assert_clean(s);
+    }
+}
+
+#[test]
+fn a_python_step_that_raises_ends_the_run_with_its_last_line() {
+    let dir = fresh_dir("raising");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("raising_controller.py");
+    std::fs::write(
+        &script,
+        "import looplab\n\n\nclass Raising:\n    def __init__(self, stage):\n        pass\n\n    \
+         def step(self, t, x, u):\n        if t >= 1.0:\n            raise ValueError(\"boom\")\n\n\n\
+         looplab.run(Raising)\n",
+    )
+    .unwrap();
+    let out = dir.join("run");
+    let stage = python_stage("controller", script.to_str().unwrap());
+    let output = launcher()
+        .args(["run", "pendulum", "--mode", "lockstep", "--duration", "3", "-q", "--set", &stage])
+        .args(["--set", "supervision.controller.restart=never", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
+    let s = load_summary(&out);
+    let why = match &s.stopped_because {
+        Some(StopReason::Failed(why)) => why.clone(),
+        other => panic!("not a failure: {other:?}"),
+    };
+    let last = "controller: error: step failed at t = 1.000000 s: ValueError: boom";
+    assert!(why.contains(&format!("controller exited with status 1: {last}")), "{why}");
+    // The whole traceback is in the stage's log, the error line last.
+    let log = std::fs::read_to_string(out.join("logs/controller.log")).unwrap();
+    assert!(log.contains("Traceback (most recent call last):") && log.contains("raise ValueError(\"boom\")"), "{log}");
+    assert_eq!(log.lines().last(), Some(last), "{log}");
+    assert_clean(&s);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_python_step_gets_the_stage_and_the_same_two_float64_views_every_loop() {
+    let dir = fresh_dir("views");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("checking_controller.py");
+    // Any failed check raises in the stage, which ends the run.
+    std::fs::write(
+        &script,
+        r#"import looplab
+
+
+class Checking:
+    def __init__(self, stage):
+        assert stage.role == "controller" and stage.incarnation == 0, stage
+        assert stage.input_names == ["theta", "theta_dot", "wheel_speed", "bias"], stage.input_names
+        assert stage.output_names == ["current"], stage.output_names
+        assert stage.config["scenario"] == "pendulum" and stage.config["model"]["current_limit_a"] == 5.0
+        self.k = stage.config["controller"]["gains"]
+        self.views = None
+
+    def step(self, t, x, u):
+        if self.views is None:
+            self.views = (x, u)
+            assert x.format == "d" and u.format == "d" and x.readonly and not u.readonly
+            assert (len(x), len(u)) == (4, 1)
+            try:
+                x[0] = 1.0
+                raise AssertionError("x is writable")
+            except TypeError:
+                pass
+        assert x is self.views[0] and u is self.views[1], "new views"
+        assert u[0] == 0.0, "u starts at zero every loop"
+        u[0] = min(max(-(self.k[0] * x[0] + self.k[1] * x[1] + self.k[2] * x[2]), -5.0), 5.0)
+
+
+looplab.run(Checking)
+"#,
+    )
+    .unwrap();
+    let stage = python_stage("controller", script.to_str().unwrap());
+    let r = run_from(launcher(), "views", &["pendulum", "--mode", "lockstep", "--duration", "1", "--set", &stage]);
+    assert!(r.summary().completed, "{:?}", r.summary().stopped_because);
+    assert!(r.metric("theta_max_abs_rad") < 0.1, "the views' command reached the plant");
+    assert_clean(r.summary());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
