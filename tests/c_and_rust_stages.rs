@@ -16,57 +16,6 @@ use common::*;
 const REPO: &str = env!("CARGO_MANIFEST_DIR");
 const OTHER_GAINS: &str = "controller.gains=[-420.0, -61.5, -1.25]";
 
-/// The profile's target folder (target/release under `cargo test --release`), where cargo puts
-/// the launcher, the C library, its header and the Rust example.
-fn profile_dir() -> PathBuf {
-    Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher is in a folder").to_owned()
-}
-
-/// The C library, its header and the Rust example, built once if any is missing.
-fn built() -> &'static Path {
-    static BUILT: OnceLock<PathBuf> = OnceLock::new();
-    BUILT.get_or_init(|| {
-        let dir = profile_dir();
-        let needed = ["liblooplab_stage.so", "looplab_stage.h", "looplab-example-controller"];
-        if needed.iter().any(|file| !dir.join(file).exists()) {
-            cargo_build(&dir);
-        }
-        for file in needed {
-            assert!(dir.join(file).exists(), "{} is missing after the build", dir.join(file).display());
-        }
-        dir
-    })
-}
-
-/// `cargo build -p looplab-stage -p looplab-example-controller` in the tests' profile. Where the
-/// running `cargo test` holds the build folder's lock, cargo would wait for it for ever: that is
-/// a failure that says what to run first.
-fn cargo_build(dir: &Path) {
-    let release = dir.file_name().is_some_and(|name| name == "release");
-    let mut command = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
-    command.current_dir(REPO).args(["build", "-p", "looplab-stage", "-p", "looplab-example-controller"]);
-    if release {
-        command.arg("--release");
-    }
-    let mut child = command.stderr(Stdio::piped()).spawn().expect("start cargo");
-    let mut said = Vec::new();
-    for line in BufReader::new(child.stderr.take().expect("piped")).lines() {
-        let line = line.expect("cargo's stderr");
-        if line.contains("Blocking waiting for file lock") {
-            child.kill().expect("stop cargo");
-            let _ = child.wait();
-            panic!(
-                "the C library or the Rust example is not built, and cargo cannot build it while this cargo test \
-                 holds the build folder: run `cargo build{} -p looplab-stage -p looplab-example-controller` first",
-                if release { " --release" } else { "" }
-            );
-        }
-        said.push(line);
-    }
-    let status = child.wait().expect("cargo ends");
-    assert!(status.success(), "cargo build failed:\n{}", said.join("\n"));
-}
-
 /// Compiles one C program against the library into its own fresh folder; returns the program.
 fn compile_c(name: &str, source: &Path) -> PathBuf {
     let lib = built();
@@ -173,7 +122,7 @@ int main(void) { return looplab_run(step, 0); }
     let output = looplab()
         .arg("run")
         .arg(&launch)
-        .args(["--mode", "lockstep", "--duration", "3", "--set", "supervision.controller.restart=never"])
+        .args(["--mode", "lockstep", "--duration", "3", "--set", "supervision.controller.max_restarts=2"])
         .args(["--set", &controller_command(&program), "-q", "--out"])
         .arg(&out)
         .output()
@@ -183,8 +132,11 @@ int main(void) { return looplab_run(step, 0); }
     let s = load_summary(&out);
     let Some(StopReason::Failed(why)) = &s.stopped_because else { panic!("not a failure: {:?}", s.stopped_because) };
     assert!(why.contains("step returned 7"), "the failure does not name the code: {why}\n{said}");
+    // The restart policy applied: each successor took over loop 1000 (lockstep keeps the input a
+    // stage was handling) and failed on it again, until the restarts ran out.
+    assert_eq!(s.restarts[&Role::Controller], 2, "{said}");
     let log = std::fs::read_to_string(out.join("logs/controller.log")).expect("logs/controller.log");
-    assert!(log.contains("step failed at t = 1.0") && log.contains("step returned 7"), "{log}");
+    assert_eq!(log.matches("step failed at t = 1.000000 s: step returned 7").count(), 3, "{log}");
     assert_no_files_left(&s);
     std::fs::remove_dir_all(&dir).unwrap();
 }

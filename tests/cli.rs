@@ -159,6 +159,14 @@ fn bench_quick_writes_every_part() {
         let said_skipped = skipped.iter().any(|s| s.starts_with(&format!("{expected}: needs 5 CPUs")));
         assert_eq!((ran, said_skipped), (cpus >= 5 || !expected.contains("spin"), !ran), "{expected}: {names:?}");
     }
+    // A controller of one's own runs where its stage can be prepared (the C one is compiled
+    // here; the Python one needs the `looplab` module installed), or is named as skipped, with why.
+    for own in ["looplab block, Python controller", "looplab block, C controller"] {
+        let ran = names.contains(&own);
+        let said_skipped = skipped.iter().any(|s| s.starts_with(&format!("{own}: ")));
+        assert!(ran != said_skipped, "{own}: ran {ran}, skipped {skipped:?}");
+    }
+    assert!(names.contains(&"looplab block, C controller"), "cc and liblooplab_stage.so are here: {skipped:?}");
     // The physical floor and the hop's anatomy (this machine has two CPUs at least).
     assert!(cpus >= 2);
     let raw = &report["floor_raw_one_way_ns"];

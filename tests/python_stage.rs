@@ -124,6 +124,29 @@ fn the_python_bias_observer_gives_the_builtin_estimates() {
     assert_clean(python.summary());
 }
 
+/// Noise-free sensors sampled every loop, built in and in Python (`ideal_sensors.py` copies the
+/// true state): the same readings, so the same run, byte for byte.
+#[test]
+fn python_sensors_reading_the_truth_give_the_builtin_ideal_sensors_run() {
+    let ideal = [
+        "--set",
+        "sensors.encoder.bias=0.0",
+        "--set",
+        "sensors.encoder.quantum=0.0",
+        "--set",
+        "sensors.wheel_speed.period_s=0.001",
+        "--set",
+        "sensors.wheel_speed.noise_std=0.0",
+    ];
+    let common = [&["pendulum", "--mode", "lockstep", "--duration", "2"][..], &ideal[..]].concat();
+    let builtin = run_from(launcher(), "builtin-ideal-sensors", &common);
+    let stage = python_stage("sensors", &example("ideal_sensors.py"));
+    let python = run_from(launcher(), "python-ideal-sensors", &[&common[..], &["--set", &stage]].concat());
+    assert!(python.summary().completed, "{:?}", python.summary().stopped_because);
+    assert!(trajectory_bytes(&python) == trajectory_bytes(&builtin), "the trajectories differ");
+    assert_clean(python.summary());
+}
+
 #[test]
 fn an_integrating_python_controller_killed_in_lockstep_resumes_its_integrator() {
     // The plant holds the loop while the controller is replaced, so a restarted controller that

@@ -64,6 +64,27 @@ fn lockstep_with_a_remote_controller_writes_the_local_runs_bytes() {
 /// The fitted clock of a run on `hosts`, and the corrected crossing hops checked against the
 /// link's round trip: a one-way hop is at most the round trip, give or take the offset's
 /// uncertainty, which an uncorrected hop between clocks 1000 s apart could never be.
+/// A stage of one's own on the other host: the Rust example controller (its own program, started
+/// there through the host's prefix with the run's environment), byte-identical to the local run.
+#[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
+fn a_controller_of_ones_own_runs_on_another_host_like_a_built_in_one() {
+    let program = built().join("looplab-example-controller");
+    let hosts = test_hosts("own", None);
+    let base = ["pendulum", "--set", "mode=lockstep", "--set", "duration_s=1"];
+    let local = run("remote-own-local", &base);
+    let mut args: Vec<String> = base.map(String::from).to_vec();
+    args.extend(placed(&hosts));
+    args.extend(["--set".into(), format!("stages.controller.command=[{:?}]", program.display().to_string())]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let remote = run_from(launcher_on(&hosts), "remote-own", &args);
+    let bytes = |r: &Run| std::fs::read(r.dir.join("trajectory.csv")).unwrap();
+    assert!(bytes(&local) == bytes(&remote), "the remote run's trajectory.csv differs from the local run's");
+    let controller = remote.summary().processes.iter().find(|p| p.name == Role::Controller).unwrap();
+    assert_eq!(controller.command.as_deref(), Some(program.display().to_string().as_str()));
+    assert_eq!(hosts.remote_shm_entries(), Vec::<String>::new());
+}
+
 fn fitted_offset_ns(hosts: &TestHosts, name: &str) -> (f64, f64) {
     let mut args: Vec<String> = ["pendulum", "--set", "duration_s=3"].map(String::from).to_vec();
     args.extend(placed(hosts));

@@ -7,8 +7,10 @@
 pub mod netns;
 
 use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Command, Output, Stdio};
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 pub use looplab_shared::config::faults::FaultKind;
@@ -177,4 +179,61 @@ pub fn png_size(path: &Path) -> (u32, u32) {
     assert_eq!(&bytes[12..16], b"IHDR");
     let number = |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap());
     (number(16), number(20))
+}
+
+/// The profile's target folder (target/release under `cargo test --release`), where cargo puts
+/// the launcher, the C library, its header and the Rust example.
+pub fn profile_dir() -> PathBuf {
+    Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher is in a folder").to_owned()
+}
+
+/// The C library, its header and the Rust example, built (or found fresh) once: they are not
+/// dependencies of this test, so cargo may not have built them since the last change.
+pub fn built() -> &'static Path {
+    static BUILT: OnceLock<PathBuf> = OnceLock::new();
+    BUILT.get_or_init(|| {
+        let dir = profile_dir();
+        let needed = ["liblooplab_stage.so", "looplab_stage.h", "looplab-example-controller"];
+        cargo_build(&dir);
+        for file in needed {
+            assert!(dir.join(file).exists(), "{} is missing after the build", dir.join(file).display());
+        }
+        dir
+    })
+}
+
+/// `cargo build -p looplab-stage -p looplab-example-controller` in the tests' profile (a no-op
+/// when they are fresh). Where the
+/// running `cargo test` holds the build folder's lock, cargo would wait for it for ever: that is
+/// a failure that says what to run first.
+fn cargo_build(dir: &Path) {
+    let release = dir.file_name().is_some_and(|name| name == "release");
+    let mut command = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    command.current_dir(env!("CARGO_MANIFEST_DIR")).args([
+        "build",
+        "-p",
+        "looplab-stage",
+        "-p",
+        "looplab-example-controller",
+    ]);
+    if release {
+        command.arg("--release");
+    }
+    let mut child = command.stderr(Stdio::piped()).spawn().expect("start cargo");
+    let mut said = Vec::new();
+    for line in BufReader::new(child.stderr.take().expect("piped")).lines() {
+        let line = line.expect("cargo's stderr");
+        if line.contains("Blocking waiting for file lock") {
+            child.kill().expect("stop cargo");
+            let _ = child.wait();
+            panic!(
+                "the C library or the Rust example is not built, and cargo cannot build it while this cargo test \
+                 holds the build folder: run `cargo build{} -p looplab-stage -p looplab-example-controller` first",
+                if release { " --release" } else { "" }
+            );
+        }
+        said.push(line);
+    }
+    let status = child.wait().expect("cargo ends");
+    assert!(status.success(), "cargo build failed:\n{}", said.join("\n"));
 }
