@@ -99,6 +99,28 @@ fn a_rust_controller_crate_gives_the_builtin_controllers_trajectory_to_the_byte(
     );
 }
 
+/// The launch file as written, run from another folder into a relative run folder: the stage
+/// starts in the launch file's folder and still finds the run's files.
+#[test]
+fn a_launch_file_of_ones_own_runs_from_any_folder_into_a_relative_run_folder() {
+    built();
+    let here = fresh_dir("relative-out");
+    std::fs::create_dir_all(&here).unwrap();
+    let launch = Path::new(REPO).join("services/examples/rust-controller/pendulum_rust.toml");
+    let output = looplab()
+        .current_dir(&here)
+        .arg("run")
+        .arg(&launch)
+        .args(["--mode", "lockstep", "--duration", "0.5", "-q", "--out", "run"])
+        .output()
+        .expect("start looplab");
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let s = load_summary(&here.join("run"));
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_no_files_left(&s);
+    std::fs::remove_dir_all(&here).unwrap();
+}
+
 #[test]
 fn a_c_step_that_returns_an_error_ends_the_run_and_names_its_code() {
     let dir = fresh_dir("c-step-error");

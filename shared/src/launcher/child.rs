@@ -255,7 +255,14 @@ pub fn spawn<E: Send + 'static>(
             (command, binary.display().to_string())
         }
         Program::Stage(stage) => {
-            let env = process_args.to_env(role.name());
+            // The stage starts in its own folder: the run's paths must not be relative to ours.
+            let absolute = |path: &Path| std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+            let env = ProcessArgs {
+                launch: absolute(&process_args.launch),
+                run_dir: absolute(&process_args.run_dir),
+                ..process_args
+            }
+            .to_env(role.name());
             let command = if args.prefix.is_empty() {
                 let mut command = std::process::Command::new(&stage.command[0]);
                 command.args(&stage.command[1..]).current_dir(&stage.dir).envs(env);
