@@ -66,16 +66,6 @@ fn trajectory_bytes(run: &Run) -> Vec<u8> {
     std::fs::read(run.dir.join("trajectory.csv")).expect("trajectory.csv")
 }
 
-/// Nothing of the run is left: no shared memory file, no process.
-fn assert_clean(s: &Summary) {
-    assert!(s.shared_memory.clean, "{:?}", s.shared_memory);
-    let left = looplab_shared::runtime::ipc::files_of_run(&s.run_id);
-    assert!(left.is_empty(), "files left behind: {left:?}");
-    for p in &s.processes {
-        assert!(!alive(i64::from(p.pid)), "{p:?} is still running");
-    }
-}
-
 fn log(run: &Run, role: &str) -> String {
     std::fs::read_to_string(run.dir.join("logs").join(format!("{role}.log"))).unwrap_or_default()
 }
@@ -91,7 +81,7 @@ fn the_python_controller_port_is_byte_identical_to_the_builtin_with_default_and_
         assert!(python.summary().completed, "{:?}", python.summary().stopped_because);
         assert!(python.metric("theta_max_abs_rad") < 0.1, "{gains:?} should hold the pendulum up");
         assert!(trajectory_bytes(&python) == trajectory_bytes(&builtin), "{gains:?}: the trajectories differ");
-        assert_clean(python.summary());
+        assert_nothing_left(python.summary());
     }
     // The stage that ran was the Python one: without the module it cannot start.
     let dir = fresh_dir("python-without-module");
@@ -121,7 +111,7 @@ fn the_python_bias_observer_gives_the_builtin_estimates() {
     }
     // The same arithmetic in the same order: the whole run is the built-in one, byte for byte.
     assert!(trajectory_bytes(&python) == trajectory_bytes(&builtin), "within 1e-9 but not byte-identical");
-    assert_clean(python.summary());
+    assert_nothing_left(python.summary());
 }
 
 /// Noise-free sensors sampled every loop, built in and in Python (`ideal_sensors.py` copies the
@@ -144,7 +134,7 @@ fn python_sensors_reading_the_truth_give_the_builtin_ideal_sensors_run() {
     let python = run_from(launcher(), "python-ideal-sensors", &[&common[..], &["--set", &stage]].concat());
     assert!(python.summary().completed, "{:?}", python.summary().stopped_because);
     assert!(trajectory_bytes(&python) == trajectory_bytes(&builtin), "the trajectories differ");
-    assert_clean(python.summary());
+    assert_nothing_left(python.summary());
 }
 
 #[test]
@@ -161,7 +151,7 @@ fn an_integrating_python_controller_killed_in_lockstep_resumes_its_integrator() 
     assert_eq!(s.restarts[&Role::Controller], 1, "{:?}", s.restarts);
     assert!(log(&killed, "controller").contains("thawed: integral"), "{}", log(&killed, "controller"));
     assert!(trajectory_bytes(&killed) == trajectory_bytes(&nominal), "the restarted controller did not resume");
-    assert_clean(s);
+    assert_nothing_left(s);
 }
 
 /// The thawed integrator's (integral, t) from the controller's log.
@@ -203,7 +193,7 @@ fn an_integrating_python_controller_in_real_time_survives_a_kill_a_stop_and_a_de
         for p in last_incarnations(s).values() {
             assert_eq!(p.exit, Exit::Status(0), "{fault}: {:?}", s.processes);
         }
-        assert_clean(s);
+        assert_nothing_left(s);
     }
 }
 
@@ -239,7 +229,7 @@ fn a_python_step_that_raises_ends_the_run_with_its_last_line() {
     let log = std::fs::read_to_string(out.join("logs/controller.log")).unwrap();
     assert!(log.contains("Traceback (most recent call last):") && log.contains("raise ValueError(\"boom\")"), "{log}");
     assert_eq!(log.lines().last(), Some(last), "{log}");
-    assert_clean(&s);
+    assert_nothing_left(&s);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -286,6 +276,6 @@ looplab.run(Checking)
     let r = run_from(launcher(), "views", &["pendulum", "--mode", "lockstep", "--duration", "1", "--set", &stage]);
     assert!(r.summary().completed, "{:?}", r.summary().stopped_because);
     assert!(r.metric("theta_max_abs_rad") < 0.1, "the views' command reached the plant");
-    assert_clean(r.summary());
+    assert_nothing_left(r.summary());
     std::fs::remove_dir_all(&dir).unwrap();
 }

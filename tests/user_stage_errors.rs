@@ -68,14 +68,8 @@ fn stderr(output: &Output) -> String {
 }
 
 /// The run ended: every process gone, no shared-memory file of it left.
-fn assert_nothing_left(dir: &Path) {
-    let summary = load_summary(dir);
-    for p in &summary.processes {
-        assert!(!common::alive(i64::from(p.pid)), "{} (pid {}) is still running", p.name, p.pid);
-        assert_ne!(p.exit, Exit::Running);
-    }
-    let left = looplab_shared::runtime::ipc::files_of_run(&summary.run_id);
-    assert!(left.is_empty(), "files of run {} left behind: {left:?}", summary.run_id);
+fn assert_run_left_nothing(dir: &Path) {
+    common::assert_nothing_left(&load_summary(dir));
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -100,7 +94,7 @@ fn never_connects() {
     let controller =
         load_summary(&dir).processes.into_iter().find(|p| p.name == common::Role::Controller).expect("a controller");
     assert_eq!(controller.exit, Exit::Signal(libc::SIGTERM), "the launcher stopped it");
-    assert_nothing_left(&dir);
+    assert_run_left_nothing(&dir);
 }
 
 fn missing_program_or_script() {
@@ -132,7 +126,7 @@ fn other_layouts() {
          the launcher (the Python package: pip install ./services/python); see logs/controller.log"
     );
     assert_eq!(said.trim_end(), expected);
-    assert_nothing_left(&dir);
+    assert_run_left_nothing(&dir);
 }
 
 fn started_by_hand() {

@@ -28,6 +28,18 @@ pub fn looplab() -> Command {
     command
 }
 
+/// Nothing of the run is left: the launcher found its shared memory clean, no file of it is in
+/// /dev/shm, and none of its processes is alive.
+pub fn assert_nothing_left(s: &Summary) {
+    assert!(s.shared_memory.clean, "{:?}", s.shared_memory);
+    let left = looplab_shared::runtime::ipc::files_of_run(&s.run_id);
+    assert!(left.is_empty(), "files of run {} left behind: {left:?}", s.run_id);
+    for p in &s.processes {
+        assert!(!alive(i64::from(p.pid)), "{} (pid {}) is still running", p.name, p.pid);
+        assert_ne!(p.exit, Exit::Running, "{}", p.name);
+    }
+}
+
 /// A fresh, not yet existing folder under the system's temp folder.
 pub fn fresh_dir(name: &str) -> PathBuf {
     static COUNTER: AtomicU32 = AtomicU32::new(0);
