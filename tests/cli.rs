@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{fresh_dir, looplab, png_size};
+use common::{fresh_dir, load_summary, looplab, png_size};
 
 fn stdout_of(args: &[&str]) -> String {
     let out = looplab().args(args).output().unwrap();
@@ -385,4 +385,33 @@ fn in_process_refuses_real_time_and_faults_done_from_outside() {
         assert!(stderr.starts_with("error: --in-process: ") && stderr.contains(why), "{stderr}");
         assert!(!out_dir.exists(), "a refused run leaves no folder");
     }
+}
+
+/// Standard output whose reader has gone (`looplab show pendulum | head -1`, a closed terminal):
+/// the text is lost, not the run, and nothing panics.
+#[test]
+fn a_closed_stdout_loses_the_text_not_the_run() {
+    use std::os::fd::FromRawFd;
+    let closed_pipe = || {
+        let mut fds = [0; 2];
+        // SAFETY: pipe writes two new descriptors into `fds`; the read end is closed at once.
+        assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0);
+        unsafe { libc::close(fds[0]) };
+        // SAFETY: the write end is ours alone from here on.
+        std::process::Stdio::from(unsafe { std::os::fd::OwnedFd::from_raw_fd(fds[1]) })
+    };
+    let show = looplab().args(["show", "pendulum"]).stdout(closed_pipe()).output().unwrap();
+    assert_eq!(show.status.code(), Some(0), "{}", String::from_utf8_lossy(&show.stderr));
+    let dir = fresh_dir("closed-stdout");
+    let run = looplab()
+        .args(["run", "pendulum", "--mode", "lockstep", "--duration", "0.2", "--out"])
+        .arg(&dir)
+        .stdout(closed_pipe())
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{said}");
+    assert!(!said.contains("panicked"), "{said}");
+    assert!(load_summary(&dir).completed);
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -261,8 +261,9 @@ fn wait_exit(mut child: std::process::Child) -> std::process::ExitStatus {
 }
 
 #[test]
-fn sigint_and_sigterm_stop_the_run_cleanly_with_a_report() {
-    for (signal, name) in [(libc::SIGINT, "sigint"), (libc::SIGTERM, "sigterm")] {
+fn sigint_sigterm_and_sighup_stop_the_run_cleanly_with_a_report() {
+    // SIGHUP: the terminal the run was started from closed.
+    for (signal, name) in [(libc::SIGINT, "sigint"), (libc::SIGTERM, "sigterm"), (libc::SIGHUP, "sighup")] {
         let (child, dir) = start_long_run(name, &[]);
         unsafe { libc::kill(child.id() as i32, signal) };
         let status = wait_exit(child);

@@ -260,7 +260,7 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         }
         Some(Command::Show { scenario }) => match catalog.find(&scenario) {
             Some(entry) => {
-                print!("{}", entry.text);
+                say_raw!("{}", entry.text);
                 ExitCode::SUCCESS
             }
             None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", catalog.names())),
@@ -276,7 +276,7 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         ),
         Some(Command::Report { run_dir }) => match report::read_summary(&run_dir) {
             Ok(summary) => {
-                print!("{}", report::render(&summary));
+                say_raw!("{}", report::render(&summary));
                 ExitCode::SUCCESS
             }
             Err(e) => bad_input(format!("{e:#}")),
@@ -285,7 +285,7 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         Some(Command::Bench(args)) => report_failure(bench::run(&args, catalog)),
         Some(Command::Export { run_dir, mcap: _ }) => match export::write_mcap(&run_dir, catalog) {
             Ok(path) => {
-                println!("wrote {}", path.display());
+                say!("wrote {}", path.display());
                 ExitCode::SUCCESS
             }
             Err(ToolError::BadInput(why)) => bad_input(why),
@@ -298,8 +298,8 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         Some(Command::Plot { .. }) => bad_input("plot: give a run folder or --paper SCENARIO"),
         Some(Command::Compare { runs, out }) => match compare::compare(&runs, out.as_deref()) {
             Ok((table, chart)) => {
-                print!("{table}");
-                println!("\nchart: {}", chart.display());
+                say_raw!("{table}");
+                say!("\nchart: {}", chart.display());
                 ExitCode::SUCCESS
             }
             Err(ToolError::BadInput(why)) => bad_input(why),
@@ -315,7 +315,7 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
 fn figures(written: Result<Vec<PathBuf>, ToolError>) -> ExitCode {
     match written {
         Ok(paths) => {
-            paths.iter().for_each(|path| println!("wrote {}", path.display()));
+            paths.iter().for_each(|path| say!("wrote {}", path.display()));
             ExitCode::SUCCESS
         }
         Err(ToolError::BadInput(why)) => bad_input(why),
@@ -326,7 +326,7 @@ fn figures(written: Result<Vec<PathBuf>, ToolError>) -> ExitCode {
 /// Tells what the clean-up of runs whose launcher was killed found.
 fn report_abandoned(done: &ipc::Abandoned) {
     if !done.runs.is_empty() {
-        eprintln!(
+        tell!(
             "looplab: removed the shared-memory files of {} run(s) whose launcher was killed ({}){}",
             done.runs.len(),
             done.runs.join(", "),
@@ -334,7 +334,7 @@ fn report_abandoned(done: &ipc::Abandoned) {
         );
     }
     for path in &done.leftover {
-        eprintln!("looplab: could not remove {path}");
+        tell!("looplab: could not remove {path}");
     }
 }
 
@@ -342,7 +342,7 @@ fn clean() -> ExitCode {
     let done = ipc::clean_abandoned_runs();
     report_abandoned(&done);
     if done.runs.is_empty() {
-        println!("nothing to clean: no abandoned run of this user in {}", ipc::SHM_DIR);
+        say!("nothing to clean: no abandoned run of this user in {}", ipc::SHM_DIR);
     }
     if done.leftover.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE }
 }
@@ -351,25 +351,25 @@ fn report_failure(result: Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) if e.is::<crate::runtime::signals::Interrupted>() => {
-            eprintln!("looplab: interrupted; stopped in order, nothing left behind");
+            tell!("looplab: interrupted; stopped in order, nothing left behind");
             ExitCode::from(EXIT_INTERRUPTED)
         }
         Err(e) => {
-            eprintln!("error: {e:#}");
+            tell!("error: {e:#}");
             ExitCode::FAILURE
         }
     }
 }
 
 fn list(catalog: &Catalog) {
-    println!("Scenarios (looplab run <name>; defaults in the launch file named):");
+    say!("Scenarios (looplab run <name>; defaults in the launch file named):");
     for s in catalog.entries() {
-        println!("  {:<12} {}  [{}]", s.name, s.description, s.file);
+        say!("  {:<12} {}  [{}]", s.name, s.description, s.file);
     }
 }
 
 fn bad_input(message: impl std::fmt::Display) -> ExitCode {
-    eprintln!("error: {message}");
+    tell!("error: {message}");
     ExitCode::from(EXIT_BAD_INPUT)
 }
 
@@ -457,17 +457,17 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
     };
     match ran {
         Ok((summary, outcome)) => {
-            print!("{}", report::render(&summary));
+            say_raw!("{}", report::render(&summary));
             let (code, error) = launcher::exit_code(&outcome, &summary);
             if let Some(error) = error {
-                eprintln!("error: {error}");
+                tell!("error: {error}");
             }
             let plotted = if args.plot { figures(plot::run::plot_run(&run_dir, catalog)) } else { ExitCode::SUCCESS };
             // A run that failed keeps its code; a failed plot fails a run that completed.
             if code == launcher::EXIT_OK { plotted } else { ExitCode::from(code) }
         }
         Err(e) => {
-            eprintln!("error: {e:#}");
+            tell!("error: {e:#}");
             ExitCode::FAILURE
         }
     }

@@ -53,7 +53,7 @@ pub fn locate_bridge() -> Result<PathBuf> {
     let exe = std::env::current_exe().context("cannot find the looplab executable")?;
     let dir = exe.parent().ok_or_else(|| anyhow!("{} has no parent folder", exe.display()))?;
     if let Some(mut cargo) = cargo_build(dir) {
-        eprintln!("looplab: a stage runs on another host; building the bridge (the first build takes minutes)");
+        tell!("looplab: a stage runs on another host; building the bridge (the first build takes minutes)");
         let status = cargo.args(["-p", "looplab-bridge"]).status().context("cannot run cargo to build the bridge")?;
         if !status.success() {
             bail!("building the bridge failed ({status})");

@@ -133,7 +133,7 @@ impl Dashboard {
         if let Some(thread) = self.thread.take()
             && let Ok(Err(e)) = thread.join()
         {
-            eprintln!("looplab: the dashboard stopped drawing: {e}");
+            tell!("looplab: the dashboard stopped drawing: {e}");
         }
         ratatui::restore();
     }

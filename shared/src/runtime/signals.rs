@@ -20,7 +20,8 @@ impl StopFlag {
             return Ok(flag.clone());
         }
         let count = Arc::new(AtomicUsize::new(0));
-        for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
+        // SIGHUP: the terminal closed; the run stops in order as for Ctrl-C and keeps its summary.
+        for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT, signal_hook::consts::SIGHUP] {
             let count = count.clone();
             // SAFETY: the handler only increments an atomic, which is async-signal-safe.
             unsafe { signal_hook::low_level::register(signal, move || _ = count.fetch_add(1, Ordering::Relaxed)) }?;

@@ -112,7 +112,7 @@ fn swept_fault(param: &str) -> Option<usize> {
 /// Runs the sweep of `args.target`, a scenario of `catalog` or a launch file for one.
 pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
     let bad = |message: String| {
-        eprintln!("error: {message}");
+        tell!("error: {message}");
         ExitCode::from(EXIT_BAD_INPUT)
     };
     if !(args.step.is_finite() && args.step > 0.0 && args.from.is_finite() && args.to.is_finite()) {
@@ -167,18 +167,18 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         return bad(format!("--out {}: the folder exists and is not empty; give a new or empty folder", out.display()));
     }
 
-    eprintln!("sweeping {} over {} values, {} at a time, in lockstep mode", args.param, values.len(), args.jobs);
+    tell!("sweeping {} over {} values, {} at a time, in lockstep mode", args.param, values.len(), args.jobs);
     let stop = match StopFlag::install() {
         Ok(stop) => stop,
         Err(e) => {
-            eprintln!("error: cannot install the signal handlers: {e}");
+            tell!("error: cannot install the signal handlers: {e}");
             return ExitCode::FAILURE;
         }
     };
     let results = run_all(&configs, binaries.as_ref(), &out, &args.param, args.jobs.max(1), &stop);
     if stop.requested() {
         let done = results.iter().filter(|r| r.is_some()).count();
-        eprintln!(
+        tell!(
             "sweep interrupted after {done} of {} values; no verdict. Their run folders are in {}",
             configs.len(),
             out.display()
@@ -190,7 +190,7 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         match result.expect("without a stop request every value runs") {
             Ok((summary, outcome)) => points.push(point(*value, &summary, &outcome, fault_index)),
             Err(e) => {
-                eprintln!("error: the run for {} = {} failed: {e:#}", args.param, value_text(*value));
+                tell!("error: the run for {} = {} failed: {e:#}", args.param, value_text(*value));
                 return ExitCode::FAILURE;
             }
         }
@@ -204,11 +204,11 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
     let theory = if controller_delay { scenario.delay_margin(config) } else { None };
     let report =
         SweepReport { scenario: config.scenario.clone(), param: args.param.clone(), points, first_unstable, theory };
-    print!("{}", render(&report, &args.metrics));
+    say_raw!("{}", render(&report, &args.metrics));
     for name in &args.metrics {
         if report.points.iter().all(|p| !p.metrics.contains_key(name)) {
             let known: Vec<&str> = report.points[0].metrics.keys().map(String::as_str).collect();
-            eprintln!("warning: no run reported a metric {name}; the runs' metrics are {}", known.join(", "));
+            tell!("warning: no run reported a metric {name}; the runs' metrics are {}", known.join(", "));
         }
     }
     let path = out.join("sweep.json");
@@ -216,7 +216,7 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         .map_err(anyhow::Error::from)
         .and_then(|text| std::fs::write(&path, text + "\n").with_context(|| format!("write {}", path.display())));
     if let Err(e) = written {
-        eprintln!("error: {e:#}");
+        tell!("error: {e:#}");
         return ExitCode::FAILURE;
     }
     if report.points.iter().any(|p| p.verdict == Verdict::Failed) { ExitCode::FAILURE } else { ExitCode::SUCCESS }
@@ -256,7 +256,7 @@ fn run_all(
                         break;
                     }
                     if let Ok((summary, _)) = &result {
-                        progress.suspend(|| eprintln!("  {param} = {}: {} loops", value_text(*value), summary.loops));
+                        progress.suspend(|| tell!("  {param} = {}: {} loops", value_text(*value), summary.loops));
                     }
                     progress.inc(1);
                     *results[i].lock().expect("not poisoned") = Some(result);

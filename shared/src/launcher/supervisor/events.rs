@@ -23,7 +23,7 @@ impl Supervisor<'_> {
             }
         };
         if let Line::Unreadable { line, error } = &line {
-            eprintln!("looplab: {role} wrote a line that is not an event ({error}): {line}");
+            tell!("looplab: {role} wrote a line that is not an event ({error}): {line}");
             self.note(now_ns(), format!("{role} wrote a line that is not an event ({error})"));
             return None;
         }

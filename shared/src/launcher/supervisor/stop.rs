@@ -39,9 +39,9 @@ impl Supervisor<'_> {
                 let urgent = self.stop.urgent();
                 if urgent || Instant::now() > until {
                     if urgent {
-                        eprintln!("looplab: second stop request; killing {role}");
+                        tell!("looplab: second stop request; killing {role}");
                     } else {
-                        eprintln!("looplab: {role} did not stop within {} s; killing it", timeout.as_secs());
+                        tell!("looplab: {role} did not stop within {} s; killing it", timeout.as_secs());
                     }
                     self.processes[role].signal(libc::SIGKILL);
                     while !self.processes[role].try_reap() {

@@ -478,7 +478,7 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
     let binaries = crate::launcher::locate_binaries()?;
     let setup = pingpong::Setup { exe: &exe, run_id, scratch: &out };
     let message_bytes = std::mem::size_of::<PlantState>();
-    eprintln!("looplab bench: {rounds} round(s) of {segment} s per loop configuration; writing {}", out.display());
+    tell!("looplab bench: {rounds} round(s) of {segment} s per loop configuration; writing {}", out.display());
 
     let machine = machine(if quick { 500 } else { 3000 })?;
     let cpus = machine.cpus;
@@ -521,7 +521,7 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
     // Each round, then the payload sweep, then the lockstep speed.
     let progress = crate::tools::sweep::progress_bar(rounds as u64 + 2, "parts");
     for round in 0..rounds {
-        progress.suspend(|| eprintln!("  round {} of {rounds}", round + 1));
+        progress.suspend(|| tell!("  round {} of {rounds}", round + 1));
         if cpus >= 2 {
             raw_floor.extend(raw_floor::measure(&exe, run_id, 1_000_000, floor_rounds)?);
             check(&stop)?;
@@ -549,14 +549,14 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
     }
 
     let hop_anatomy = if cpus >= 2 {
-        progress.suspend(|| eprintln!("  hop anatomy"));
+        progress.suspend(|| tell!("  hop anatomy"));
         anatomy::measure(run_id, floor_rounds)?
     } else {
         skipped.push("the hop anatomy: needs 2 CPUs".to_owned());
         Vec::new()
     };
     check(&stop)?;
-    progress.suspend(|| eprintln!("  payload sweep"));
+    progress.suspend(|| tell!("  payload sweep"));
     let sizes: Vec<usize> = (0..9).map(|i| 64usize << (2 * i)).collect();
     let samples = if quick { 40 } else { 300 };
     let mut payload = Vec::new();
@@ -572,7 +572,7 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
     }
 
     progress.inc(1);
-    progress.suspend(|| eprintln!("  lockstep speed"));
+    progress.suspend(|| tell!("  lockstep speed"));
     let lockstep_seconds = if quick { 3.0 } else { 20.0 };
     let auto = if WaitSettings::default().lockstep_polls(cpus) { LockstepWait::Poll } else { LockstepWait::Block };
     let mut lockstep_by_method = BTreeMap::new();
@@ -632,8 +632,8 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
             ("unix socket + bincode".into(), report.payload.iter().map(|p| (p.bytes, p.unix_socket_us.p50)).collect()),
         ],
     )?;
-    print!("{}", render(&report));
-    println!("  written: {}", out.display());
+    say_raw!("{}", render(&report));
+    say!("  written: {}", out.display());
     Ok(())
 }
 

@@ -209,9 +209,9 @@ pub fn run(kills: usize, out: &Path, binaries: &Binaries, catalog: &Catalog) -> 
             cell(&b.total)
         );
     }
-    print!("{text}");
+    say_raw!("{text}");
     let path = out.join("restarts.json");
     crate::launcher::write_atomically(&path, &(serde_json::to_string_pretty(&all)? + "\n"))?;
-    eprintln!("wrote {}", path.display());
+    tell!("wrote {}", path.display());
     Ok(())
 }

@@ -32,7 +32,7 @@ fn run_case(case: &PaperCase, out: &Path, catalog: &Catalog) -> anyhow::Result<R
     };
     let (config, scenario) = resolved?;
     let dir = create_run_dir(Some(&out.join(case.name)), &config.scenario)?;
-    println!("running {} ({}, {} s in lockstep) ...", case.name, scenario.title(), config.duration_s);
+    say!("running {} ({}, {} s in lockstep) ...", case.name, scenario.title(), config.duration_s);
     run_in_process(&config, scenario.as_ref(), &dir)?;
     Ok(RunData::read(&dir, catalog)?)
 }

@@ -335,9 +335,9 @@ pub fn plot_run(run_dir: &Path, catalog: &Catalog) -> Result<Vec<PathBuf>, ToolE
     ];
     match tick_period_figure(&data) {
         Some(figure) => figures.push(("tick-period.png", figure)),
-        None => eprintln!(
-            "tick-period.png: not drawn, a lockstep run has no tick schedule (the plant waits for each command)"
-        ),
+        None => {
+            tell!("tick-period.png: not drawn, a lockstep run has no tick schedule (the plant waits for each command)")
+        }
     }
     for (name, figure) in figures {
         let path = run_dir.join(name);
