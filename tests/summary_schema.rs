@@ -85,3 +85,24 @@ fn each_incarnation_of_a_killed_process_has_its_own_counts() {
     assert_eq!(counts(Role::Controller), [Some(2000)]);
     assert_eq!(counts(Role::Plant), [None]);
 }
+
+/// A simulation that diverges (a state that overflows at the first step) keeps its report: every
+/// loop recorded, the metrics it could compute, the others as "NaN", where it diverged, a summary
+/// valid against the schema, and figures drawn; five processes and in-process alike.
+#[test]
+fn a_diverged_simulation_keeps_its_report_and_says_where_it_diverged() {
+    let args = ["--mode", "lockstep", "--duration", "0.3", "--set", "plant.initial.theta_dot=1.7e308"];
+    for (name, r) in
+        [("diverged", run("diverged", &args)), ("diverged-in-process", run_in_process("diverged-ip", &args))]
+    {
+        assert_eq!((r.summary().loops, r.summary().monitor.records), (300, 300), "{name}");
+        assert_eq!(r.summary().diverged_at_loop, Some(1), "{name}");
+        assert_eq!(r.summary["metrics"]["theta_final_rad"], "NaN", "{name}");
+        assert_eq!(r.summary["metrics"]["bias_true_rad"], 0.1, "{name}");
+        assert!(r.summary().notes[0].starts_with("the simulation diverged at loop 1 (t = 0.001 s)"), "{name}");
+        assert_eq!(problems(&r.summary), Vec::<String>::new(), "{name}");
+        let plot = looplab().arg("plot").arg(&r.dir).output().unwrap();
+        assert!(plot.status.success(), "{name}: {}", String::from_utf8_lossy(&plot.stderr));
+        assert!(r.dir.join("estimate.png").is_file(), "{name}");
+    }
+}

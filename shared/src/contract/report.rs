@@ -8,6 +8,62 @@ use serde::{Deserialize, Serialize};
 use crate::contract::msg::Stamp;
 use crate::contract::role::{Role, Topic};
 
+/// Metrics as JSON: a finite number as itself, and NaN and the infinities (a simulation that
+/// diverged) as the strings "NaN", "inf" and "-inf": JSON has no such numbers, and a null would
+/// make the whole report unreadable and say nothing of which it was.
+pub mod metrics {
+    use std::collections::BTreeMap;
+
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    /// A metric as JSON has it, for the schema.
+    #[derive(Serialize, Deserialize, schemars::JsonSchema)]
+    #[serde(untagged)]
+    pub enum Metric {
+        Number(f64),
+        NotFinite(NotFinite),
+    }
+
+    #[derive(Serialize, Deserialize, schemars::JsonSchema)]
+    pub enum NotFinite {
+        #[serde(rename = "NaN")]
+        NaN,
+        #[serde(rename = "inf")]
+        Inf,
+        #[serde(rename = "-inf")]
+        NegInf,
+    }
+
+    impl Metric {
+        fn of(v: f64) -> Self {
+            match v {
+                v if v.is_finite() => Metric::Number(v),
+                v if v.is_nan() => Metric::NotFinite(NotFinite::NaN),
+                v if v > 0.0 => Metric::NotFinite(NotFinite::Inf),
+                _ => Metric::NotFinite(NotFinite::NegInf),
+            }
+        }
+
+        fn value(self) -> f64 {
+            match self {
+                Metric::Number(v) => v,
+                Metric::NotFinite(NotFinite::NaN) => f64::NAN,
+                Metric::NotFinite(NotFinite::Inf) => f64::INFINITY,
+                Metric::NotFinite(NotFinite::NegInf) => f64::NEG_INFINITY,
+            }
+        }
+    }
+
+    pub fn serialize<S: Serializer>(map: &BTreeMap<String, f64>, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_map(map.iter().map(|(name, v)| (name, Metric::of(*v))))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<BTreeMap<String, f64>, D::Error> {
+        let map = BTreeMap::<String, Metric>::deserialize(deserializer)?;
+        Ok(map.into_iter().map(|(name, m)| (name, m.value())).collect())
+    }
+}
+
 /// Most missing ranges listed in the report.
 pub const MAX_MISSING_RANGES: usize = 100;
 
@@ -61,7 +117,11 @@ pub struct MonitorReport {
     pub data_age: BTreeMap<String, Stats>,
     /// Trajectory rows written with some part missing.
     pub partial_rows: u64,
+    #[serde(with = "metrics")]
     pub metrics: BTreeMap<String, f64>,
+    /// The first loop whose true state was not finite: the simulation diverged there.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diverged_at: Option<u64>,
     /// The scenario's findings in words.
     pub notes: Vec<String>,
     /// What each fault of the launch file did to the loop, in its order.

@@ -94,11 +94,17 @@ pub struct Summary {
     /// Per sensor: how old the sample behind command k was when command k took effect.
     pub data_age_ns: BTreeMap<String, Stats>,
     pub monitor: MonitorCounts,
+    /// A metric that is not finite (the simulation diverged) is the string "NaN", "inf" or "-inf".
+    #[serde(with = "crate::contract::report::metrics")]
+    #[schemars(with = "BTreeMap<String, crate::contract::report::metrics::Metric>")]
     pub metrics: BTreeMap<String, f64>,
     /// What the scenario's metrics mean, in words (for example a parameter that could not be
     /// identified).
     #[serde(default)]
     pub notes: Vec<String>,
+    /// The first loop whose true state was not finite: the simulation diverged there.
+    #[serde(default)]
+    pub diverged_at_loop: Option<u64>,
     /// What the fault report's errors measure, the band a recovery must reach and the limit
     /// the physical system must stay within.
     pub error_measure: ErrorMeasureInfo,
@@ -401,6 +407,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         },
         metrics: monitor.metrics.clone(),
         notes: monitor.notes.clone(),
+        diverged_at_loop: monitor.diverged_at,
         error_measure: scenario.error_measure().describe(),
         faults: fault_reports(config, log, &monitor),
         timeline: log.timeline.clone(),
@@ -552,6 +559,7 @@ pub(crate) mod tests {
             monitor: MonitorCounts::default(),
             metrics: BTreeMap::new(),
             notes: vec![],
+            diverged_at_loop: None,
             error_measure: ErrorMeasureInfo { name: "angle".into(), recovery_band: 0.05, limit: 1.0 },
             faults: vec![],
             timeline: vec![],

@@ -162,6 +162,16 @@ impl Recording {
             .collect();
         report.metrics = self.metrics.finish();
         report.notes = self.metrics.notes();
+        if let Some(k) = report.diverged_at {
+            report.notes.insert(
+                0,
+                format!(
+                    "the simulation diverged at loop {k} (t = {} s): the plant's state is not finite from there on, and \
+                     the metrics that depend on it are not numbers",
+                    k as f64 / self.rate_hz
+                ),
+            );
+        }
         report.faults = self.faults.into_iter().map(|f| f.finish(self.rate_hz)).collect();
         for sink in &mut self.sinks {
             sink.finish(&report)?;
@@ -175,6 +185,9 @@ impl Recording {
         let t = k as f64 / self.rate_hz;
         if let Some(state) = &parts.state {
             self.last_counters = state.counters;
+            if self.report.diverged_at.is_none() && state.x[..self.layout.state.len()].iter().any(|v| !v.is_finite()) {
+                self.report.diverged_at = Some(k);
+            }
         }
         self.stats.observe(t, parts);
         if let Some(live) = &mut self.live {

@@ -295,9 +295,15 @@ const HEADER: u32 = 64;
 /// The caption's line under the panels.
 const CAPTION: u32 = 36;
 
+/// Values beyond this magnitude (a simulation that diverged) are left out of a panel's range: an
+/// axis spanning them would overflow, and the axis's tick search would never end.
+const PLOTTABLE: f64 = 1e150;
+
 /// The y range of a panel's values: their span with a margin, or a small one around a constant.
 fn y_range(values: impl Iterator<Item = f64>) -> Range<f64> {
-    let (lo, hi) = values.filter(|v| v.is_finite()).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let (lo, hi) = values
+        .filter(|v| v.is_finite() && v.abs() < PLOTTABLE)
+        .fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
     if lo > hi {
         return -1.0..1.0;
     }
