@@ -415,3 +415,56 @@ fn a_closed_stdout_loses_the_text_not_the_run() {
     assert!(load_summary(&dir).completed);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `--out` into a folder that another user could write in (or owns): refused before anything
+/// starts, so no link planted there can make a run write through it.
+#[test]
+fn an_out_folder_others_can_write_in_is_refused() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = fresh_dir("shared-out");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777)).unwrap();
+    let run = |dir: &std::path::Path| {
+        looplab()
+            .args(["run", "pendulum", "--mode", "lockstep", "--duration", "0.1", "-q", "--out"])
+            .arg(dir)
+            .output()
+            .unwrap()
+    };
+    let output = run(&dir);
+    assert_eq!(output.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&output.stderr).trim_end(),
+        format!(
+            "error: --out {}: others may write in the folder (mode 777); give a folder only you can write in",
+            dir.display()
+        )
+    );
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "nothing written");
+    // As root (CI), a folder another user owns.
+    // SAFETY: geteuid and chown on our own fresh folder.
+    if unsafe { libc::geteuid() } == 0 {
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let path = std::ffi::CString::new(dir.display().to_string()).unwrap();
+        assert_eq!(unsafe { libc::chown(path.as_ptr(), 65534, 65534) }, 0);
+        let output = run(&dir);
+        assert_eq!(output.status.code(), Some(2));
+        let said = String::from_utf8_lossy(&output.stderr);
+        assert!(said.contains("the folder belongs to another user (uid 65534)"), "{said}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A bad value in a launch file is reported even where a `--set` (or an option) replaces it.
+#[test]
+fn a_bad_value_in_the_file_is_reported_even_when_set_on_the_command_line() {
+    let dir = fresh_dir("bad-in-file");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("bad.toml");
+    std::fs::write(&file, "scenario = \"pendulum\"\nmode = 3.7\n").unwrap();
+    let output = looplab().arg("run").arg(&file).args(["--mode", "realtime", "--duration", "0.1"]).output().unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert!(said.starts_with(&format!("error: {}: key `mode`: ", file.display())), "{said}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

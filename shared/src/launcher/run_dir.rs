@@ -19,6 +19,7 @@ pub fn begin_run(run_dir: &Path, config: &LaunchConfig) -> Result<(PathBuf, Stri
 pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     let dir = match out {
         Some(dir) => {
+            check_own_folder(dir)?;
             if dir.exists() && !dir.is_dir() {
                 bail!("--out {}: is a file, not a folder; give a new or empty folder", dir.display());
             }
@@ -49,6 +50,33 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     std::fs::create_dir_all(dir.join("logs"))
         .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
     Ok(dir)
+}
+
+/// An existing `--out` folder must be the user's own, and no one else's to write in: another user
+/// could put links there (`trajectory.csv` → a file of ours) between our check and our writes.
+fn check_own_folder(dir: &Path) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(meta) = std::fs::symlink_metadata(dir) else { return Ok(()) };
+    if meta.file_type().is_symlink() {
+        bail!("--out {}: is a symbolic link; give the folder itself", dir.display());
+    }
+    // SAFETY: geteuid has no preconditions.
+    let me = unsafe { libc::geteuid() };
+    if meta.uid() != me {
+        bail!(
+            "--out {}: the folder belongs to another user (uid {}); give a folder of your own",
+            dir.display(),
+            meta.uid()
+        );
+    }
+    if meta.mode() & 0o022 != 0 {
+        bail!(
+            "--out {}: others may write in the folder (mode {:o}); give a folder only you can write in",
+            dir.display(),
+            meta.mode() & 0o777
+        );
+    }
+    Ok(())
 }
 
 /// Points `runs/latest` at `dir`, a folder in `runs/`: a relative link, replaced atomically

@@ -115,6 +115,11 @@ pub fn resolve_config(
         })?;
         (schema.file.to_owned(), schema.defaults(), None)
     };
+    // The file is checked as written too: a bad value in it is reported even where a `--set`
+    // replaces it (`mode = 3.7` in the file with `--mode realtime`).
+    if looks_like_path && !overrides.is_empty() {
+        from_document(document.clone(), &origin, &[], catalog, launch_folder.as_deref())?;
+    }
     let config = from_document(document, &origin, overrides, catalog, launch_folder.as_deref())?;
     // A user's stage that cannot start is bad input, found before anything starts.
     for (role, stage) in &config.stages.commands {
