@@ -410,3 +410,25 @@ fn a_plant_killed_at_the_last_tick_still_makes_a_complete_run() {
     assert_eq!(s.loops, 2000);
     assert_eq!(s.restarts[&Role::Plant], 1);
 }
+
+/// Another user plants an entry named like a run's in /dev/shm: the run's clean-up reports it as
+/// foreign and leaves it, and the run is still clean (it is not the run's, and a user who is not
+/// root could not remove it anyway).
+#[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, to plant a file as another user")]
+fn an_entry_another_user_planted_with_a_runs_name_is_reported_not_fatal() {
+    use looplab_shared::runtime::ipc::{clean_up_run, create_run_storage, file_prefix};
+    let run_id = looplab_shared::launcher::run_dir::new_run_id();
+    let lock = create_run_storage(&run_id).unwrap();
+    let planted = std::path::Path::new("/dev/shm").join(format!("{}planted", file_prefix(&run_id)));
+    std::fs::write(&planted, b"junk").unwrap();
+    let path = std::ffi::CString::new(planted.display().to_string()).unwrap();
+    // SAFETY: chown of the file this test just made, to the user nobody.
+    assert_eq!(unsafe { libc::chown(path.as_ptr(), 65534, 65534) }, 0);
+    let cleanup = clean_up_run(&run_id).unwrap();
+    assert_eq!(cleanup.leftover, Vec::<String>::new(), "the run's own files are gone");
+    assert_eq!(cleanup.foreign, vec![planted.display().to_string()]);
+    assert!(planted.exists(), "another user's file is left where it is");
+    std::fs::remove_file(&planted).unwrap();
+    drop(lock);
+}

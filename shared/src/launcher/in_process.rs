@@ -44,7 +44,7 @@ pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &
         reports: &reports,
         starts: &BTreeMap::new(),
         log: &RunLog::default(),
-        shared_memory: SharedMemoryCheck { clean: true, removed_dead_nodes: 0, leftover: vec![] },
+        shared_memory: SharedMemoryCheck { clean: true, ..Default::default() },
     });
     summary::write(&summary, run_dir)?;
     Ok((summary, outcome))

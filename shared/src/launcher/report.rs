@@ -156,6 +156,13 @@ pub fn render(s: &Summary) -> String {
     } else {
         writeln!(out, "  shared memory: NOT CLEAN, left behind: {}", s.shared_memory.leftover.join(", "))
     };
+    if !s.shared_memory.foreign.is_empty() {
+        let _ = writeln!(
+            out,
+            "  shared memory: another user made entries named like this run's (not the run's, left there): {}",
+            s.shared_memory.foreign.join(", ")
+        );
+    }
     let _ = writeln!(out, "  run folder: {}", s.run_dir);
     let _ = writeln!(
         out,

@@ -277,6 +277,9 @@ pub struct SharedMemoryCheck {
     pub removed_dead_nodes: u64,
     /// Files still there.
     pub leftover: Vec<String>,
+    /// Entries named like the run's that another user made (not the run's; left where they are).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub foreign: Vec<String>,
 }
 
 /// One restart, in wall-clock ms after the launcher saw the process die (its output closed and

@@ -569,6 +569,9 @@ pub fn check_private(folder: &std::path::Path) -> Result<()> {
 pub struct Cleanup {
     pub removed_dead_nodes: u64,
     pub leftover: Vec<String>,
+    /// Entries with the run's name that another user made: not the run's, and not ours to
+    /// remove (a planted file must not fail the run).
+    pub foreign: Vec<String>,
 }
 
 /// The run's nodes: alive (pids of their processes) and how many dead ones had their resources
@@ -605,7 +608,7 @@ pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
     // iceoryx2 keeps one registry segment per prefix for good. The prefix is this run's alone, so
     // once no process of the run is alive, it goes too, with the folder.
     if alive.is_empty() {
-        for path in paths_of_run(run_id) {
+        for path in paths_of_run(run_id).into_iter().filter(|p| is_ours(p)) {
             if path.is_dir() && !path.is_symlink() {
                 let _ = std::fs::remove_dir_all(&path);
             } else {
@@ -613,7 +616,15 @@ pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
             }
         }
     }
-    Ok(Cleanup { removed_dead_nodes, leftover: files_of_run(run_id) })
+    let foreign = paths_of_run(run_id).into_iter().filter(|p| !is_ours(p)).map(|p| p.display().to_string()).collect();
+    Ok(Cleanup { removed_dead_nodes, leftover: files_of_run(run_id), foreign })
+}
+
+/// Whether this user made `path` (not following a link).
+fn is_ours(path: &std::path::Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    // SAFETY: geteuid has no preconditions.
+    std::fs::symlink_metadata(path).is_ok_and(|m| m.uid() == unsafe { libc::geteuid() })
 }
 
 /// Every entry of `SHM_DIR` that belongs to the run: its folder and its segments.
@@ -631,10 +642,11 @@ fn paths_of_run(run_id: &str) -> Vec<PathBuf> {
         .collect()
 }
 
-/// Every file of a run still present; removes nothing (for checks from outside a run).
+/// Every file of a run still present (this user's); removes nothing (for checks from outside a
+/// run).
 pub fn files_of_run(run_id: &str) -> Vec<String> {
     let mut found = vec![];
-    for path in paths_of_run(run_id) {
+    for path in paths_of_run(run_id).into_iter().filter(|p| is_ours(p)) {
         found.push(path.display().to_string());
         if let Ok(entries) = std::fs::read_dir(&path) {
             found.extend(entries.flatten().map(|e| e.path().display().to_string()));

@@ -217,6 +217,7 @@ impl<'a> Supervisor<'a> {
                 clean: cleanup.leftover.is_empty(),
                 removed_dead_nodes: cleanup.removed_dead_nodes + supervisor.removed_dead_nodes,
                 leftover: cleanup.leftover,
+                foreign: cleanup.foreign,
             },
         });
         summary::write(&summary, run_dir)?;
