@@ -432,3 +432,46 @@ fn an_entry_another_user_planted_with_a_runs_name_is_reported_not_fatal() {
     std::fs::remove_file(&planted).unwrap();
     drop(lock);
 }
+
+/// The newest loop the monitor has written to `loops.csv` so far.
+fn newest_loop(dir: &std::path::Path) -> u64 {
+    let text = std::fs::read_to_string(dir.join("loops.csv")).unwrap_or_default();
+    let whole = &text[..text.rfind('\n').unwrap_or(0)];
+    whole.rsplit('\n').next().and_then(|line| line.split(',').next()?.parse().ok()).unwrap_or(0)
+}
+
+/// A launcher stopped (SIGSTOP) past a kill's time injects it late: the timeline says the
+/// launcher did not run, and the report says by how much the fault was late.
+#[test]
+fn a_stopped_launcher_says_it_fell_behind_and_which_fault_went_late() {
+    let dir = fresh_dir("launcher-stopped");
+    let mut child = looplab()
+        .args(["run", "pendulum", "--duration", "4", "-q", "--fault", "kill controller at 2.5s", "--out"])
+        .arg(&dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let launcher = child.id() as i32;
+    let until = Instant::now() + Duration::from_secs(60);
+    while newest_loop(&dir) < 500 {
+        assert!(Instant::now() < until, "the run did not start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    unsafe { libc::kill(launcher, libc::SIGSTOP) };
+    // Real time: loop 3000 is 3 s after tick 0, so the kill due at 2.5 s is at least 0.5 s late.
+    while newest_loop(&dir) < 3000 {
+        assert!(Instant::now() < until, "the loop did not reach 3 s");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    unsafe { libc::kill(launcher, libc::SIGCONT) };
+    let mut report = String::new();
+    std::io::Read::read_to_string(child.stdout.as_mut().unwrap(), &mut report).unwrap();
+    assert!(child.wait().unwrap().success(), "{report}");
+    let s = load_summary(&dir);
+    assert!(s.timeline.iter().any(|e| e.event.starts_with("the launcher did not run for ")), "{:?}", s.timeline);
+    let late = s.faults[0].injected_at_ms.expect("injected once the launcher went on") - 2500.0;
+    assert!(late >= 500.0, "injected {late} ms late");
+    assert!(report.contains("note: `kill controller at 2.5s` was injected "), "{report}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

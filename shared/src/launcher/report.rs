@@ -280,6 +280,9 @@ fn render_network(out: &mut String, s: &Summary) {
     );
 }
 
+/// A kill or stop injected later than this after its time is named as late.
+const LATE_INJECTION_MS: f64 = 50.0;
+
 fn render_faults(out: &mut String, s: &Summary) {
     if s.faults.is_empty() {
         return;
@@ -320,6 +323,12 @@ fn render_faults(out: &mut String, s: &Summary) {
     }
     // The fault and the verdict are text; the columns between them are numbers.
     write_table(out, &rows, &[false, true, true, true, true, true, true, false]);
+    // Real time: a kill or stop the launcher sent later than planned (it was stopped or starved).
+    for f in &s.faults {
+        if let Some(late) = f.injected_at_ms.map(|at| at - f.at_s * 1e3).filter(|late| *late > LATE_INJECTION_MS) {
+            let _ = writeln!(out, "  note: `{}` was injected {late:.0} ms after its time", f.fault);
+        }
+    }
     if !s.timeline.is_empty() {
         let _ = writeln!(out, "\n  timeline (wall-clock ms after tick 0)");
         for entry in &s.timeline {

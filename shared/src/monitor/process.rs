@@ -22,7 +22,7 @@ use crate::monitor::join::Sample;
 use crate::monitor::recording::{Recording, StatusCallback};
 use crate::monitor::stall::StallWatch;
 use crate::runtime::child::Context;
-use crate::runtime::child::emit;
+use crate::runtime::child::{emit, emit_if_room};
 use crate::runtime::ipc::{Topic, TopicSubscriber};
 
 /// Sleep between drains when the queues were nearly empty.
@@ -69,7 +69,9 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     estimates.subscriber.connect(&context.stop)?;
     commands.subscriber.connect(&context.stop)?;
     records.subscriber.connect(&context.stop)?;
-    let status: StatusCallback = Box::new(|status| emit(&ChildEvent::Status(Box::new(status.clone()))));
+    // Only shown, so dropped when the launcher is not reading (stopped): the recording goes on.
+    let status: StatusCallback =
+        Box::new(|status| emit_if_room(&ChildEvent::Status(Box::new(status.clone()))).map(|_| ()));
     let recording =
         Recording::new(config, context.scenario.as_ref(), &context.run_dir, context.incarnation, Some(status))?;
     // The mode's one say in the monitor process. In real time the monitor must never slow the

@@ -162,6 +162,19 @@ pub fn emit(event: &ChildEvent) -> Result<()> {
     written.context("write event to the launcher")
 }
 
+/// Writes `event` only if the launcher's pipe has room now: for what is only shown (the monitor's
+/// status line), which must never make its writer wait for a launcher that is stopped or slow.
+/// Returns whether it was written.
+pub fn emit_if_room(event: &ChildEvent) -> Result<bool> {
+    let mut pfd = libc::pollfd { fd: 1, events: libc::POLLOUT, revents: 0 };
+    // SAFETY: one valid pollfd, no wait.
+    let ready = unsafe { libc::poll(&mut pfd, 1, 0) };
+    if ready <= 0 || pfd.revents & libc::POLLOUT == 0 {
+        return Ok(false);
+    }
+    emit(event).map(|()| true)
+}
+
 /// Blocks until the launcher writes `expected` as a line on stdin. Returns false if a stop was
 /// requested or the launcher went away first.
 pub fn wait_for_line(stop: &StopFlag, expected: &str) -> Result<bool> {

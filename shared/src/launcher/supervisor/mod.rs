@@ -39,6 +39,8 @@ use live::Live;
 pub use live::LiveView;
 use processes::{Process, Processes};
 
+/// A gap between two turns of the supervision loop longer than this is noted on the timeline.
+const LAUNCHER_STALL: Duration = Duration::from_millis(250);
 /// Longest wait between two looks at the fault schedule.
 const SUPERVISE_TICK: Duration = Duration::from_millis(2);
 
@@ -364,7 +366,15 @@ impl<'a> Supervisor<'a> {
         }
         self.last_status_ns = now_ns();
 
+        let mut last_turn = Instant::now();
         loop {
+            // A launcher that did not run (stopped, or starved of CPU) injects late: say so.
+            let gap = last_turn.elapsed();
+            last_turn = Instant::now();
+            if gap > LAUNCHER_STALL {
+                let ms = gap.as_secs_f64() * 1e3;
+                self.note(now_ns(), format!("the launcher did not run for {ms:.0} ms (stopped or starved of CPU)"));
+            }
             self.show_processes();
             if let Some(outcome) = self.stop_outcome() {
                 return outcome;
