@@ -475,3 +475,30 @@ fn a_stopped_launcher_says_it_fell_behind_and_which_fault_went_late() {
     assert!(report.contains("note: `kill controller at 2.5s` was injected "), "{report}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The run folder removed mid-run, then a kill: the restart is impossible (no folder for its log)
+/// and the summary cannot be written; the error names both, the first one first.
+#[test]
+fn a_removed_run_folder_does_not_hide_why_the_run_failed() {
+    let dir = fresh_dir("folder-removed");
+    let child = looplab()
+        .args(["run", "pendulum", "--duration", "3", "-q", "--fault", "kill controller at 1.5s", "--out"])
+        .arg(&dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let until = Instant::now() + Duration::from_secs(60);
+    while newest_loop(&dir) < 500 {
+        assert!(Instant::now() < until, "the run did not start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+    let output = child.wait_with_output().unwrap();
+    assert_eq!(output.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&output.stderr);
+    let why = said.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("no error line: {said}"));
+    assert!(why.starts_with("error: controller could not be restarted: "), "{why}");
+    assert!(why.contains("; and cannot write ") && why.contains("summary.json"), "{why}");
+    assert!(String::from_utf8_lossy(&output.stdout).contains("latency (µs)"), "the report is still printed");
+}

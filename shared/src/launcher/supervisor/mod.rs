@@ -222,7 +222,13 @@ impl<'a> Supervisor<'a> {
                 foreign: cleanup.foreign,
             },
         });
-        summary::write(&summary, run_dir)?;
+        // A summary that cannot be written (a full disk, the folder removed) does not hide why
+        // the run ended: the report is still printed, with both.
+        let outcome = match (summary::write(&summary, run_dir), outcome) {
+            (Ok(()), outcome) => outcome,
+            (Err(e), Outcome::Failed(why)) => Outcome::Failed(format!("{why}; and {e:#}")),
+            (Err(e), _) => Outcome::Failed(format!("{e:#}")),
+        };
         Ok((summary, outcome))
     }
 
