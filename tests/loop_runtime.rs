@@ -502,3 +502,31 @@ fn a_removed_run_folder_does_not_hide_why_the_run_failed() {
     assert!(why.contains("; and cannot write ") && why.contains("summary.json"), "{why}");
     assert!(String::from_utf8_lossy(&output.stdout).contains("latency (µs)"), "the report is still printed");
 }
+
+/// A run folder on a disk that fills up: the monitor stops once with "disk full" and is not
+/// restarted into it, the loop runs to its end, and the error names the file that could not be
+/// written; the report is still printed. Root only (it mounts a small tmpfs).
+#[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, to mount a small file system")]
+fn a_full_disk_stops_the_monitor_once_and_the_error_names_the_file() {
+    let disk = fresh_dir("full-disk");
+    std::fs::create_dir_all(&disk).unwrap();
+    let mounted = std::process::Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=256k", "tmpfs"])
+        .arg(&disk)
+        .status()
+        .unwrap();
+    assert!(mounted.success(), "mount a 256 KiB tmpfs");
+    let out = disk.join("run");
+    let output = looplab().args(["run", "pendulum", "--duration", "3", "-q", "--out"]).arg(&out).output().unwrap();
+    let umounted = std::process::Command::new("umount").arg(&disk).status().unwrap();
+    let said = String::from_utf8_lossy(&output.stderr).into_owned();
+    let report = String::from_utf8_lossy(&output.stdout).into_owned();
+    assert!(umounted.success());
+    std::fs::remove_dir_all(&disk).unwrap();
+    assert_eq!(output.status.code(), Some(1), "{said}");
+    assert!(said.starts_with("error: monitor exited with status 3 (its disk is full)"), "{said}");
+    assert!(said.contains(&format!("cannot write {}: No space left on device", out.join("summary.json").display())));
+    assert!(report.contains(", exit 3, "), "the report is printed, with the monitor's exit: {report}");
+    assert!(!report.contains("monitor restart 1"), "{report}");
+}

@@ -29,6 +29,10 @@ pub struct ProcessArgs {
     pub incarnation: u32,
 }
 
+/// A loop process's exit status when it stopped because its disk is full: restarting it would
+/// only fill the disk again, so the launcher does not.
+pub const EXIT_DISK_FULL: u8 = 3;
+
 /// The environment a user's own stage (`[stages.<role>] command`) is started with: the same
 /// arguments, by name, since its command line is the user's.
 pub mod stage_env {

@@ -20,6 +20,8 @@ pub struct Death {
     pub quick_restarts: u32,
     /// Wall-clock seconds it ran since it was last ready (None: it never was).
     pub ran_s: Option<f64>,
+    /// It stopped because its disk is full (`contract::protocol::EXIT_DISK_FULL`).
+    pub disk_full: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -30,6 +32,8 @@ pub enum Decision {
     NotWanted(Restart),
     /// It would be restarted, but has had its `max_restarts` already.
     TooMany { max_restarts: u32 },
+    /// Its disk is full: a restart would only fill it again.
+    DiskFull,
 }
 
 impl Decision {
@@ -41,6 +45,7 @@ impl Decision {
             Decision::TooMany { max_restarts } => {
                 Some(format!("not restarted: it reached supervision max_restarts = {max_restarts}"))
             }
+            Decision::DiskFull => Some("not restarted: its disk is full".into()),
         }
     }
 }
@@ -55,6 +60,9 @@ pub fn decide(policy: &Policy, backoff_reset_s: f64, death: Death) -> Decision {
     };
     if !wanted {
         return Decision::NotWanted(policy.restart);
+    }
+    if death.disk_full {
+        return Decision::DiskFull;
     }
     if death.restarts >= policy.max_restarts {
         return Decision::TooMany { max_restarts: policy.max_restarts };
@@ -94,7 +102,7 @@ mod tests {
     const ON_FAILURE: Policy = Policy { restart: Restart::OnFailure, max_restarts: 10, backoff_s: 0.01 };
 
     fn killed(restarts: u32, quick_restarts: u32, ran_s: Option<f64>) -> Death {
-        Death { clean: false, restarts, quick_restarts, ran_s }
+        Death { clean: false, restarts, quick_restarts, ran_s, disk_full: false }
     }
 
     fn ms(ms: u64) -> Duration {
@@ -166,5 +174,13 @@ mod tests {
         assert_eq!(decide(&ON_FAILURE, 1.0, clean).refusal().unwrap(), "not restarted (restart = on-failure)");
         assert_eq!(decide(&always, 1.0, clean), Decision::Restart { backoff: ms(10), quick_restarts: 1 });
         assert_eq!(decide(&always, 1.0, clean).refusal(), None);
+    }
+
+    #[test]
+    fn a_process_whose_disk_is_full_is_not_restarted_into_it() {
+        let full = Death { disk_full: true, ..killed(0, 0, Some(5.0)) };
+        let always = Policy { restart: Restart::Always, ..ON_FAILURE };
+        assert_eq!(decide(&always, 1.0, full), Decision::DiskFull);
+        assert_eq!(decide(&always, 1.0, full).refusal().unwrap(), "not restarted: its disk is full");
     }
 }

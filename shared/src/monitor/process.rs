@@ -108,15 +108,20 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
         }
         Ok(n)
     };
-    while !context.stop.requested() {
-        if drain()? < MONITOR_BUFFER / 8 {
-            std::thread::sleep(POLL_PERIOD);
+    let drained = (|| -> Result<()> {
+        while !context.stop.requested() {
+            if drain()? < MONITOR_BUFFER / 8 {
+                std::thread::sleep(POLL_PERIOD);
+            }
         }
-    }
-    // The launcher stops the monitor last: everything the loop sent is queued by now.
-    while drain()? > 0 {}
+        // The launcher stops the monitor last: everything the loop sent is queued by now.
+        while drain()? > 0 {}
+        Ok(())
+    })();
     drop(tx);
+    // The writer's own error first (a full disk): the receive loop only saw it stop.
     let report = writer.join().map_err(|_| anyhow!("the monitor's writer panicked"))??;
+    drained?;
     Ok(ChildEvent::MonitorReport(Box::new(report)))
 }
 

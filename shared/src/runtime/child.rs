@@ -108,8 +108,13 @@ pub(crate) fn run_process_as(
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("{name}: error: {e:#}");
-            ExitCode::FAILURE
+            // Not eprintln: its log may be on the disk that is full, and the exit status must
+            // still say why.
+            tell!("{name}: error: {e:#}");
+            let disk_full = e.chain().any(|c| {
+                c.downcast_ref::<std::io::Error>().is_some_and(|io| io.kind() == std::io::ErrorKind::StorageFull)
+            });
+            if disk_full { ExitCode::from(crate::contract::protocol::EXIT_DISK_FULL) } else { ExitCode::FAILURE }
         }
     }
 }

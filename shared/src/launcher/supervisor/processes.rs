@@ -8,6 +8,7 @@ use std::process::ChildStdin;
 use std::time::Duration;
 
 use crate::config::faults::Policy;
+use crate::contract::protocol::EXIT_DISK_FULL;
 use crate::contract::role::Role;
 use crate::launcher::child::Start;
 use crate::launcher::dashboard::{ProcessRow, ProcessState};
@@ -79,6 +80,9 @@ impl Process {
 
     pub(super) fn exit_text(&self) -> String {
         match self.runs.last().map(|r| r.exit) {
+            Some(exit) if exit == Exit::Status(EXIT_DISK_FULL.into()) => {
+                format!("{} exited with status {exit} (its disk is full)", self.role)
+            }
             Some(exit) if exit != Exit::Running => format!("{} exited with status {exit}", self.role),
             _ => format!("{} closed its output", self.role),
         }
@@ -134,7 +138,14 @@ impl Process {
         self.ready = false;
         self.ready_since_ns = None;
         self.stopped = false;
-        Death { clean: self.ended_cleanly(), restarts: self.incarnation(), quick_restarts: self.quick_restarts, ran_s }
+        let disk_full = self.runs.last().is_some_and(|r| r.exit == Exit::Status(EXIT_DISK_FULL.into()));
+        Death {
+            clean: self.ended_cleanly(),
+            restarts: self.incarnation(),
+            quick_restarts: self.quick_restarts,
+            ran_s,
+            disk_full,
+        }
     }
 
     /// It is to start again once its clean-up is done and `backoff` after `now_ns` has passed.
@@ -292,7 +303,7 @@ mod tests {
         p.became_ready(at(0));
         p.stopped = true;
         let death = p.died(at(2500));
-        assert_eq!(death, Death { clean: true, restarts: 0, quick_restarts: 0, ran_s: Some(2.5) });
+        assert_eq!(death, Death { clean: true, restarts: 0, quick_restarts: 0, ran_s: Some(2.5), disk_full: false });
         assert!(!p.ready && !p.stopped);
         assert_eq!(p.row().state, ProcessState::Exited);
         assert_eq!(p.exit_text(), "plant exited with status 0");
