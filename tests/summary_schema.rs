@@ -101,6 +101,12 @@ fn a_diverged_simulation_keeps_its_report_and_says_where_it_diverged() {
         assert_eq!(r.summary["metrics"]["bias_true_rad"], 0.1, "{name}");
         assert!(r.summary().notes[0].starts_with("the simulation diverged at loop 1 (t = 0.001 s)"), "{name}");
         assert_eq!(problems(&r.summary), Vec::<String>::new(), "{name}");
+        let report = looplab().arg("report").arg(&r.dir).output().unwrap();
+        let report = String::from_utf8_lossy(&report.stdout).into_owned();
+        assert!(
+            report.contains("  completed, the simulation DIVERGED at loop 1: 300 of 300 loops"),
+            "{name}: {report}"
+        );
         let plot = looplab().arg("plot").arg(&r.dir).output().unwrap();
         assert!(plot.status.success(), "{name}: {}", String::from_utf8_lossy(&plot.stderr));
         assert!(r.dir.join("estimate.png").is_file(), "{name}");

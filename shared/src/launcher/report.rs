@@ -79,6 +79,10 @@ pub fn render(s: &Summary) -> String {
         (None, true) => "completed".into(),
         (None, false) => "did not complete".into(),
     };
+    let status = match s.diverged_at_loop {
+        Some(k) => format!("{status}, the simulation DIVERGED at loop {k}"),
+        None => status,
+    };
     let _ = writeln!(
         out,
         "  {status}: {} of {} loops in {:.2} s ({:.0} loops/s) · deadline misses {} · rejected commands {}",
