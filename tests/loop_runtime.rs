@@ -440,34 +440,42 @@ fn newest_loop(dir: &std::path::Path) -> u64 {
     whole.rsplit('\n').next().and_then(|line| line.split(',').next()?.parse().ok()).unwrap_or(0)
 }
 
+/// Waits until the monitor has written loop `k`; `what` says what it means if it never does.
+fn wait_for_loop(dir: &std::path::Path, k: u64, what: &str) {
+    let until = Instant::now() + Duration::from_secs(60);
+    while newest_loop(dir) < k {
+        assert!(Instant::now() < until, "{what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A real-time pendulum run of `duration` with one `fault`, its report and errors piped.
+fn spawn_faulted_run(name: &str, duration: &str, fault: &str) -> (std::process::Child, std::path::PathBuf) {
+    let dir = fresh_dir(name);
+    let child = looplab()
+        .args(["run", "pendulum", "--duration", duration, "-q", "--fault", fault, "--out"])
+        .arg(&dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    (child, dir)
+}
+
 /// A launcher stopped (SIGSTOP) past a kill's time injects it late: the timeline says the
 /// launcher did not run, and the report says by how much the fault was late.
 #[test]
 fn a_stopped_launcher_says_it_fell_behind_and_which_fault_went_late() {
-    let dir = fresh_dir("launcher-stopped");
-    let mut child = looplab()
-        .args(["run", "pendulum", "--duration", "4", "-q", "--fault", "kill controller at 2.5s", "--out"])
-        .arg(&dir)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
+    let (child, dir) = spawn_faulted_run("launcher-stopped", "4", "kill controller at 2.5s");
     let launcher = child.id() as i32;
-    let until = Instant::now() + Duration::from_secs(60);
-    while newest_loop(&dir) < 500 {
-        assert!(Instant::now() < until, "the run did not start");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_for_loop(&dir, 500, "the run did not start");
     unsafe { libc::kill(launcher, libc::SIGSTOP) };
     // Real time: loop 3000 is 3 s after tick 0, so the kill due at 2.5 s is at least 0.5 s late.
-    while newest_loop(&dir) < 3000 {
-        assert!(Instant::now() < until, "the loop did not reach 3 s");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_for_loop(&dir, 3000, "the loop did not reach 3 s");
     unsafe { libc::kill(launcher, libc::SIGCONT) };
-    let mut report = String::new();
-    std::io::Read::read_to_string(child.stdout.as_mut().unwrap(), &mut report).unwrap();
-    assert!(child.wait().unwrap().success(), "{report}");
+    let output = child.wait_with_output().unwrap();
+    let report = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{report}");
     let s = load_summary(&dir);
     assert!(s.timeline.iter().any(|e| e.event.starts_with("the launcher did not run for ")), "{:?}", s.timeline);
     let late = s.faults[0].injected_at_ms.expect("injected once the launcher went on") - 2500.0;
@@ -480,19 +488,8 @@ fn a_stopped_launcher_says_it_fell_behind_and_which_fault_went_late() {
 /// and the summary cannot be written; the error names both, the first one first.
 #[test]
 fn a_removed_run_folder_does_not_hide_why_the_run_failed() {
-    let dir = fresh_dir("folder-removed");
-    let child = looplab()
-        .args(["run", "pendulum", "--duration", "3", "-q", "--fault", "kill controller at 1.5s", "--out"])
-        .arg(&dir)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let until = Instant::now() + Duration::from_secs(60);
-    while newest_loop(&dir) < 500 {
-        assert!(Instant::now() < until, "the run did not start");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let (child, dir) = spawn_faulted_run("folder-removed", "3", "kill controller at 1.5s");
+    wait_for_loop(&dir, 500, "the run did not start");
     std::fs::remove_dir_all(&dir).unwrap();
     let output = child.wait_with_output().unwrap();
     assert_eq!(output.status.code(), Some(1));

@@ -154,15 +154,10 @@ pub fn keep_stdout_for_events() -> Result<()> {
 /// Writes one event line on stdout for the launcher.
 pub fn emit(event: &ChildEvent) -> Result<()> {
     let line = serde_json::to_string(event).context("encode event")?;
+    let write = |out: &mut dyn Write| writeln!(out, "{line}").and_then(|_| out.flush());
     let written = match EVENTS.get() {
-        Some(events) => {
-            let mut out = events.lock().unwrap_or_else(|e| e.into_inner());
-            writeln!(out, "{line}").and_then(|_| out.flush())
-        }
-        None => {
-            let mut out = std::io::stdout().lock();
-            writeln!(out, "{line}").and_then(|_| out.flush())
-        }
+        Some(events) => write(&mut *events.lock().unwrap_or_else(|e| e.into_inner())),
+        None => write(&mut std::io::stdout().lock()),
     };
     written.context("write event to the launcher")
 }
