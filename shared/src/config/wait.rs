@@ -11,7 +11,9 @@
 //!   ends the sleep (it waits on the input's wake-up with the timer as its deadline), and one that
 //!   comes late is polled for up to `spin_cap_us` (default: one loop period) past its due time, so
 //!   that neither costs a halted-vCPU wake-up. Only an input missing for that long (its writer died
-//!   or stalls) makes it block, and it goes on blocking until inputs come again.
+//!   or stalls) makes it block, and it goes on blocking until inputs come again. On a busy
+//!   machine (a poll's yield found another task wanting the CPU) it blocks for a while, as
+//!   `block` does: there a yield gives the CPU away for a whole time slice.
 //!   In lockstep there is no schedule to learn: see `lockstep`.
 //!
 //! Lockstep has no schedule, so each hop either blocks or polls (`lockstep`): polling needs a

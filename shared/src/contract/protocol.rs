@@ -216,6 +216,10 @@ pub struct WaitCounts {
     pub caught: u64,
     /// Waits that gave up polling and blocked.
     pub blocked: u64,
+    /// Waits that blocked without polling because the CPU was wanted by another task (a
+    /// busy machine), or that stopped polling when they found so.
+    #[serde(default)]
+    pub busy: u64,
 }
 
 /// What a bridge carried over the link, per crossing topic, and what the link did.

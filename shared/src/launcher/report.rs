@@ -127,8 +127,10 @@ pub fn render(s: &Summary) -> String {
     for (process, w) in waits {
         let _ = writeln!(
             out,
-            "  adaptive wait, {process}: {} caught by polling, {} blocked after the cap",
-            w.caught, w.blocked
+            "  adaptive wait, {process}: {} caught by polling, {} blocked after the cap{}",
+            w.caught,
+            w.blocked,
+            if w.busy > 0 { format!(", {} blocked while the CPU was busy", w.busy) } else { String::new() }
         );
     }
 
@@ -479,8 +481,8 @@ mod tests {
             ready_after_ms: None,
         }];
         s.adaptive_waits = [
-            (Role::Plant, WaitCounts { caught: 5, blocked: 1 }),
-            (Role::Controller, WaitCounts { caught: 2, blocked: 0 }),
+            (Role::Plant, WaitCounts { caught: 5, blocked: 1, busy: 7 }),
+            (Role::Controller, WaitCounts { caught: 2, blocked: 0, busy: 0 }),
         ]
         .into();
         let text = render(&s);
@@ -494,7 +496,7 @@ mod tests {
             waits,
             [
                 "  adaptive wait, controller: 2 caught by polling, 0 blocked after the cap",
-                "  adaptive wait, plant: 5 caught by polling, 1 blocked after the cap"
+                "  adaptive wait, plant: 5 caught by polling, 1 blocked after the cap, 7 blocked while the CPU was busy"
             ]
         );
     }

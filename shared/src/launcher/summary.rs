@@ -459,10 +459,11 @@ fn processes(
 fn adaptive_waits(plant: &PlantReport, reports: &Reports) -> BTreeMap<Role, WaitCounts> {
     let mut all = BTreeMap::new();
     let mut add = |role: Role, w: WaitCounts| {
-        if w.caught + w.blocked > 0 {
+        if w.caught + w.blocked + w.busy > 0 {
             let entry: &mut WaitCounts = all.entry(role).or_default();
             entry.caught += w.caught;
             entry.blocked += w.blocked;
+            entry.busy += w.busy;
         }
     };
     add(Role::Plant, plant.wait);
@@ -587,7 +588,7 @@ pub(crate) mod tests {
             ..Default::default()
         };
         let stage =
-            StageReport { processed: 500, waited: 1, wait: WaitCounts { caught: 3, blocked: 4 }, ..Default::default() };
+            StageReport { processed: 500, waited: 1, wait: WaitCounts { caught: 3, blocked: 4, busy: 0 }, ..Default::default() };
         let monitor = MonitorReport { records: 500, loops_seen: 500, ..Default::default() };
         let reports = Reports {
             plant: Some(plant),
@@ -729,7 +730,7 @@ pub(crate) mod tests {
         let mut s = summary();
         s.restarts = Role::ALL.into_iter().map(|r| (r, 0)).collect();
         s.adaptive_waits =
-            [(Role::Plant, WaitCounts { caught: 1, blocked: 0 }), (Role::Controller, WaitCounts::default())].into();
+            [(Role::Plant, WaitCounts { caught: 1, blocked: 0, busy: 0 }), (Role::Controller, WaitCounts::default())].into();
         s.stopped_because = Some(StopReason::Interrupted);
         s.processes = vec![ProcessInfo {
             name: Role::Monitor,

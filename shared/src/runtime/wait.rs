@@ -17,6 +17,13 @@ const WINDOW: usize = 64;
 /// Sleeps remembered to learn how late this process wakes.
 const OVERSLEEP_WINDOW: usize = 32;
 
+/// A yield that gives the CPU away for this long means another task wanted it: the machine is
+/// busy.
+const BUSY_YIELD_NS: u64 = 30_000;
+
+/// On a busy machine, this many waits block before polling is tried again.
+const BUSY_WAITS: u32 = 1000;
+
 /// `ns` nanoseconds as a timespec.
 pub fn timespec(ns: u64) -> libc::timespec {
     libc::timespec { tv_sec: (ns / 1_000_000_000) as libc::time_t, tv_nsec: (ns % 1_000_000_000) as libc::c_long }
@@ -92,6 +99,14 @@ impl ArrivalModel {
     }
 }
 
+/// Yields the CPU; returns whether another task had it meanwhile (the yield took long).
+fn yield_found_cpu_wanted() -> bool {
+    let yielded = now_ns();
+    // SAFETY: sched_yield has no preconditions.
+    unsafe { libc::sched_yield() };
+    now_ns() - yielded > BUSY_YIELD_NS
+}
+
 /// How a waiter waits: a real-time strategy, or lockstep's poll.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Method {
@@ -157,6 +172,12 @@ pub struct Waiter {
     /// Adaptive: the last wait polled its whole cap without input (its writer died, stalls or
     /// the run ends), so waits block until an input comes again rather than poll for nothing.
     silent: bool,
+    /// Adaptive: waits left that block because a poll's yield found the CPU wanted by another
+    /// task. There a yield hands the CPU over for a whole time slice (milliseconds), while a
+    /// blocked waiter is woken ahead of a busy task the moment its input comes.
+    busy_waits_left: u32,
+    /// Adaptive: one poll's yield (a field, so that tests choose what it finds).
+    yield_cpu: fn() -> bool,
 }
 
 impl Waiter {
@@ -195,6 +216,8 @@ impl Waiter {
             counts: WaitCounts::default(),
             oversleeps: VecDeque::with_capacity(OVERSLEEP_WINDOW),
             silent: false,
+            busy_waits_left: 0,
+            yield_cpu: yield_found_cpu_wanted,
         }
     }
 
@@ -228,10 +251,19 @@ impl Waiter {
                 if ready()? {
                     return Ok(());
                 }
+                if self.busy_waits_left > 0 {
+                    self.busy_waits_left -= 1;
+                    self.counts.busy += 1;
+                    return block();
+                }
                 if !self.silent {
                     if self.doze_then_poll(due, &mut ready, &mut doze)? {
                         self.counts.caught += 1;
                         return Ok(());
+                    }
+                    if self.busy_waits_left > 0 {
+                        self.counts.busy += 1;
+                        return block();
                     }
                     // Polled the whole cap for nothing: the writer is silent.
                     self.counts.blocked += 1;
@@ -247,7 +279,8 @@ impl Waiter {
     /// Adaptive: dozes until shortly before the input is due (an input that comes earlier ends
     /// the doze with its wake-up), then polls, yielding the CPU to whichever process has work,
     /// until the cap past the due time. A late input is polled for: a blocking wake-up of a
-    /// halted vCPU costs more than the polling. Returns whether the input came.
+    /// halted vCPU costs more than the polling. A yield that finds the CPU wanted by another
+    /// task ends the polling for [`BUSY_WAITS`] waits. Returns whether the input came.
     fn doze_then_poll(
         &mut self,
         due: u64,
@@ -273,8 +306,10 @@ impl Waiter {
             if ready()? {
                 return Ok(true);
             }
-            // SAFETY: sched_yield has no preconditions.
-            unsafe { libc::sched_yield() };
+            if (self.yield_cpu)() {
+                self.busy_waits_left = BUSY_WAITS;
+                return Ok(ready()?);
+            }
         }
         Ok(false)
     }
@@ -345,6 +380,8 @@ mod tests {
 
         let patient = WaitSettings { spin_cap_us: Some(3.6e9), ..Default::default() };
         let mut w = Waiter::with_method(&patient, Method::Adaptive, 1_000_000);
+        // An idle machine: a yield finds no other task (whatever this machine is doing now).
+        w.yield_cpu = || false;
         // Early: the doze ends with the input's wake-up.
         w.wait(Some(now_ns() + HOUR), u64::MAX, ready, doze_brings_input, block).unwrap();
         assert_eq!((w.counts.caught, blocks.get(), dozes.get()), (1, 0, 1));
@@ -361,6 +398,7 @@ mod tests {
         reset();
         let impatient = WaitSettings { spin_cap_us: Some(0.0), ..Default::default() };
         let mut w = Waiter::with_method(&impatient, Method::Adaptive, 1_000_000);
+        w.yield_cpu = || false;
         w.wait(Some(now_ns()), u64::MAX, ready, |_| Ok(()), block).unwrap();
         assert_eq!((w.counts.blocked, blocks.get()), (1, 1));
         reset();
@@ -375,5 +413,41 @@ mod tests {
         reset();
         w.wait(Some(now_ns() + HOUR), u64::MAX, ready, doze_brings_input, || panic!("not silent")).unwrap();
         assert_eq!(dozes.get(), 2);
+    }
+
+    /// Once a poll's yield found the CPU wanted by another task, that wait and the next ones
+    /// block at once, neither dozing nor polling, and polling is tried again after them.
+    #[test]
+    fn on_a_busy_machine_adaptive_blocks_for_a_while_then_polls_again() {
+        use std::cell::Cell;
+        const HOUR: u64 = 3_600_000_000_000;
+        let (blocks, dozes, looks) = (Cell::new(0), Cell::new(0), Cell::new(0));
+        let patient = WaitSettings { spin_cap_us: Some(3.6e9), ..Default::default() };
+        let mut w = Waiter::with_method(&patient, Method::Adaptive, 1_000_000);
+        w.yield_cpu = || true;
+        let block = || {
+            blocks.set(blocks.get() + 1);
+            Ok(())
+        };
+        let ready = || {
+            looks.set(looks.get() + 1);
+            Ok(false)
+        };
+        // Due now: the first yield finds the CPU wanted, and the wait blocks.
+        w.wait(Some(now_ns()), u64::MAX, ready, |_| Ok(()), block).unwrap();
+        assert_eq!((blocks.get(), looks.get(), w.counts.busy, w.counts.blocked), (1, 3, 1, 0));
+        w.yield_cpu = || false;
+        for _ in 1..=BUSY_WAITS {
+            w.wait(Some(now_ns() + HOUR), u64::MAX, || Ok(false), |_| panic!("no doze while busy"), block).unwrap();
+        }
+        assert_eq!((blocks.get(), w.counts.busy, w.counts.blocked, w.counts.caught), (1001, 1001, 0, 0));
+        let here = Cell::new(false);
+        let doze = |_| {
+            dozes.set(dozes.get() + 1);
+            here.set(true);
+            Ok(())
+        };
+        w.wait(Some(now_ns() + HOUR), u64::MAX, || Ok(here.get()), doze, || panic!("not busy any more")).unwrap();
+        assert_eq!((dozes.get(), w.counts.caught), (1, 1));
     }
 }
