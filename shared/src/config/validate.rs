@@ -47,6 +47,25 @@ pub fn within_si(c: &LaunchConfig, key: &str, value: f64) -> Result<(), LaunchEr
     within(c, key, value, MAX_SI, "SI units")
 }
 
+/// An error unless `period` (s) lies from one loop period to the run's duration, or is 0 where
+/// `zero_is_every_tick` (0: every tick).
+pub fn period_within_run(
+    c: &LaunchConfig,
+    key: &str,
+    period: f64,
+    zero_is_every_tick: bool,
+) -> Result<(), LaunchError> {
+    if zero_is_every_tick && period == 0.0 {
+        return Ok(());
+    }
+    let dt = c.dt();
+    if period.is_finite() && period >= dt * (1.0 - 1e-9) && period <= c.duration_s.max(dt) {
+        return Ok(());
+    }
+    let zero = if zero_is_every_tick { "0 (every tick) or " } else { "" };
+    Err(c.error(key, format!("must be {zero}from one loop period ({dt} s) to the run's duration, got {period}")))
+}
+
 /// Every element of `values` checked by `check` under `key.i` (the index as `--set` names it).
 pub fn each(
     c: &LaunchConfig,

@@ -587,8 +587,12 @@ pub(crate) mod tests {
             waited: 2,
             ..Default::default()
         };
-        let stage =
-            StageReport { processed: 500, waited: 1, wait: WaitCounts { caught: 3, blocked: 4, busy: 0 }, ..Default::default() };
+        let stage = StageReport {
+            processed: 500,
+            waited: 1,
+            wait: WaitCounts { caught: 3, blocked: 4, busy: 0 },
+            ..Default::default()
+        };
         let monitor = MonitorReport { records: 500, loops_seen: 500, ..Default::default() };
         let reports = Reports {
             plant: Some(plant),
@@ -730,7 +734,8 @@ pub(crate) mod tests {
         let mut s = summary();
         s.restarts = Role::ALL.into_iter().map(|r| (r, 0)).collect();
         s.adaptive_waits =
-            [(Role::Plant, WaitCounts { caught: 1, blocked: 0, busy: 0 }), (Role::Controller, WaitCounts::default())].into();
+            [(Role::Plant, WaitCounts { caught: 1, blocked: 0, busy: 0 }), (Role::Controller, WaitCounts::default())]
+                .into();
         s.stopped_because = Some(StopReason::Interrupted);
         s.processes = vec![ProcessInfo {
             name: Role::Monitor,
@@ -748,7 +753,7 @@ pub(crate) mod tests {
         let text = serde_json::to_string(&s).unwrap();
         assert!(
             text.contains(
-                r#""adaptive_waits":{"controller":{"caught":0,"blocked":0},"plant":{"caught":1,"blocked":0}}"#
+                r#""adaptive_waits":{"controller":{"caught":0,"blocked":0,"busy":0},"plant":{"caught":1,"blocked":0,"busy":0}}"#
             ),
             "{text}"
         );

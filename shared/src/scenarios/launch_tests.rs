@@ -188,6 +188,14 @@ fn scenario_parameters_that_overflow_the_physics_are_rejected() {
         Some("estimator.initial_xi_factor.0")
     );
     assert_eq!(quadcopter(&["plant.mass_step_at_s=-1"]).key.as_deref(), Some("plant.mass_step_at_s"));
+    // Initial states and references the model cannot integrate (they overflowed in a run).
+    rejected(&["plant.initial.theta_dot=1.7e308"], "plant.initial.theta_dot", "within ±10000");
+    rejected(&["plant.initial.theta=4"], "plant.initial.theta", "within ±3.14");
+    let e = quadcopter(&["reference.hover_position=[1e300, 0.0, 0.0]"]);
+    assert_eq!((e.key.as_deref(), e.message.contains("within ±10000")), (Some("reference.hover_position.0"), true));
+    let e = quadcopter(&["model.command_period_s=1e308"]);
+    assert_eq!(e.key.as_deref(), Some("model.command_period_s"));
+    assert!(e.message.contains("0 (every tick) or from one loop period"), "{e}");
 }
 
 /// Every number of each scenario's defaults, set to extreme values, loads or gives an error:

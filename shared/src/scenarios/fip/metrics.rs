@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use super::reference::EllipseReference;
 use super::{INPUTS, layout, state};
 use crate::model::command_link::ActuationAge;
-use crate::model::mean::Mean;
+use crate::model::mean::{Mean, max_keeping_nan};
 use crate::model::reference::Reference;
 use crate::model::scenario::{Metrics, Row};
 
@@ -91,7 +91,7 @@ impl Metrics for FipMetrics {
     fn observe(&mut self, row: &Row) {
         let (t, x, est) = (row.t, row.state, row.estimate);
         let point = self.reference.at(t);
-        self.speed_err_max = self.speed_err_max.max((norm(&point.p[1]) - self.speed).abs());
+        self.speed_err_max = max_keeping_nan(self.speed_err_max, (norm(&point.p[1]) - self.speed).abs());
         if self.lap_period.is_none() {
             let lap = std::f64::consts::TAU;
             if let Some((t0, theta0)) = self.previous_theta
@@ -106,8 +106,8 @@ impl Metrics for FipMetrics {
         if theta > self.theta_max {
             (self.theta_max, self.theta_max_at) = (theta, t);
         }
-        self.thrust_max = self.thrust_max.max(row.applied[0]);
-        self.rate_max = row.applied[1..INPUTS].iter().fold(self.rate_max, |m, r| m.max(r.abs()));
+        self.thrust_max = max_keeping_nan(self.thrust_max, row.applied[0]);
+        self.rate_max = row.applied[1..INPUTS].iter().fold(self.rate_max, |m, r| max_keeping_nan(m, r.abs()));
         self.actuation.observe(row, INPUTS);
         if t < STEADY_FROM_S {
             return;
@@ -115,7 +115,7 @@ impl Metrics for FipMetrics {
         let z_p: Vec<f64> = (0..3).map(|i| x[state::LOAD_POSITION][i] - point.p[0][i]).collect();
         let zp = norm(&z_p);
         self.zp.add(zp);
-        self.zp_max = Some(self.zp_max.unwrap_or(0.0).max(zp));
+        self.zp_max = Some(max_keeping_nan(self.zp_max.unwrap_or(0.0), zp));
         self.zp_z.add(z_p[2]);
         self.vl_hat_speed.add(norm(&est[layout::LOAD_VELOCITY_HAT]));
         for i in 0..3 {
@@ -125,7 +125,7 @@ impl Metrics for FipMetrics {
             self.b[i].add(b);
         }
         self.thrust.add(row.applied[0]);
-        self.theta_max_steady = Some(self.theta_max_steady.unwrap_or(0.0).max(theta));
+        self.theta_max_steady = Some(max_keeping_nan(self.theta_max_steady.unwrap_or(0.0), theta));
         self.omega_err.add(difference_norm(&est[layout::RATE_HAT], &x[state::RATE]));
         self.vl_err.add(difference_norm(&est[layout::LOAD_VELOCITY_HAT], &x[state::LOAD_VELOCITY]));
         self.q_hat_err.add(difference_norm(&est[layout::DIRECTION_HAT], &x[state::DIRECTION]));

@@ -28,7 +28,7 @@ use self::params::Model;
 use self::plant::{FipPlant, PlantSection};
 use self::reference::{EllipseReference, ReferenceSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
-use crate::config::validate::{each, in_range, not_negative, positive, within, within_si};
+use crate::config::validate::{each, in_range, not_negative, period_within_run, positive, within, within_si};
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, ScenarioEntry, ScenarioParts, check_substeps,
 };
@@ -156,7 +156,7 @@ impl Fip {
 
         let plant: PlantSection = c.section("plant")?;
         check_substeps(c, "plant.substeps", plant.substeps)?;
-        check_period(c, "plant.command_period_s", plant.command_period_s, true)?;
+        period_within_run(c, "plant.command_period_s", plant.command_period_s, true)?;
         each(c, "plant.initial.load_position_m", &plant.initial.load_position_m, within_si)?;
         // Upright is 0°; at 90° the rod lies flat and beyond it hangs.
         in_range(c, "plant.initial.tilt_deg", plant.initial.tilt_deg, 0.0..=80.0, "degrees from upright")?;
@@ -171,7 +171,7 @@ impl Fip {
         each(c, "disturbance.ou_noise_gain_n", &disturbance.ou_noise_gain_n, within_si)?;
         not_negative(c, "disturbance.ou_noise_std", disturbance.ou_noise_std)?;
         within_si(c, "disturbance.ou_noise_std", disturbance.ou_noise_std)?;
-        check_period(c, "disturbance.ou_noise_sample_s", disturbance.ou_noise_sample_s, false)?;
+        period_within_run(c, "disturbance.ou_noise_sample_s", disturbance.ou_noise_sample_s, false)?;
 
         let mut estimator: EstimatorSection = c.section("estimator")?;
         for (key, value) in [("estimator.q_direction", estimator.q_direction), ("estimator.q_rate", estimator.q_rate)] {
@@ -239,19 +239,6 @@ impl Fip {
     pub fn reference(&self) -> EllipseReference {
         EllipseReference::new(self.reference)
     }
-}
-
-/// A period in seconds: at least one loop period (0 allowed where `zero_is_every_tick`).
-fn check_period(c: &LaunchConfig, key: &str, period: f64, zero_is_every_tick: bool) -> Result<(), LaunchError> {
-    if zero_is_every_tick && period == 0.0 {
-        return Ok(());
-    }
-    let dt = c.dt();
-    if period.is_finite() && period >= dt * (1.0 - 1e-9) && period <= c.duration_s.max(dt) {
-        return Ok(());
-    }
-    let zero = if zero_is_every_tick { "0 (every tick) or " } else { "" };
-    Err(c.error(key, format!("must be {zero}from one loop period ({dt} s) to the run's duration, got {period}")))
 }
 
 /// Every gain positive, and β within condition (38) of Theorem 2:

@@ -27,7 +27,8 @@ use self::params::Model;
 use self::plant::PendulumPlant;
 use self::reference::Upright;
 use crate::config::launch::{LaunchConfig, LaunchError};
-use crate::config::validate::{positive, positive_as};
+use crate::config::validate::{positive, positive_as, within, within_si};
+use crate::model::mean::max_keeping_nan;
 use crate::model::reference::Reference;
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, Row, ScenarioEntry, ScenarioParts, TheoreticalMargin,
@@ -180,6 +181,11 @@ impl Pendulum {
         }
         let plant: PlantSection = c.section("plant")?;
         check_substeps(c, "plant.substeps", plant.substeps)?;
+        // Larger initial motion is no pendulum experiment, and a rate near f64's limit
+        // overflows within a step.
+        within(c, "plant.initial.theta", plant.initial.theta, std::f64::consts::PI, "rad")?;
+        within_si(c, "plant.initial.theta_dot", plant.initial.theta_dot)?;
+        within_si(c, "plant.initial.wheel_speed", plant.initial.wheel_speed)?;
         let estimator: EstimatorSection = c.section("estimator")?;
         let poles_key = |kind: &str| format!("estimator.{kind}.poles");
         if estimator.bias_observer.poles.iter().any(|p| !(p.is_finite() && *p < 0.0)) {
@@ -327,7 +333,7 @@ impl Metrics for PendulumMetrics {
             self.saturated += 1;
         }
         self.last = Some((row.t, theta, wheel_speed, bias_estimate));
-        self.theta_max_abs = self.theta_max_abs.max(self.reference.error(row.t, row.state));
+        self.theta_max_abs = max_keeping_nan(self.theta_max_abs, self.reference.error(row.t, row.state));
         if (bias_estimate - self.bias_true).abs() >= 0.02 * self.bias_true.abs() {
             self.bias_last_outside = Some(row.t);
         }

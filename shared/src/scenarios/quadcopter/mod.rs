@@ -29,9 +29,9 @@ use self::params::{Actuation, Model};
 use self::plant::{PlantSection, QuadcopterPlant};
 use self::reference::{Reference, ReferenceSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
-use crate::config::validate::{not_negative, positive, within_si};
+use crate::config::validate::{each, not_negative, period_within_run, positive, within, within_si};
 use crate::model::command_link::ActuationAge;
-use crate::model::mean::Mean;
+use crate::model::mean::{Mean, max_keeping_nan};
 use crate::model::reference::Reference as _;
 use crate::model::scenario::{
     Controller, ErrorMeasure, Estimator, Metrics, Plant, PositionLimits, Row, ScenarioEntry, ScenarioParts,
@@ -168,7 +168,7 @@ impl Quadcopter {
         }
         positive(c, "model.g", model.g)?;
         positive(c, "model.rate_loop_time_constant_s", model.rate_loop_time_constant_s)?;
-        not_negative(c, "model.command_period_s", model.command_period_s)?;
+        period_within_run(c, "model.command_period_s", model.command_period_s, true)?;
         positive(c, "model.thrust_max_n", model.thrust_max_n)?;
         positive(c, "model.torque_max_nm", model.torque_max_nm)?;
         positive(c, "model.rate_max_rad_s", model.rate_max_rad_s)?;
@@ -238,8 +238,14 @@ impl Quadcopter {
         }
 
         let reference: ReferenceSection = c.section("reference")?;
+        each(c, "reference.hover_position", &reference.hover_position, within_si)?;
         positive(c, "reference.lemniscate_size_m", reference.lemniscate_size_m)?;
+        within_si(c, "reference.lemniscate_size_m", reference.lemniscate_size_m)?;
         not_negative(c, "reference.lemniscate_speed_m_s", reference.lemniscate_speed_m_s)?;
+        within_si(c, "reference.lemniscate_speed_m_s", reference.lemniscate_speed_m_s)?;
+        within(c, "reference.lemniscate_tilt_deg", reference.lemniscate_tilt_deg, 360.0, "degrees")?;
+        within_si(c, "reference.gamma_amplitude", reference.gamma_amplitude)?;
+        within_si(c, "reference.gamma_frequency_rad_s", reference.gamma_frequency_rad_s)?;
         let limits = PositionLimits::load(c)?;
         let metrics: MetricsSection = c.section("metrics")?;
         not_negative(c, "metrics.steady_from_s", metrics.steady_from_s)?;
@@ -384,7 +390,7 @@ impl Metrics for QuadcopterMetrics {
             self.snr_steady.add(row.estimate[layout::SNR]);
         }
         if t >= 5.0 {
-            self.z1_max_after_5s = self.z1_max_after_5s.max(z1);
+            self.z1_max_after_5s = max_keeping_nan(self.z1_max_after_5s, z1);
         }
         self.z1_last = z1;
         self.t_last = t;
@@ -392,8 +398,8 @@ impl Metrics for QuadcopterMetrics {
         let mut xi = [0.0; 10];
         xi.copy_from_slice(&row.estimate[layout::XI]);
         let initial = *self.xi_initial.get_or_insert(xi);
-        self.xi3_change = self.xi3_change.max(block_change(&xi[4..7], &initial[4..7]));
-        self.xi4_change = self.xi4_change.max(block_change(&xi[7..10], &initial[7..10]));
+        self.xi3_change = max_keeping_nan(self.xi3_change, block_change(&xi[4..7], &initial[4..7]));
+        self.xi4_change = max_keeping_nan(self.xi4_change, block_change(&xi[7..10], &initial[7..10]));
         self.xi_last = xi;
         let mass_true = row.state[18];
         self.xi_true_last = self.model.as_ref().expect("built with a model").xi(mass_true);
@@ -408,7 +414,7 @@ impl Metrics for QuadcopterMetrics {
                 }
             } else {
                 self.z1_after_step.add(z1);
-                self.z1_max_after_step = self.z1_max_after_step.max(z1);
+                self.z1_max_after_step = max_keeping_nan(self.z1_max_after_step, z1);
             }
         }
         self.actuation.observe(row, INPUTS);
@@ -435,11 +441,11 @@ impl Metrics for QuadcopterMetrics {
         put("mass_true_kg", Some(self.mass_true_last));
         let (xi, truth) = (&self.xi_last, &self.xi_true_last);
         let errors: Vec<f64> = xi.iter().zip(truth).map(|(e, t)| relative_error(*e, *t)).collect();
-        put("param_rel_error_max_final", errors.iter().copied().reduce(f64::max));
+        put("param_rel_error_max_final", errors.iter().copied().reduce(max_keeping_nan));
         put("xi1_rel_error_final", Some(errors[0]));
-        put("xi2_error_final_m_s2", errors[1..4].iter().copied().reduce(f64::max));
-        put("xi3_rel_error_max_final", errors[4..7].iter().copied().reduce(f64::max));
-        put("xi4_rel_error_max_final", errors[7..10].iter().copied().reduce(f64::max));
+        put("xi2_error_final_m_s2", errors[1..4].iter().copied().reduce(max_keeping_nan));
+        put("xi3_rel_error_max_final", errors[4..7].iter().copied().reduce(max_keeping_nan));
+        put("xi4_rel_error_max_final", errors[7..10].iter().copied().reduce(max_keeping_nan));
         put("xi3_change_max_rel", Some(self.xi3_change));
         put("xi4_change_max_rel", Some(self.xi4_change));
         // b = ξ₂/ξ₁.

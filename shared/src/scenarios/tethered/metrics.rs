@@ -18,7 +18,7 @@ use std::f64::consts::PI;
 
 use super::reference::TetheredReference;
 use super::{layout, state};
-use crate::model::mean::Mean;
+use crate::model::mean::{Mean, max_keeping_nan};
 use crate::model::poly::wrap;
 use crate::model::reference::Reference;
 use crate::model::scenario::{Metrics, Row};
@@ -92,7 +92,7 @@ impl Metrics for TetheredMetrics {
         self.etrack.add(etrack);
         self.etrack_phase[phase].add(etrack);
         if phase == 2 {
-            self.etrack_max_phase3 = self.etrack_max_phase3.max(etrack);
+            self.etrack_max_phase3 = max_keeping_nan(self.etrack_max_phase3, etrack);
         }
 
         let errors = [wrap(e[layout::PHI] - x[state::PHI]).abs(), wrap(e[layout::THETA] - x[state::THETA]).abs()];
@@ -103,7 +103,7 @@ impl Metrics for TetheredMetrics {
         if phase == 2 {
             for ((mean, max), error) in self.phase3_error.iter_mut().zip(&mut self.phase3_error_max).zip(errors) {
                 mean.add(error);
-                *max = max.max(error);
+                *max = max_keeping_nan(*max, error);
             }
         }
 

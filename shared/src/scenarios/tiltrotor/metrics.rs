@@ -10,6 +10,7 @@ use super::dynamics::{self, rotation};
 use super::reference::TiltReference;
 use super::{INPUTS, STATE_LEN, layout, state};
 use crate::model::autodiff::mat_vec;
+use crate::model::mean::max_keeping_nan;
 use crate::model::scenario::{Metrics, Row};
 
 /// `[metrics]`.
@@ -176,7 +177,8 @@ impl TiltrotorMetrics {
         }
         let position_error = errors[..3].iter().map(|e| e * e).sum::<f64>().sqrt();
         if position_error.is_finite() {
-            self.position_error_max = Some(self.position_error_max.map_or(position_error, |m| m.max(position_error)));
+            self.position_error_max =
+                Some(self.position_error_max.map_or(position_error, |m| max_keeping_nan(m, position_error)));
         }
         let velocity = load_velocity(x, self.rod_length);
         self.load_velocity[0].add(velocity[0]);
@@ -184,7 +186,7 @@ impl TiltrotorMetrics {
         let d = load_offset(x, self.rod_length);
         let swing = (-d[2] / self.rod_length).clamp(-1.0, 1.0).acos();
         if swing.is_finite() {
-            self.load_swing_max = Some(self.load_swing_max.map_or(swing, |m| m.max(swing)));
+            self.load_swing_max = Some(self.load_swing_max.map_or(swing, |m| max_keeping_nan(m, swing)));
         }
     }
 
