@@ -308,7 +308,7 @@ impl Waiter {
             }
             if (self.yield_cpu)() {
                 self.busy_waits_left = BUSY_WAITS;
-                return Ok(ready()?);
+                return ready();
             }
         }
         Ok(false)
