@@ -400,8 +400,10 @@ fn a_closed_stdout_loses_the_text_not_the_run() {
         // SAFETY: the write end is ours alone from here on.
         std::process::Stdio::from(unsafe { std::os::fd::OwnedFd::from_raw_fd(fds[1]) })
     };
-    let show = looplab().args(["show", "pendulum"]).stdout(closed_pipe()).output().unwrap();
-    assert_eq!(show.status.code(), Some(0), "{}", String::from_utf8_lossy(&show.stderr));
+    for args in [&["show", "pendulum"][..], &["completions", "fish"], &["completions", "bash"], &["man"]] {
+        let shown = looplab().args(args).stdout(closed_pipe()).output().unwrap();
+        assert_eq!(shown.status.code(), Some(0), "{args:?}: {}", String::from_utf8_lossy(&shown.stderr));
+    }
     let dir = fresh_dir("closed-stdout");
     let run = looplab()
         .args(["run", "pendulum", "--mode", "lockstep", "--duration", "0.2", "--out"])

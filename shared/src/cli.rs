@@ -267,13 +267,20 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         },
         Some(Command::Run(args)) => run(args, catalog),
         Some(Command::Clean) => clean(),
+        // Both written whole into memory first: clap_complete panics on a closed pipe
+        // (`looplab completions fish | head -1`), and say_raw! ignores one.
         Some(Command::Completions { shell }) => {
-            clap_complete::generate(shell, &mut Cli::command(), "looplab", &mut std::io::stdout());
+            let mut text = vec![];
+            clap_complete::generate(shell, &mut Cli::command(), "looplab", &mut text);
+            say_raw!("{}", String::from_utf8_lossy(&text));
             ExitCode::SUCCESS
         }
-        Some(Command::Man) => report_failure(
-            clap_mangen::Man::new(Cli::command()).render(&mut std::io::stdout()).map_err(anyhow::Error::from),
-        ),
+        Some(Command::Man) => {
+            let mut text = vec![];
+            let rendered = clap_mangen::Man::new(Cli::command()).render(&mut text);
+            say_raw!("{}", String::from_utf8_lossy(&text));
+            report_failure(rendered.map_err(anyhow::Error::from))
+        }
         Some(Command::Report { run_dir }) => match report::read_summary(&run_dir) {
             Ok(summary) => {
                 say_raw!("{}", report::render(&summary));

@@ -91,7 +91,8 @@ fn python_error(py: Python<'_>, err: PyErr) -> anyhow::Error {
     })();
     match formatted {
         Ok((full, last)) => {
-            eprint!("{full}");
+            // Ignored if stderr is gone (a launcher that died): the error still goes up.
+            let _ = std::io::Write::write_all(&mut std::io::stderr(), full.as_bytes());
             anyhow!("{}", last.trim_end().lines().last().unwrap_or_default())
         }
         Err(_) => anyhow!("{err}"),
