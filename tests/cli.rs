@@ -369,12 +369,21 @@ fn a_sweep_with_a_fault_done_from_outside_needs_processes() {
     assert!(!out_dir.exists(), "a refused sweep leaves no folder");
 }
 
-/// `--in-process` runs lockstep without kill or stop faults; anything else is one line naming
-/// the option and why, exit 2, and no run folder.
+/// `--in-process` runs lockstep (without `--mode` it implies it) without kill or stop faults;
+/// anything else is one line naming the option and why, exit 2, and no run folder.
 #[test]
-fn in_process_refuses_real_time_and_faults_done_from_outside() {
+fn in_process_implies_lockstep_and_refuses_real_time_and_faults_done_from_outside() {
+    let out_dir = fresh_dir("in-process-implies-lockstep");
+    let output = looplab()
+        .args(["run", "pendulum", "--duration", "0.05", "-q", "--in-process", "--out"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(load_summary(&out_dir).mode, looplab_shared::config::launch::Mode::Lockstep);
+    std::fs::remove_dir_all(&out_dir).unwrap();
     for (args, why) in [
-        (&["pendulum"][..], "only lockstep runs in one process"),
+        (&["pendulum", "--mode", "realtime"][..], "only lockstep runs in one process"),
         (&["pendulum", "--mode", "lockstep", "--fault", "stop controller at 1s for 100ms"][..], "`stop controller"),
     ] {
         let out_dir = fresh_dir("in-process-refused");

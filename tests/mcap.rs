@@ -211,6 +211,16 @@ fn a_lockstep_run_records_every_loop_and_fault_and_export_writes_the_same() {
     }
     assert_eq!(exported.messages["/measurements"][5].json["encoder"].get("fresh"), None);
     assert_eq!(exported.messages["/loop"][5].json.get("lost"), None);
+    // A recording there is never overwritten, unless --force says so.
+    std::fs::write(r.dir.join("run.mcap"), "the monitor's").unwrap();
+    let out = looplab().arg("export").arg(&r.dir).arg("--mcap").output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!((out.status.code(), stderr.lines().count()), (Some(2), 1), "{stderr}");
+    assert!(stderr.contains("run.mcap exists") && stderr.contains("--force"), "{stderr}");
+    assert_eq!(std::fs::read_to_string(r.dir.join("run.mcap")).unwrap(), "the monitor's");
+    let out = looplab().arg("export").arg(&r.dir).args(["--mcap", "--force"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(Recording::read(&r.dir.join("run.mcap")).messages["/state"].len(), live.messages["/state"].len());
 
     // The cells are read by the names a run of the launch file writes: a header without one of
     // them (here one from before the units) is one clear error naming the file and the column,

@@ -82,7 +82,7 @@ looplab run --set wait.strategy=adaptive --out runs/adaptive\n  looplab compare 
     Clean,
     /// Measure LoopLab's own latency against the transport's floor and a hand-written Unix-socket
     /// loop, per wait strategy, plus zero copy, the monitor's cost and lockstep speed; writes
-    /// bench.json and SVG charts
+    /// bench.json and PNG charts
     Bench(bench::BenchArgs),
     /// Write a file for an existing run folder from its files: --mcap writes run.mcap (for
     /// Foxglove or PlotJuggler), as every run does, for a run folder that has none
@@ -92,6 +92,9 @@ looplab run --set wait.strategy=adaptive --out runs/adaptive\n  looplab compare 
         /// Write run.mcap
         #[arg(long, required = true)]
         mcap: bool,
+        /// Replace a run.mcap that is there already (the monitor's own keeps more than the files)
+        #[arg(long)]
+        force: bool,
     },
     /// Draw a run folder's figures as PNG into it (estimate.png, commands.png, sensors.png,
     /// tick-period.png), or with --paper reproduce a paper's figure for a scenario
@@ -167,10 +170,10 @@ struct SweepCli {
 #[derive(Debug, Default, Args)]
 struct LaunchArgs {
     /// Simulated duration in seconds (same as --set duration_s=S)
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     duration: Option<f64>,
     /// Loop rate in Hz (same as --set rate_hz=HZ)
-    #[arg(long, value_name = "HZ")]
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
     rate: Option<f64>,
     /// Noise seed (same as --set seed=N)
     #[arg(long)]
@@ -219,8 +222,8 @@ struct RunArgs {
     #[arg(long, conflicts_with_all = ["quiet", "in_process"])]
     dashboard: bool,
     /// Run the same plant, sensors, estimator and controller in this one process, in loop order,
-    /// with no IPC and no monitor process (lockstep only): the run folder is the same and
-    /// trajectory.csv byte-identical to the five-process run's, many times faster
+    /// with no IPC and no monitor process (lockstep only; implies --mode lockstep): the run folder
+    /// is the same and trajectory.csv byte-identical to the five-process run's, many times faster
     #[arg(long)]
     in_process: bool,
     /// After the run, draw its figures into the run folder, as `looplab plot` does
@@ -290,7 +293,7 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         },
         Some(Command::Sweep(args)) => sweep(args, catalog),
         Some(Command::Bench(args)) => report_failure(bench::run(&args, catalog)),
-        Some(Command::Export { run_dir, mcap: _ }) => match export::write_mcap(&run_dir, catalog) {
+        Some(Command::Export { run_dir, mcap: _, force }) => match export::write_mcap(&run_dir, catalog, force) {
             Ok(path) => {
                 say!("wrote {}", path.display());
                 ExitCode::SUCCESS
@@ -423,7 +426,9 @@ fn overrides(mode: Option<&str>, launch: &LaunchArgs) -> Result<Vec<Override>, l
 }
 
 fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
-    let overrides = overrides(args.mode.as_deref(), &args.launch);
+    // One process runs only lockstep: --in-process implies it unless --mode says otherwise.
+    let mode = args.mode.as_deref().or(args.in_process.then_some("lockstep"));
+    let overrides = overrides(mode, &args.launch);
     let resolved = overrides.and_then(|o| catalog.resolve(&args.target, &o));
     let (config, scenario) = match resolved {
         Ok(r) => r,

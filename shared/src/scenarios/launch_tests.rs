@@ -174,6 +174,21 @@ fn supervision_times_and_counts_are_bounded() {
     }
 }
 
+/// A rate from the command line that a sensor's period (from the file) no longer fits: the error
+/// says where the rate came from and what to set with it.
+#[test]
+fn a_rate_that_breaks_a_sensor_period_says_what_to_set() {
+    let e = run(&["rate_hz=250"]).unwrap_err();
+    assert_eq!(e.key.as_deref(), Some("sensors.encoder.period_s"));
+    assert!(
+        e.message.ends_with(
+            "rate_hz comes from --set rate_hz=250 (--rate): set the sensor's period with it, e.g. --set \
+             sensors.encoder.period_s=0.004"
+        ),
+        "{e}"
+    );
+}
+
 #[test]
 fn scenario_parameters_that_overflow_the_physics_are_rejected() {
     rejected(&["model.torque_constant=1e307"], "model", "finite");

@@ -15,10 +15,18 @@ use crate::monitor::sinks::{JoinedLoop, RunSink};
 use crate::tools::run_folder::{RunFolder, Table};
 use crate::tools::{RUN_FILES, ToolError};
 
-/// Writes `run_dir/run.mcap` from the run folder's files; returns its path.
-pub fn write_mcap(run_dir: &Path, catalog: &Catalog) -> Result<PathBuf, ToolError> {
+/// Writes `run_dir/run.mcap` from the run folder's files; returns its path. A recording there
+/// already (the monitor's, which keeps more than the files) is replaced only with `force`.
+pub fn write_mcap(run_dir: &Path, catalog: &Catalog, force: bool) -> Result<PathBuf, ToolError> {
     let folder = RunFolder::open(run_dir, &RUN_FILES)?;
     let bad = |why: String| ToolError::BadInput(format!("{}: {why}", run_dir.display()));
+    let path = run_dir.join(FILE);
+    if !force && std::fs::symlink_metadata(&path).is_ok() {
+        return Err(bad(format!(
+            "{FILE} exists (the monitor's recording keeps more than the files: sample times, fresh flags, \
+             incarnations); export writes one only where there is none: give --force to replace it"
+        )));
+    }
     let (config, scenario) = folder.launch(catalog)?;
     let layout = Layout::new(&config, scenario.as_ref());
     let summary: serde_json::Value =
@@ -48,7 +56,6 @@ pub fn write_mcap(run_dir: &Path, catalog: &Catalog) -> Result<PathBuf, ToolErro
         joined(row)?;
     }
 
-    let path = run_dir.join(FILE);
     let mut recording = McapRecording::create(&path, &config, &layout, Detail::Files)?;
     for row in 0..loops.k.len() {
         let (k, t, parts) = joined(row)?;

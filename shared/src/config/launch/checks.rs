@@ -48,10 +48,21 @@ pub(super) fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
         let ticks = s.period_s * c.rate_hz;
         if !(s.period_s.is_finite() && s.period_s > 0.0) || ticks.round() < 1.0 || (ticks - ticks.round()).abs() > 1e-6
         {
+            // A rate changed on the command line breaks a period the user never touched: say
+            // which option did it and what to set with it.
+            let rate_origin = c.origins.of("rate_hz");
+            let fix = if rate_origin != c.origins.file && c.origins.of(&key("period_s")) == c.origins.file {
+                format!(
+                    "; rate_hz comes from {rate_origin} (--rate): set the sensor's period with it, e.g. --set {}={dt}",
+                    key("period_s")
+                )
+            } else {
+                String::new()
+            };
             return Err(c.error(
                 &key("period_s"),
                 format!(
-                    "{} s is not a whole multiple of the loop period {dt} s (rate_hz = {}); allowed: {dt}, {}, {}, ...",
+                    "{} s is not a whole multiple of the loop period {dt} s (rate_hz = {}); allowed: {dt}, {}, {}, ...{fix}",
                     s.period_s,
                     c.rate_hz,
                     2.0 * dt,
