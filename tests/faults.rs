@@ -323,7 +323,7 @@ fn bad_faults_name_the_key_and_what_is_allowed() {
     let cases = [
         (
             vec!["--fault", "explode plant at 1s"],
-            "unknown fault kind \"explode\"; allowed: kill, stop, delay, drop, corrupt",
+            "unknown fault kind \"explode\"; allowed: kill, stop, delay, drop, corrupt, cut",
         ),
         (
             vec!["--fault", "delay plant by 3 ticks"],

@@ -39,7 +39,15 @@ impl Supervisor<'_> {
     /// Sends SIGCONT to the processes whose stop is over at `now` (ns).
     pub(super) fn continue_stopped(&mut self, now: u64) {
         for i in self.faults.take_continues_due(now) {
-            let role = inject::target(self.faults.spec(i));
+            let fault = self.faults.spec(i);
+            if fault.kind == FaultKind::Cut {
+                // The bridge mends it by itself at its end loop; this notes when.
+                let ns = now_ns();
+                self.faults.continued(i, ns);
+                self.note(ns, format!("{}: the link carries the loop again", fault.describe()));
+                continue;
+            }
+            let role = inject::target(fault);
             // Stamped before the signal: the process may run, and the monitor stamp it resumed,
             // before this thread reads the clock again.
             let ns = now_ns();
@@ -55,6 +63,14 @@ impl Supervisor<'_> {
         let role = inject::target(fault);
         let ns = now_ns();
         self.faults.injected(i, ns);
+        if fault.kind == FaultKind::Cut {
+            // This machine's bridge drops the loops of the cut by itself; noted at its time, and
+            // mended at its end (a cut without a duration lasts to the end of the run).
+            let lasts = fault.duration_s.map(|d| ns + std::time::Duration::from_secs_f64(d).as_nanos() as u64);
+            self.faults.continue_at(i, lasts);
+            self.note(ns, format!("inject: {} (the link passes nothing either way)", fault.describe()));
+            return;
+        }
         if !self.processes[role].running() {
             self.note(ns, format!("{}: not injected, {role} is not running", fault.describe()));
             return;
