@@ -332,12 +332,18 @@ fn bad_faults_name_the_key_and_what_is_allowed() {
         (vec!["--fault", "stop sensors at 1s"], "key `faults.0.duration_s`: a stop needs the seconds it lasts"),
         (vec!["--fault", "kill plant at 20s"], "key `faults.0.at_s`: must be a time within the run"),
         (vec!["--set", "supervision.restart=sometimes"], "key `supervision.restart`"),
+        (
+            vec!["--fault", "cut bridge at 1s for 300ms"],
+            "key `faults.0.kind`: a cut needs a link, and no stage is placed on another host (hosts.<stage> = \"<host>\"); \
+             allowed without one: kill, stop, delay, drop, corrupt",
+        ),
     ];
     for (args, expected) in cases {
         let output = looplab().arg("run").args(&args).output().unwrap();
         assert_eq!(output.status.code(), Some(2), "{args:?}");
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
     }
 }
 
