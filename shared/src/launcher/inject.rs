@@ -41,6 +41,8 @@ pub struct FaultSeen {
     pub resumed_ns: Option<u64>,
     /// A stop: when to send SIGCONT.
     pub continue_at_ns: Option<u64>,
+    /// A stop (or a cut) still on when the run ended: it was continued then, before its time.
+    pub continued_at_run_end: bool,
 }
 
 /// The process a fault targets (checked when the launch file was loaded).

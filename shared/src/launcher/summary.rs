@@ -149,6 +149,10 @@ pub struct FaultReport {
     /// handled its input again.
     pub continued_after_ms: Option<f64>,
     pub resumed_after_ms: Option<f64>,
+    /// Stop, cut: it was still on when the run ended, so it was continued (mended) then, before
+    /// its time: the run is not held for it.
+    #[serde(default)]
+    pub continued_at_run_end: bool,
     /// None when the monitor has no record of the fault's loops.
     pub effect: Option<FaultEffect>,
 }
@@ -501,6 +505,7 @@ fn fault_reports(config: &LaunchConfig, log: &RunLog, monitor: &MonitorReport) -
                 restarted_after_ms: after(seen.restarted_ns),
                 continued_after_ms: after(seen.continued_ns),
                 resumed_after_ms: after(seen.resumed_ns),
+                continued_at_run_end: seen.continued_at_run_end,
                 effect: monitor.faults.get(i).cloned(),
             }
         })

@@ -54,6 +54,25 @@ impl<'a> FaultLedger<'a> {
         due
     }
 
+    /// The run is over: every stop not continued yet is taken off the wait, to be continued now,
+    /// before its time (a stop may last longer than the run).
+    pub(super) fn take_continues_at_run_end(&mut self) -> Vec<usize> {
+        let left: Vec<usize> = (0..self.seen.len()).filter(|&i| self.seen[i].continue_at_ns.is_some()).collect();
+        for &i in &left {
+            self.seen[i].continue_at_ns = None;
+            self.seen[i].continued_at_run_end = true;
+        }
+        left
+    }
+
+    /// Since when `role` has been stopped by a fault not continued yet, if it is: (the fault, ns).
+    pub(super) fn stopped_since(&self, role: Role) -> Option<(usize, u64)> {
+        self.injected_on(role, FaultKind::Stop)
+            .into_iter()
+            .find(|&i| self.seen[i].continue_at_ns.is_some())
+            .and_then(|i| Some((i, self.seen[i].injected_ns?)))
+    }
+
     /// Fault `i`'s process was sent SIGCONT at `ns`.
     pub(super) fn continued(&mut self, i: usize, ns: u64) {
         self.seen[i].continued_ns = Some(ns);
@@ -223,6 +242,24 @@ mod tests {
         late.injected(1, 100);
         late.continued(1, 300);
         assert_eq!(late.detect(Role::Bridge, DetectedBy::InputDeadline, 310), [1]);
+    }
+
+    #[test]
+    fn the_runs_end_continues_every_stop_still_on_and_says_so() {
+        let f = specs(&["stop plant at 100ms for 100s", "stop sensors at 100ms for 10ms", "kill estimator at 1s"]);
+        let mut ledger = FaultLedger::new(&f);
+        assert_eq!(ledger.stopped_since(Role::Plant), None);
+        for i in [0, 1] {
+            ledger.injected(i, 100);
+            ledger.continue_at(i, Some(if i == 0 { 100_100 } else { 110 }));
+        }
+        assert_eq!(ledger.stopped_since(Role::Plant), Some((0, 100)));
+        assert_eq!(ledger.take_continues_due(120), [1], "the short stop is over in its time");
+        assert_eq!(ledger.take_continues_at_run_end(), [0], "the long one is cut short");
+        assert!(ledger.take_continues_at_run_end().is_empty() && ledger.take_continues_due(200_000).is_empty());
+        assert_eq!(ledger.stopped_since(Role::Plant), None);
+        let seen = ledger.seen();
+        assert_eq!([seen[0].continued_at_run_end, seen[1].continued_at_run_end], [true, false]);
     }
 
     #[test]
