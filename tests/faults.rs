@@ -440,7 +440,7 @@ fn a_stop_longer_than_the_run_is_cut_short_by_its_end() {
         "{:?}",
         s.timeline
     );
-    assert_clean(&s);
+    assert_clean(s);
 
     let s = run_failing(
         "long-stop-lockstep",
