@@ -323,7 +323,7 @@ fn bad_faults_name_the_key_and_what_is_allowed() {
     let cases = [
         (
             vec!["--fault", "explode plant at 1s"],
-            "unknown fault kind \"explode\"; allowed: kill, stop, delay, drop, corrupt",
+            "unknown fault kind \"explode\"; allowed: kill, stop, delay, drop, corrupt, cut",
         ),
         (
             vec!["--fault", "delay plant by 3 ticks"],
@@ -332,12 +332,18 @@ fn bad_faults_name_the_key_and_what_is_allowed() {
         (vec!["--fault", "stop sensors at 1s"], "key `faults.0.duration_s`: a stop needs the seconds it lasts"),
         (vec!["--fault", "kill plant at 20s"], "key `faults.0.at_s`: must be a time within the run"),
         (vec!["--set", "supervision.restart=sometimes"], "key `supervision.restart`"),
+        (
+            vec!["--fault", "cut bridge at 1s for 300ms"],
+            "key `faults.0.kind`: a cut needs a link, and no stage is placed on another host (hosts.<stage> = \"<host>\"); \
+             allowed without one: kill, stop, delay, drop, corrupt",
+        ),
     ];
     for (args, expected) in cases {
         let output = looplab().arg("run").args(&args).output().unwrap();
         assert_eq!(output.status.code(), Some(2), "{args:?}");
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
     }
 }
 
@@ -413,4 +419,36 @@ fn a_sweep_as_five_processes_reports_what_the_in_process_sweep_reports() {
     assert_eq!(verdicts, ["stable", "unstable"]);
     assert_eq!(processes, in_process);
     assert_eq!(processes_table, in_process_table);
+}
+
+/// A stop longer than the run ends with it: continued at the run's end, not at its time, and the
+/// summary says so. Real time: the run's duration has passed; lockstep: a plant stopped past
+/// `lockstep_stall_s` has stalled the loop, as any stopped stage would.
+#[test]
+fn a_stop_longer_than_the_run_is_cut_short_by_its_end() {
+    let stop = "stop plant at 0.1s for 100s";
+    let r = run("long-stop", &["pendulum", "--duration", "0.5", "--fault", stop]);
+    let s = r.summary();
+    assert!(s.completed && s.loops == 500, "{:?}", s.stopped_because);
+    let f = &s.faults[0];
+    assert!(f.continued_at_run_end, "{f:?}");
+    // Continued before the stop's own end (at 100.1 s after tick 0): by the run's end.
+    let continued_ms = f.injected_at_ms.unwrap() + f.continued_after_ms.unwrap();
+    assert!(continued_ms < (f.at_s + 100.0) * 1e3, "continued {continued_ms} ms after tick 0: {f:?}");
+    assert!(
+        s.timeline.iter().any(|e| e.event == "SIGCONT plant, before its time: the run is over"),
+        "{:?}",
+        s.timeline
+    );
+    assert_clean(s);
+
+    let s = run_failing(
+        "long-stop-lockstep",
+        &["--mode", "lockstep", "--duration", "0.5", "--fault", stop, "--set", "supervision.lockstep_stall_s=0.3"],
+    );
+    let why = failure(&s);
+    assert!(why.starts_with("the loop stalled at loop 100: the plant was stopped for longer than 0.3 s"), "{why}");
+    let f = &s.faults[0];
+    assert!(f.continued_at_run_end, "{f:?}");
+    assert!(f.continued_after_ms.unwrap() < 100e3, "{f:?}");
 }

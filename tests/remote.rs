@@ -180,3 +180,27 @@ fn a_silent_remote_bridge_is_lost_after_the_lease_and_found_again() {
     assert!(stop.resumed_after_ms.is_some(), "the link came back: {stop:?}");
     assert!(stop.effect.as_ref().is_some_and(|e| e.outage_ticks > 0), "{stop:?}");
 }
+
+#[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, iproute2 and util-linux (network namespaces)")]
+fn a_cut_link_is_detected_reported_with_its_outage_and_the_loop_recovers() {
+    // The link passes nothing either way from loop 1000 to 1299; zenoh's session stays up.
+    let (cut_s, rate_hz) = (0.3, 1000.0);
+    let (_hosts, run) = faulted_run("cut", "cut bridge at 1s for 300ms");
+    let s = run.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    let cut = &s.faults[0];
+    assert_eq!(cut.detected_by, Some(DetectedBy::InputDeadline), "the controller across the link stalled: {cut:?}");
+    assert!(cut.continued_after_ms.is_some() && cut.resumed_after_ms.is_some(), "mended and back: {cut:?}");
+    let effect = cut.effect.as_ref().expect("the monitor followed the cut's loops");
+    // Every loop of the cut goes without a fresh command, and a few more while the first
+    // commands after it come back (the same slack as a stop's: the loop's own lateness).
+    let cut_ticks = (cut_s * rate_hz) as u64;
+    assert!((cut_ticks..=cut_ticks + cut_ticks / 10).contains(&effect.outage_ticks), "{effect:?}");
+    // The loop recovered: fresh commands after the cut, every loop recorded to the end.
+    assert!(effect.commands_back_at_s.is_some_and(|t| t >= 1.0 + cut_s), "{effect:?}");
+    assert_eq!(run.summary["loops"], 4000);
+    assert_eq!(run.summary["network"]["link"]["losses"], 0, "a cut leaves the session up");
+    let command = &run.summary["network"]["topics"]["command"];
+    assert!(command["received"].as_u64().unwrap() < 4000 - cut_ticks + 10, "{command}");
+}

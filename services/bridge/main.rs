@@ -310,7 +310,7 @@ fn publish_received(
 ) -> Result<Vec<(Topic, CrossingCounts)>> {
     let ipc = Ipc::new(&format!("{role}-in"), run_id, config.mode)?;
     let mut ins: Vec<Box<dyn Inbound>> =
-        topics.iter().map(|&topic| bridge::inbound(&ipc, config, topic)).collect::<Result<_>>()?;
+        topics.iter().map(|&topic| bridge::inbound(&ipc, config, role, topic)).collect::<Result<_>>()?;
     let _ = ready.send(());
     loop {
         match frames.recv_timeout(WAIT_SLICE) {

@@ -184,9 +184,10 @@ struct LaunchArgs {
     set: Vec<String>,
     /// Inject a fault, added to the launch file's [[faults]]: KIND PROCESS [by AMOUNT]
     /// [P%] [nan|inf|out-of-range] [at TIME] [for DURATION]. Kinds: kill, stop (SIGSTOP, then
-    /// SIGCONT), delay, drop, corrupt. Examples: "kill estimator at 3s", "stop controller at 2s
-    /// for 200ms", "delay controller by 3 ticks at 2s", "drop sensors 20% at 1s for 2s",
-    /// "corrupt controller nan at 4s for 100ms". Repeatable.
+    /// SIGCONT), delay, drop, corrupt, cut (the link to another host). Examples: "kill estimator
+    /// at 3s", "stop controller at 2s for 200ms", "delay controller by 3 ticks at 2s", "drop
+    /// sensors 20% at 1s for 2s", "corrupt controller nan at 4s for 100ms", "cut bridge at 2s for
+    /// 300ms". Repeatable.
     #[arg(long = "fault", value_name = "FAULT")]
     fault: Vec<String>,
 }

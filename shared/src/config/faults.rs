@@ -4,7 +4,8 @@
 //!
 //! `kill` and `stop` are done to a process from outside, by the launcher; `delay`, `drop` and
 //! `corrupt` change what a process does, so the process applies them itself, by loop index k,
-//! which keeps them deterministic in lockstep mode.
+//! which keeps them deterministic in lockstep mode; so does `cut`, which this machine's bridge
+//! applies to the link to the other host.
 
 use serde::{Deserialize, Serialize};
 
@@ -36,7 +37,15 @@ pub enum FaultKind {
     Drop,
     /// The controller sends `value` instead of its command.
     Corrupt,
+    /// The link to the other host carries nothing, either way, for `duration_s` (simulation
+    /// time): this machine's bridge drops every frame of those loops (lockstep: passes them
+    /// marked lost, as a lockstep `drop` does, so that the loop goes on).
+    Cut,
 }
+
+/// Every kind, in the order the messages list them.
+pub const FAULT_KINDS: [FaultKind; 6] =
+    [FaultKind::Kill, FaultKind::Stop, FaultKind::Delay, FaultKind::Drop, FaultKind::Corrupt, FaultKind::Cut];
 
 /// Every process, the bridges included (they run only when a stage is on another host).
 const KILLABLE: [Role; 7] =
@@ -53,6 +62,8 @@ impl FaultKind {
             FaultKind::Kill | FaultKind::Stop => &KILLABLE,
             FaultKind::Delay | FaultKind::Drop => &Role::STAGES,
             FaultKind::Corrupt => &[Role::Controller],
+            // The link is this machine's bridge's: it cuts both ways.
+            FaultKind::Cut => &[Role::Bridge],
         }
     }
 
@@ -142,11 +153,12 @@ fn seconds_text(s: f64) -> String {
 
 /// The `--fault` text form, for example `kill estimator at 3s`, `stop controller at 2s for
 /// 200ms`, `delay controller by 5ms at 2s for 1s`, `delay controller by 3 ticks`,
-/// `drop sensors 20% at 1s for 2s`, `corrupt controller nan at 4s for 100ms`.
+/// `drop sensors 20% at 1s for 2s`, `corrupt controller nan at 4s for 100ms`, `cut bridge at 2s
+/// for 300ms` (the link to the other host).
 pub const FAULT_SYNTAX: &str = "KIND PROCESS [by AMOUNT] [PROBABILITY%] [nan|inf|out-of-range] [at TIME] [for DURATION]; \
 times as 3s, 250ms or 3 (seconds), amounts as 5ms or 3 ticks. Examples: \"kill estimator at 3s\", \
 \"stop controller at 2s for 200ms\", \"delay controller by 3 ticks at 2s\", \"drop sensors 20% at 1s for 2s\", \
-\"corrupt controller nan at 4s for 100ms\"";
+\"corrupt controller nan at 4s for 100ms\", \"cut bridge at 2s for 300ms\"";
 
 /// Parses the `--fault` form into a fault (checked later, with the rest of the launch file).
 pub fn parse_fault(text: &str) -> Result<FaultSpec, String> {
@@ -155,13 +167,8 @@ pub fn parse_fault(text: &str) -> Result<FaultSpec, String> {
     let (Some(kind), Some(process)) = (words.first(), words.get(1)) else {
         return Err(bad("a fault needs a kind and a process".into()));
     };
-    let kind: FaultKind = match *kind {
-        "kill" => FaultKind::Kill,
-        "stop" => FaultKind::Stop,
-        "delay" => FaultKind::Delay,
-        "drop" => FaultKind::Drop,
-        "corrupt" => FaultKind::Corrupt,
-        other => return Err(bad(format!("unknown fault kind \"{other}\"; allowed: kill, stop, delay, drop, corrupt"))),
+    let Some(kind) = FAULT_KINDS.into_iter().find(|k| k.name() == *kind) else {
+        return Err(bad(format!("unknown fault kind \"{kind}\"; allowed: {}", kind_names())));
     };
     let mut spec = FaultSpec {
         kind,
@@ -204,6 +211,11 @@ pub fn parse_fault(text: &str) -> Result<FaultSpec, String> {
         }
     }
     Ok(spec)
+}
+
+/// The kinds' names, for messages: `kill, stop, delay, drop, corrupt, cut`.
+pub fn kind_names() -> String {
+    FAULT_KINDS.map(FaultKind::name).join(", ")
 }
 
 /// `3s`, `250ms`, `40us`, or a plain number of seconds.
@@ -356,5 +368,18 @@ mod tests {
         }
         let f = parse_fault("stop controller at 2s for 200ms").unwrap();
         assert_eq!(parse_fault(&f.describe()).unwrap(), f, "{}", f.describe());
+    }
+
+    #[test]
+    fn a_cut_is_the_link_of_this_machines_bridge_for_a_time() {
+        let f = parse_fault("cut bridge at 2s for 300ms").unwrap();
+        assert_eq!((f.kind, f.process.as_str(), f.at_s, f.duration_s), (FaultKind::Cut, "bridge", 2.0, Some(0.3)));
+        assert_eq!(f.describe(), "cut bridge at 2s for 300ms");
+        assert_eq!(parse_fault(&f.describe()).unwrap(), f);
+        assert_eq!(f.ticks(1000.0), (2000, Some(2300)));
+        assert_eq!(FaultKind::Cut.targets(), [Role::Bridge]);
+        assert!(!FaultKind::Cut.from_outside(), "the bridge applies it by loop index");
+        let e = parse_fault("sever bridge at 1s").unwrap_err();
+        assert!(e.contains("allowed: kill, stop, delay, drop, corrupt, cut"), "{e}");
     }
 }

@@ -1,6 +1,8 @@
 //! Fault injection from outside: which kill and stop faults are due (at their time in real time,
 //! at their loop while the lockstep plant holds), the signal each sends, and what was seen of
-//! each fault. The supervisor sends the signals.
+//! each fault. The supervisor sends the signals. A `cut` is this machine's bridge's own (by loop
+//! index), but in real time the launcher notes it as injected at its time and mended at its end,
+//! so that its detection and the link's return are timed as a stop's are.
 
 use std::time::Duration;
 
@@ -15,13 +17,15 @@ pub enum DetectedBy {
     /// A kill: the process's output closed and it was reaped.
     #[serde(rename = "the process exited")]
     ProcessExited,
-    /// A stop: the monitor saw the process's input wait past `stall_timeout_s`.
+    /// A stop: the monitor saw the process's input wait past `stall_timeout_s` (a cut: the
+    /// input of the stage across the link).
     #[serde(rename = "the monitor's input deadline")]
     InputDeadline,
     /// A stop of the monitor itself: its status lines stopped.
     #[serde(rename = "the monitor's heartbeat stopped")]
     MonitorHeartbeat,
-    /// A stop of a bridge: the other bridge's link lease ran out.
+    /// A stop of a bridge: the other bridge's link lease ran out. (A cut passes nothing of the
+    /// loop but leaves the link up: the input deadline of the stage across it notices it.)
     #[serde(rename = "the link's lease ran out")]
     LinkLease,
 }
@@ -37,6 +41,8 @@ pub struct FaultSeen {
     pub resumed_ns: Option<u64>,
     /// A stop: when to send SIGCONT.
     pub continue_at_ns: Option<u64>,
+    /// A stop (or a cut) still on when the run ended: it was continued then, before its time.
+    pub continued_at_run_end: bool,
 }
 
 /// The process a fault targets (checked when the launch file was loaded).
@@ -50,9 +56,14 @@ pub fn due_by_time(faults: &[FaultSpec], seen: &[FaultSeen], start_ns: u64, now_
     (0..faults.len())
         .filter(|&i| {
             let due = start_ns + (faults[i].at_s * 1e9) as u64;
-            faults[i].kind.from_outside() && seen[i].injected_ns.is_none() && now_ns >= due
+            noted_at_its_time(faults[i].kind) && seen[i].injected_ns.is_none() && now_ns >= due
         })
         .collect()
+}
+
+/// Real time: the faults the launcher injects, or notes (a cut), at their time.
+fn noted_at_its_time(kind: FaultKind) -> bool {
+    kind.from_outside() || kind == FaultKind::Cut
 }
 
 /// Lockstep: the faults the launcher injects at loop `k`, not injected yet.
@@ -72,7 +83,8 @@ pub fn injected(faults: &[FaultSpec], seen: &[FaultSeen], role: Role, kind: Faul
 }
 
 /// What injecting `spec` at `now_ns` does to its process, if it runs: the signal to send, and
-/// for a stop when to continue it (ns). None: the process does it itself (delay, drop, corrupt).
+/// for a stop when to continue it (ns). None: the process does it itself (delay, drop, corrupt,
+/// cut).
 pub fn injection(spec: &FaultSpec, now_ns: u64) -> Option<(i32, Option<u64>)> {
     match spec.kind {
         FaultKind::Kill => Some((libc::SIGKILL, None)),
@@ -80,7 +92,7 @@ pub fn injection(spec: &FaultSpec, now_ns: u64) -> Option<(i32, Option<u64>)> {
             let lasts = Duration::from_secs_f64(spec.duration_s.unwrap_or_default());
             Some((libc::SIGSTOP, Some(now_ns + lasts.as_nanos() as u64)))
         }
-        FaultKind::Delay | FaultKind::Drop | FaultKind::Corrupt => None,
+        FaultKind::Delay | FaultKind::Drop | FaultKind::Corrupt | FaultKind::Cut => None,
     }
 }
 

@@ -334,6 +334,10 @@ fn render_faults(out: &mut String, s: &Summary) {
         if let Some(late) = f.injected_at_ms.map(|at| at - f.at_s * 1e3).filter(|late| *late > LATE_INJECTION_MS) {
             let _ = writeln!(out, "  note: `{}` was injected {late:.0} ms after its time", f.fault);
         }
+        if f.continued_at_run_end {
+            let after = f.continued_after_ms.map_or(String::new(), |ms| format!(" after {ms:.0} ms"));
+            let _ = writeln!(out, "  note: `{}` was cut short by the run's end (continued{after})", f.fault);
+        }
     }
     if !s.timeline.is_empty() {
         let _ = writeln!(out, "\n  timeline (wall-clock ms after tick 0)");
@@ -397,6 +401,7 @@ mod tests {
                 restarted_after_ms: Some(206.0),
                 continued_after_ms: None,
                 resumed_after_ms: None,
+                continued_at_run_end: false,
                 effect: Some(FaultEffect {
                     outage_ticks: 200,
                     worst_error_during: Some(0.0123),

@@ -138,14 +138,21 @@ pub struct FaultReport {
     /// When the launcher injected it (kill, stop), ms after tick 0 in wall-clock time.
     pub injected_at_ms: Option<f64>,
     /// Kill: until the launcher saw the process exit. Stop: until the monitor's input deadline
-    /// (or, for the monitor itself, its silent heartbeat) flagged it.
+    /// (or, for the monitor itself, its silent heartbeat) flagged it. Cut: until the input
+    /// deadline of the stage across the link flagged it.
     pub detected_after_ms: Option<f64>,
     pub detected_by: Option<DetectedBy>,
     /// Kill: until the restarted process reported its ports up.
     pub restarted_after_ms: Option<f64>,
     /// Stop: until SIGCONT was sent, and until the monitor saw the process handle input again.
+    /// Cut (real time): until the link passed the loop again, and until the stage across it
+    /// handled its input again.
     pub continued_after_ms: Option<f64>,
     pub resumed_after_ms: Option<f64>,
+    /// Stop, cut: it was still on when the run ended, so it was continued (mended) then, before
+    /// its time: the run is not held for it.
+    #[serde(default)]
+    pub continued_at_run_end: bool,
     /// None when the monitor has no record of the fault's loops.
     pub effect: Option<FaultEffect>,
 }
@@ -499,6 +506,7 @@ fn fault_reports(config: &LaunchConfig, log: &RunLog, monitor: &MonitorReport) -
                 restarted_after_ms: after(seen.restarted_ns),
                 continued_after_ms: after(seen.continued_ns),
                 resumed_after_ms: after(seen.resumed_ns),
+                continued_at_run_end: seen.continued_at_run_end,
                 effect: monitor.faults.get(i).cloned(),
             }
         })

@@ -1,7 +1,7 @@
 //! The shared-memory side of a bridge: which topics it carries on its host, reading them out of
 //! iceoryx2 as frames (the `#[repr(C)]` bytes) and publishing received frames back in, with the
-//! counts of each. The link itself (zenoh) is the bridge binary's, so that nothing else of
-//! LoopLab is built with it.
+//! counts of each, and the `cut` faults on every frame both ways. The link itself (zenoh) is the
+//! bridge binary's, so that nothing else of LoopLab is built with it.
 
 use std::cell::Cell;
 use std::collections::BTreeMap;
@@ -17,6 +17,7 @@ use crate::contract::role::{Role, Topic};
 use iceoryx2::prelude::ipc;
 use iceoryx2::waitset::{WaitSet, WaitSetGuard};
 
+use crate::runtime::faults::{LinkCut, OnLink};
 use crate::runtime::ipc::{Ipc, TopicPublisher, TopicSubscriber};
 use crate::runtime::wait::reader_blocks;
 
@@ -135,6 +136,7 @@ pub trait Inbound {
 struct Out<T: Message> {
     topic: Topic,
     subscriber: TopicSubscriber<T>,
+    cut: LinkCut,
     /// A cell: the WaitSet holds the port borrowed while it drains.
     counts: Cell<CrossingCounts>,
 }
@@ -149,8 +151,14 @@ impl<T: Message> Outbound for Out<T> {
         let mut n = 0;
         let mut counts = self.counts.get();
         while let Some(sample) = self.subscriber.next(&mut cleared)? {
-            let value: &T = &sample;
-            if send(self.topic, frame_of(value)) {
+            let mut value: T = *sample;
+            match self.cut.on_link(value.header().k) {
+                OnLink::Pass => {}
+                // Cut: it never reaches the link; the other bridge sees the gap.
+                OnLink::Drop => continue,
+                OnLink::MarkLost => value.header_mut().lost = 1,
+            }
+            if send(self.topic, frame_of(&value)) {
                 counts.sent += 1;
             } else {
                 counts.send_errors += 1;
@@ -180,6 +188,7 @@ impl<T: Message> Outbound for Out<T> {
 struct In<T: Message> {
     topic: Topic,
     publisher: TopicPublisher<T>,
+    cut: LinkCut,
     last_k: Option<u64>,
     counts: CrossingCounts,
 }
@@ -190,11 +199,17 @@ impl<T: Message> Inbound for In<T> {
     }
 
     fn deliver(&mut self, frame: &[u8]) -> Result<()> {
-        let Some(value) = from_frame::<T>(frame) else {
+        let Some(mut value) = from_frame::<T>(frame) else {
             self.counts.malformed += 1;
             return Ok(());
         };
         let k = value.header().k;
+        match self.cut.on_link(k) {
+            OnLink::Pass => {}
+            // Cut: it came, but not across the link; it counts as lost (sent, not received).
+            OnLink::Drop => return Ok(()),
+            OnLink::MarkLost => value.header_mut().lost = 1,
+        }
         if let Some(last) = self.last_k
             && k > last + 1
         {
@@ -231,35 +246,37 @@ fn from_frame<T: Message>(frame: &[u8]) -> Option<T> {
 /// (`Hosts::read_by_bridge`); a topic that only the monitor needs is read passively (its stage
 /// reader is on this host too and decides the wake-ups) and drained at each wake-up.
 pub fn outbound(ipc: &Ipc, config: &LaunchConfig, bridge: Role, topic: Topic) -> Result<Box<dyn Outbound>> {
-    fn make<T: Message>(ipc: &Ipc, topic: Topic, listens: bool) -> Result<Box<dyn Outbound>> {
+    fn make<T: Message>(ipc: &Ipc, topic: Topic, listens: bool, cut: LinkCut) -> Result<Box<dyn Outbound>> {
         let subscriber =
             if listens { ipc.stage_subscriber::<T>(topic, true)? } else { ipc.passive_subscriber::<T>(topic)? };
-        Ok(Box::new(Out { topic, subscriber, counts: Cell::default() }))
+        Ok(Box::new(Out { topic, subscriber, cut, counts: Cell::default() }))
     }
     let reader_here = Role::reading(topic).is_some_and(|r| config.hosts.is_remote(r) == (bridge == Role::BridgeRemote));
     let listens = !reader_here;
+    let cut = LinkCut::for_bridge(config, bridge);
     match topic {
-        Topic::State => make::<PlantState>(ipc, topic, listens),
-        Topic::Measurements => make::<Measurements>(ipc, topic, listens),
-        Topic::Estimate => make::<Estimate>(ipc, topic, listens),
-        Topic::Command => make::<Command>(ipc, topic, listens),
+        Topic::State => make::<PlantState>(ipc, topic, listens, cut),
+        Topic::Measurements => make::<Measurements>(ipc, topic, listens, cut),
+        Topic::Estimate => make::<Estimate>(ipc, topic, listens, cut),
+        Topic::Command => make::<Command>(ipc, topic, listens, cut),
         Topic::Loop => bail!("the loop records never cross"),
     }
 }
 
 /// The writer of a received topic: it wakes the topic's reader here as that reader's own writer
 /// would (whether it blocks is its own waiting method's business).
-pub fn inbound(ipc: &Ipc, config: &LaunchConfig, topic: Topic) -> Result<Box<dyn Inbound>> {
-    fn make<T: Message>(ipc: &Ipc, topic: Topic, wakes: bool) -> Result<Box<dyn Inbound>> {
+pub fn inbound(ipc: &Ipc, config: &LaunchConfig, bridge: Role, topic: Topic) -> Result<Box<dyn Inbound>> {
+    fn make<T: Message>(ipc: &Ipc, topic: Topic, wakes: bool, cut: LinkCut) -> Result<Box<dyn Inbound>> {
         let publisher = ipc.publisher::<T>(topic, wakes)?;
-        Ok(Box::new(In { topic, publisher, last_k: None, counts: CrossingCounts::default() }))
+        Ok(Box::new(In { topic, publisher, cut, last_k: None, counts: CrossingCounts::default() }))
     }
     let wakes = reader_blocks(&config.wait, topic, config.mode == Mode::Realtime);
+    let cut = LinkCut::for_bridge(config, bridge);
     match topic {
-        Topic::State => make::<PlantState>(ipc, topic, wakes),
-        Topic::Measurements => make::<Measurements>(ipc, topic, wakes),
-        Topic::Estimate => make::<Estimate>(ipc, topic, wakes),
-        Topic::Command => make::<Command>(ipc, topic, wakes),
+        Topic::State => make::<PlantState>(ipc, topic, wakes, cut),
+        Topic::Measurements => make::<Measurements>(ipc, topic, wakes, cut),
+        Topic::Estimate => make::<Estimate>(ipc, topic, wakes, cut),
+        Topic::Command => make::<Command>(ipc, topic, wakes, cut),
         Topic::Loop => Err(anyhow!("the loop records never cross")),
     }
 }

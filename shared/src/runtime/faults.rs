@@ -1,5 +1,6 @@
-//! The in-loop faults a stage applies to itself (delay, drop, corrupt), by loop index k, and
-//! what each means in each mode: this is the one place that decides it.
+//! The in-loop faults a stage applies to itself (delay, drop, corrupt), and the cut this
+//! machine's bridge applies to the link, by loop index k, and what each means in each mode:
+//! this is the one place that decides it.
 
 use rand::SeedableRng;
 use rand::distr::{Distribution, StandardUniform};
@@ -97,6 +98,47 @@ impl StageFaults {
     }
 }
 
+/// What a bridge does with a frame of one loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OnLink {
+    Pass,
+    /// Real time: the link is cut; the frame is not sent, or not published if it came.
+    Drop,
+    /// Lockstep: the link is cut, but the loop must go on: the frame passes marked lost, as a
+    /// lockstep `drop` sends its output, and the plant holds its command.
+    MarkLost,
+}
+
+/// The `cut` faults of the link, as this machine's bridge applies them to every frame both
+/// ways, by the frame's loop index.
+#[derive(Debug, Clone, Default)]
+pub struct LinkCut {
+    windows: Vec<(u64, Option<u64>)>,
+    lockstep: bool,
+}
+
+impl LinkCut {
+    /// The cuts `bridge` applies: this machine's bridge applies every cut; the other host's none.
+    pub fn for_bridge(config: &LaunchConfig, bridge: Role) -> Self {
+        let windows = config
+            .faults
+            .iter()
+            .filter(|f| f.kind == FaultKind::Cut && f.process == bridge.name())
+            .map(|f| f.ticks(config.rate_hz))
+            .collect();
+        Self { windows, lockstep: config.mode == Mode::Lockstep }
+    }
+
+    pub fn on_link(&self, k: u64) -> OnLink {
+        let cut = self.windows.iter().any(|&(from, until)| k >= from && until.is_none_or(|u| k < u));
+        match (cut, self.lockstep) {
+            (false, _) => OnLink::Pass,
+            (true, false) => OnLink::Drop,
+            (true, true) => OnLink::MarkLost,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -159,5 +201,30 @@ mod tests {
         let mut all = faults("lockstep", Role::Controller, &["drop controller 100% at 0s"]);
         let mut none = faults("lockstep", Role::Controller, &["drop controller 0% at 0s"]);
         assert!((0..50).all(|k| all.drops(k) && !none.drops(k)));
+    }
+
+    #[test]
+    fn a_cut_drops_its_loops_in_real_time_and_marks_them_lost_in_lockstep_on_this_machines_bridge_only() {
+        let cut = |mode: &str, bridge: Role| {
+            let overrides = [
+                Override::parse(&format!("mode=\"{mode}\"")).unwrap(),
+                Override::parse("hosts.controller=\"companion\"").unwrap(),
+                Override::parse("hosts.companion.address=\"10.0.0.2\"").unwrap(),
+                Override::parse("hosts.companion.command=[\"ssh\", \"companion\"]").unwrap(),
+                Override::fault("cut bridge at 10ms for 5ms").unwrap(),
+            ];
+            let (config, _) = crate::scenarios::resolve("pendulum", &overrides).unwrap();
+            LinkCut::for_bridge(&config, bridge)
+        };
+        let realtime = cut("realtime", Role::Bridge);
+        let dropped: Vec<u64> = (0..30).filter(|&k| realtime.on_link(k) == OnLink::Drop).collect();
+        assert_eq!(dropped, (10..15).collect::<Vec<_>>());
+        let lockstep = cut("lockstep", Role::Bridge);
+        assert_eq!(
+            (lockstep.on_link(9), lockstep.on_link(10), lockstep.on_link(15)),
+            (OnLink::Pass, OnLink::MarkLost, OnLink::Pass)
+        );
+        let remote = cut("realtime", Role::BridgeRemote);
+        assert!((0..30).all(|k| remote.on_link(k) == OnLink::Pass), "one end applies it, both ways");
     }
 }

@@ -33,3 +33,25 @@ fn fault_times_and_amounts_are_bounded() {
     rejected("drop sensors nan% at 1s", "faults.0.probability", "finite");
     rejected("drop sensors 101% at 1s", "faults.0.probability", "between 0 and 1");
 }
+
+#[test]
+fn a_cut_needs_a_stage_on_another_host_and_targets_this_machines_bridge() {
+    rejected("cut bridge at 1s for 300ms", "faults.0.kind", "a cut needs a link");
+    let e = checked("cut bridge at 1s for 300ms").unwrap_err();
+    assert!(e.message.contains("allowed without one: kill, stop, delay, drop, corrupt"), "{e}");
+    let placed = |fault: &str| {
+        let overrides = [
+            Override::parse("hosts.controller=\"companion\"").unwrap(),
+            Override::parse("hosts.companion.address=\"10.0.0.2\"").unwrap(),
+            Override::parse("hosts.companion.command=[\"ssh\", \"companion\"]").unwrap(),
+            Override::fault(fault).unwrap(),
+        ];
+        crate::scenarios::resolve("pendulum", &overrides).map(|_| ())
+    };
+    placed("cut bridge at 1s for 300ms").unwrap();
+    let e = placed("cut controller at 1s for 300ms").unwrap_err();
+    assert_eq!(e.key.as_deref(), Some("faults.0.process"), "{e}");
+    assert!(e.message.contains("a cut fault cannot target \"controller\"; allowed: bridge"), "{e}");
+    let e = placed("cut bridge at 1s for 0s").unwrap_err();
+    assert_eq!(e.key.as_deref(), Some("faults.0.duration_s"), "{e}");
+}

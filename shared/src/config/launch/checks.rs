@@ -5,7 +5,7 @@ use std::fmt;
 
 use crate::config::error::LaunchError;
 use crate::config::faults::{
-    FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, Supervision,
+    FAULT_KINDS, FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, Supervision,
 };
 use crate::config::launch::types::{LaunchConfig, MAX_DURATION_S, MAX_LOOPS, MAX_RATE_HZ, Origins, PerComponent};
 use crate::config::wait::{MAX_WAIT_US, WaitSettings};
@@ -144,6 +144,17 @@ pub(super) fn check_finite(origins: &Origins, key: &str, value: &toml::Value) ->
 /// Checks the fault against the run; `key` is its dotted key (`faults.2`).
 pub(super) fn check_fault(f: &FaultSpec, c: &LaunchConfig, key: &str) -> Result<(), LaunchError> {
     let field = |f: &str| format!("{key}.{f}");
+    if f.kind == FaultKind::Cut && c.hosts.remote().is_none() {
+        let without: Vec<&str> = FAULT_KINDS.iter().filter(|k| **k != FaultKind::Cut).map(|k| k.name()).collect();
+        return Err(c.error(
+            &field("kind"),
+            format!(
+                "a cut needs a link, and no stage is placed on another host (hosts.<stage> = \"<host>\"); allowed \
+                 without one: {}",
+                without.join(", ")
+            ),
+        ));
+    }
     let targets = f.kind.targets();
     if !f.process.parse::<Role>().is_ok_and(|role| targets.contains(&role)) {
         let allowed: Vec<&str> = targets.iter().map(|r| r.name()).collect();

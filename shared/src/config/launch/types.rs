@@ -257,7 +257,7 @@ mod tests {
         fn same<T: Serialize>(value: T, name: &str) {
             assert_eq!(serde_json::to_value(value).unwrap().as_str(), Some(name));
         }
-        for kind in [FaultKind::Kill, FaultKind::Stop, FaultKind::Delay, FaultKind::Drop, FaultKind::Corrupt] {
+        for kind in crate::config::faults::FAULT_KINDS {
             same(kind, kind.name());
         }
         for mode in [Mode::Realtime, Mode::Lockstep] {

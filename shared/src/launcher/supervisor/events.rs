@@ -61,6 +61,10 @@ impl Supervisor<'_> {
             ChildEvent::Stall { process, since_ns, detected_ns } => {
                 if let Ok(stalled) = process.parse::<Role>() {
                     self.faults.detect(stalled, DetectedBy::InputDeadline, detected_ns);
+                    // A stage across the link waits on the link: a cut stalls it.
+                    if self.config.hosts.is_remote(stalled) {
+                        self.faults.detect_cut(DetectedBy::InputDeadline, detected_ns);
+                    }
                 }
                 let waited = (detected_ns.saturating_sub(since_ns)) as f64 / 1e6;
                 self.note(detected_ns, format!("{process} stalled: its input has waited {waited:.1} ms"));
@@ -68,6 +72,9 @@ impl Supervisor<'_> {
             ChildEvent::Resumed { process, at_ns } => {
                 if let Ok(resumed) = process.parse::<Role>() {
                     self.faults.resume(resumed, at_ns);
+                    if self.config.hosts.is_remote(resumed) {
+                        self.faults.resume_cut(at_ns);
+                    }
                 }
                 self.note(at_ns, format!("{process} handles its input again"));
             }

@@ -54,6 +54,25 @@ impl<'a> FaultLedger<'a> {
         due
     }
 
+    /// The run is over: every stop not continued yet is taken off the wait, to be continued now,
+    /// before its time (a stop may last longer than the run).
+    pub(super) fn take_continues_at_run_end(&mut self) -> Vec<usize> {
+        let left: Vec<usize> = (0..self.seen.len()).filter(|&i| self.seen[i].continue_at_ns.is_some()).collect();
+        for &i in &left {
+            self.seen[i].continue_at_ns = None;
+            self.seen[i].continued_at_run_end = true;
+        }
+        left
+    }
+
+    /// Since when `role` has been stopped by a fault not continued yet, if it is: (the fault, ns).
+    pub(super) fn stopped_since(&self, role: Role) -> Option<(usize, u64)> {
+        self.injected_on(role, FaultKind::Stop)
+            .into_iter()
+            .find(|&i| self.seen[i].continue_at_ns.is_some())
+            .and_then(|i| Some((i, self.seen[i].injected_ns?)))
+    }
+
     /// Fault `i`'s process was sent SIGCONT at `ns`.
     pub(super) fn continued(&mut self, i: usize, ns: u64) {
         self.seen[i].continued_ns = Some(ns);
@@ -62,8 +81,18 @@ impl<'a> FaultLedger<'a> {
     /// `by` noticed something wrong with `role` at `ns`: the injected faults on it of the kind
     /// `by` notices that are still undetected count as detected. Returns them.
     pub(super) fn detect(&mut self, role: Role, by: DetectedBy, ns: u64) -> Vec<usize> {
+        self.detect_kind(role, noticed_kind(by), by, ns)
+    }
+
+    /// `by` noticed that the link passes nothing (a stage across it stalled) at `ns`: the
+    /// injected cuts still undetected count as detected. Returns them.
+    pub(super) fn detect_cut(&mut self, by: DetectedBy, ns: u64) -> Vec<usize> {
+        self.detect_kind(Role::Bridge, FaultKind::Cut, by, ns)
+    }
+
+    fn detect_kind(&mut self, role: Role, kind: FaultKind, by: DetectedBy, ns: u64) -> Vec<usize> {
         let found: Vec<usize> =
-            self.injected_on(role, noticed_kind(by)).into_iter().filter(|&i| detectable(&self.seen[i], by)).collect();
+            self.injected_on(role, kind).into_iter().filter(|&i| detectable(&self.seen[i], by)).collect();
         for &i in &found {
             self.seen[i].detected_ns = Some(ns);
             self.seen[i].detected_by = Some(by);
@@ -73,7 +102,17 @@ impl<'a> FaultLedger<'a> {
 
     /// `role` handles its input again at `ns`: its detected stops not resumed yet are resumed.
     pub(super) fn resume(&mut self, role: Role, ns: u64) {
-        for i in self.injected_on(role, FaultKind::Stop) {
+        self.resume_kind(role, FaultKind::Stop, ns);
+    }
+
+    /// The stage across the link handles its input again at `ns`: the detected cuts not
+    /// resumed yet are resumed.
+    pub(super) fn resume_cut(&mut self, ns: u64) {
+        self.resume_kind(Role::Bridge, FaultKind::Cut, ns);
+    }
+
+    fn resume_kind(&mut self, role: Role, kind: FaultKind, ns: u64) {
+        for i in self.injected_on(role, kind) {
             let seen = &mut self.seen[i];
             if seen.resumed_ns.is_none() && seen.detected_ns.is_some() {
                 seen.resumed_ns = Some(ns);
@@ -203,5 +242,39 @@ mod tests {
         late.injected(1, 100);
         late.continued(1, 300);
         assert_eq!(late.detect(Role::Bridge, DetectedBy::InputDeadline, 310), [1]);
+    }
+
+    #[test]
+    fn the_runs_end_continues_every_stop_still_on_and_says_so() {
+        let f = specs(&["stop plant at 100ms for 100s", "stop sensors at 100ms for 10ms", "kill estimator at 1s"]);
+        let mut ledger = FaultLedger::new(&f);
+        assert_eq!(ledger.stopped_since(Role::Plant), None);
+        for i in [0, 1] {
+            ledger.injected(i, 100);
+            ledger.continue_at(i, Some(if i == 0 { 100_100 } else { 110 }));
+        }
+        assert_eq!(ledger.stopped_since(Role::Plant), Some((0, 100)));
+        assert_eq!(ledger.take_continues_due(120), [1], "the short stop is over in its time");
+        assert_eq!(ledger.take_continues_at_run_end(), [0], "the long one is cut short");
+        assert!(ledger.take_continues_at_run_end().is_empty() && ledger.take_continues_due(200_000).is_empty());
+        assert_eq!(ledger.stopped_since(Role::Plant), None);
+        let seen = ledger.seen();
+        assert_eq!([seen[0].continued_at_run_end, seen[1].continued_at_run_end], [true, false]);
+    }
+
+    #[test]
+    fn a_cut_is_detected_and_resumed_by_the_stage_across_the_link_not_as_a_stop() {
+        let f = specs(&["stop bridge at 1s for 200ms", "cut bridge at 2s for 300ms"]);
+        let mut ledger = FaultLedger::new(&f);
+        assert!(ledger.detect_cut(DetectedBy::InputDeadline, 50).is_empty(), "not cut yet");
+        ledger.injected(0, 100);
+        ledger.injected(1, 200);
+        assert_eq!(ledger.detect_cut(DetectedBy::InputDeadline, 250), [1], "the cut, not the stop");
+        assert!(ledger.detect_cut(DetectedBy::InputDeadline, 260).is_empty(), "detected once");
+        ledger.resume_cut(600);
+        ledger.resume(Role::Bridge, 700);
+        let seen = ledger.seen();
+        assert_eq!((seen[1].detected_ns, seen[1].resumed_ns), (Some(250), Some(600)));
+        assert_eq!((seen[0].detected_ns, seen[0].resumed_ns), (None, None));
     }
 }

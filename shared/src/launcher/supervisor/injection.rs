@@ -7,6 +7,7 @@ use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::role::Role;
 use crate::launcher::inject::{self, DetectedBy};
+use crate::launcher::outcome::Outcome;
 
 use super::Supervisor;
 
@@ -38,15 +39,63 @@ impl Supervisor<'_> {
 
     /// Sends SIGCONT to the processes whose stop is over at `now` (ns).
     pub(super) fn continue_stopped(&mut self, now: u64) {
-        for i in self.faults.take_continues_due(now) {
-            let role = inject::target(self.faults.spec(i));
+        let due = self.faults.take_continues_due(now);
+        self.continue_faults(due, "");
+    }
+
+    /// The run is over (real time: its duration has passed; or it ends for any reason): every
+    /// stop still on is continued now, not at its time, so that the run ends on time.
+    pub(super) fn continue_at_run_end(&mut self) {
+        let left = self.faults.take_continues_at_run_end();
+        self.continue_faults(left, ", before its time: the run is over");
+    }
+
+    /// Real time: the run's duration has passed since tick 0 at `now` (a stopped plant cannot
+    /// end it by itself).
+    pub(super) fn continue_past_run_end(&mut self, now: u64) {
+        let Some(start) = self.log.plant_start_ns else { return };
+        if self.config.mode == Mode::Realtime && now >= start + (self.config.duration_s * 1e9) as u64 {
+            self.continue_at_run_end();
+        }
+    }
+
+    /// Lockstep: a plant stopped by a fault for longer than `lockstep_stall_s` has stalled the
+    /// loop, as any stopped stage does (the plant would say so of another): the run ends there.
+    pub(super) fn lockstep_plant_stall(&self, now: u64) -> Option<Outcome> {
+        if self.config.mode != Mode::Lockstep {
+            return None;
+        }
+        let (i, since) = self.faults.stopped_since(Role::Plant)?;
+        let stall_s = self.config.supervision.lockstep_stall_s;
+        if now.saturating_sub(since) as f64 * 1e-9 <= stall_s {
+            return None;
+        }
+        let k = self.faults.spec(i).ticks(self.config.rate_hz).0;
+        Some(Outcome::Failed(format!(
+            "the loop stalled at loop {k}: the plant was stopped for longer than {stall_s} s \
+             (supervision.lockstep_stall_s)"
+        )))
+    }
+
+    /// Continues the faults `due` (SIGCONT, or a cut's mending noted); `why` ends each note.
+    fn continue_faults(&mut self, due: Vec<usize>, why: &str) {
+        for i in due {
+            let fault = self.faults.spec(i);
+            if fault.kind == FaultKind::Cut {
+                // The bridge mends it by itself at its end loop; this notes when.
+                let ns = now_ns();
+                self.faults.continued(i, ns);
+                self.note(ns, format!("{}: the link carries the loop again{why}", fault.describe()));
+                continue;
+            }
+            let role = inject::target(fault);
             // Stamped before the signal: the process may run, and the monitor stamp it resumed,
             // before this thread reads the clock again.
             let ns = now_ns();
             self.processes[role].signal(libc::SIGCONT);
             self.processes[role].stopped = false;
             self.faults.continued(i, ns);
-            self.note(ns, format!("SIGCONT {role}"));
+            self.note(ns, format!("SIGCONT {role}{why}"));
         }
     }
 
@@ -55,6 +104,14 @@ impl Supervisor<'_> {
         let role = inject::target(fault);
         let ns = now_ns();
         self.faults.injected(i, ns);
+        if fault.kind == FaultKind::Cut {
+            // This machine's bridge drops the loops of the cut by itself; noted at its time, and
+            // mended at its end (a cut without a duration lasts to the end of the run).
+            let lasts = fault.duration_s.map(|d| ns + std::time::Duration::from_secs_f64(d).as_nanos() as u64);
+            self.faults.continue_at(i, lasts);
+            self.note(ns, format!("inject: {} (the link passes nothing either way)", fault.describe()));
+            return;
+        }
         if !self.processes[role].running() {
             self.note(ns, format!("{}: not injected, {role} is not running", fault.describe()));
             return;

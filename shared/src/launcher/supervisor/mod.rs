@@ -412,6 +412,10 @@ impl<'a> Supervisor<'a> {
         let now = now_ns();
         self.inject_due_by_time();
         self.continue_stopped(now);
+        self.continue_past_run_end(now);
+        if let Some(outcome) = self.lockstep_plant_stall(now) {
+            return Some(outcome);
+        }
         if let Some(outcome) = self.start_due_restarts(now) {
             return Some(outcome);
         }

@@ -20,6 +20,8 @@ impl Supervisor<'_> {
     /// timeout, SIGKILL; collects their reports on the way.
     pub(super) fn stop_all(&mut self) {
         self.live.stopping();
+        // A stop longer than the run ends with it, and says so.
+        self.continue_at_run_end();
         // A stopped process cannot act on SIGTERM.
         for p in self.processes.iter() {
             p.signal(libc::SIGCONT);
