@@ -1,7 +1,7 @@
 //! Running sums of one quantity, for a scenario's metrics: mean, RMS and spread without keeping
 //! the samples.
 
-#[derive(Debug, Default, Clone, Copy)]
+#[derive(Debug, Default, Clone, Copy, serde::Serialize, serde::Deserialize)]
 pub struct Mean {
     sum: f64,
     sum_sq: f64,
