@@ -26,6 +26,11 @@ use crate::monitor::stats::LoopStats;
 /// then the monitor's buffer of that topic has overflowed past it.
 const JOIN_WINDOW: u64 = 2 * MONITOR_BUFFER as u64;
 
+/// Loops between snapshots besides the checkpoints' (a lockstep run can go through thousands
+/// of loops between two checkpoints): a killed monitor loses at most this many more than were
+/// still queued for it.
+const SNAPSHOT_LOOPS: u64 = 256;
+
 /// Called with the live numbers at each [`Recording::checkpoint`].
 pub type StatusCallback = Box<dyn FnMut(&MonitorStatus) -> Result<()> + Send>;
 
@@ -60,6 +65,8 @@ pub struct Recording {
     metrics_from: Option<u64>,
     /// Why the last monitor's snapshot could not be used.
     resume_failed: Option<String>,
+    /// The loop after which the next snapshot is due, checkpoint or not.
+    next_snapshot_k: u64,
 }
 
 impl Recording {
@@ -100,6 +107,7 @@ impl Recording {
             records_started: false,
             metrics_from: None,
             resume_failed: None,
+            next_snapshot_k: SNAPSHOT_LOOPS,
         })
     }
 
@@ -179,6 +187,7 @@ impl Recording {
             if self.metrics_from.is_some() {
                 self.metrics_from = Some(first);
             }
+            self.next_snapshot_k = first + SNAPSHOT_LOOPS;
         }
         if let Sample::Loop(record) = &sample {
             if self.restarted && !self.records_started {
@@ -204,8 +213,21 @@ impl Recording {
             while let Some((k, parts)) = self.joiner.next_settled() {
                 self.write(k, &parts)?;
             }
+            if self.snapshot.is_some() && self.joiner.next_k() >= self.next_snapshot_k {
+                self.save()?;
+            }
         }
         Ok(())
+    }
+
+    /// Flushes every sink, then leaves the running state for the next monitor.
+    fn save(&mut self) -> Result<()> {
+        self.sinks.iter_mut().try_for_each(|sink| sink.flush())?;
+        self.next_snapshot_k = self.joiner.next_k() + SNAPSHOT_LOOPS;
+        match &self.snapshot {
+            Some(path) => self.freeze(path),
+            None => Ok(()),
+        }
     }
 
     /// Reports the status (if there is a callback) and flushes every sink.
@@ -219,11 +241,7 @@ impl Recording {
             };
             callback(&status)?;
         }
-        self.sinks.iter_mut().try_for_each(|sink| sink.flush())?;
-        match &self.snapshot {
-            Some(path) => self.freeze(path),
-            None => Ok(()),
-        }
+        self.save()
     }
 
     /// Everything has arrived: writes the loops still waiting for parts, finishes every sink and
