@@ -252,11 +252,10 @@ fn a_restarted_monitor_accounts_for_every_loop_and_continues_the_latency_log() {
     assert_eq!(m.lost, 0, "{m:?}");
     assert_eq!(m.missing.missing_ranges_omitted, 0, "{m:?}");
     assert_eq!(listed_missing(s), m.missing.missing_loops, "{m:?}");
-    // The last monitor started after the second kill, at 2.5 s: the loops before it are its
-    // missing ones, with that reason.
-    let before_restart = m.missing.missing_before_restart;
-    assert!(before_restart >= 2500, "{m:?}");
-    assert_eq!(m.missing.ranges.first(), Some(&[0, before_restart - 1]), "{m:?}");
+    // Each restarted monitor went on from the last one's last checkpoint: only the loops
+    // between that and its own first loop are missing, with that reason, and the rest is recorded.
+    assert_eq!(m.missing.missing_before_restart, m.missing.missing_loops, "{m:?}");
+    assert!(m.records > 1500, "the first monitors' loops count, not only the last one's 1500: {m:?}");
 
     // The interval log's time stamps go on across the restarts.
     let hlog = std::fs::read(r.dir.join("latency.hlog")).unwrap();
@@ -268,10 +267,40 @@ fn a_restarted_monitor_accounts_for_every_loop_and_continues_the_latency_log() {
         .collect();
     assert!(!starts.is_empty(), "latency.hlog has no interval");
     assert!(starts.windows(2).all(|w| w[0] <= w[1]), "interval start times go back: {starts:?}");
-    // Three monitors wrote loops.csv, each appending after what the last one flushed.
+    // Three monitors wrote loops.csv, each appending after what the last one flushed (which
+    // may go past its last checkpoint).
     let rows = assert_loops_csv_integers(&r.dir) as u64;
-    assert!(rows > m.records, "{rows} rows, {} of the last monitor", m.records);
+    assert!(rows >= m.records, "{rows} rows, {} recorded", m.records);
     assert_every_process_ended_alive(s);
+    assert_clean(s);
+}
+
+#[test]
+fn a_restarted_monitor_reports_the_whole_run_as_if_it_had_never_died() {
+    // The pendulum leans most in its first loops (its initial angle); the controller's kill
+    // (which lockstep makes harmless) is over by loop 101; the monitor dies at loop 2500, long
+    // after its first snapshot (every 256 loops it has written, and every 100 ms).
+    let common = ["--mode", "lockstep", "--duration", "3.5", "--fault", "kill controller at 0.1s"];
+    let killed = run("kill-monitor-whole", &[&common[..], &["--fault", "kill monitor at 2.5s"]].concat());
+    let whole = run("kill-monitor-baseline", &common);
+    let (s, m) = (killed.summary(), &killed.summary().monitor);
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.restarts[&Role::Monitor], 1);
+    assert_eq!(m.records + m.missing.missing_loops, s.loops, "{m:?}");
+    assert_eq!(m.lost, 0, "{m:?}");
+    // Only the loops between the dead monitor's last snapshot and its successor's first are
+    // missing; the rest, the first monitor's included, is in the report.
+    assert_eq!(m.missing.missing_before_restart, m.missing.missing_loops, "{m:?}");
+    assert!(m.records >= 1000 + 256, "{m:?}");
+    assert_eq!(killed.metric("theta_max_abs_rad"), whole.metric("theta_max_abs_rad"));
+    assert_eq!(killed.metric("current_at_limit_s"), whole.metric("current_at_limit_s"));
+    // The controller's kill, before the restart, keeps the effect the first monitor saw.
+    let (during, before) = (effect(&s.faults[0]), effect(&whole.summary().faults[0]));
+    assert!(!during.unrecorded && during.error_peak_first_s.is_some(), "{during:?}");
+    assert_eq!(
+        (during.outage_ticks, during.commands_back_at_s, during.rejoined_at_s, during.error_peak_first_s),
+        (before.outage_ticks, before.commands_back_at_s, before.rejoined_at_s, before.error_peak_first_s)
+    );
     assert_clean(s);
 }
 

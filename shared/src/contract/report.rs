@@ -183,12 +183,13 @@ pub struct MissingLoops {
     pub missing_loops: u64,
     /// Ranges left out of the list.
     pub missing_ranges_omitted: u64,
-    /// Of `missing_loops`, those before the first loop of a restarted monitor: their records
-    /// went to an earlier monitor (whose report died with it) or came while none ran.
+    /// Of `missing_loops`, those no monitor recorded around its restarts: from where the last
+    /// monitor's saved state ended (its last checkpoint, or loop 0 if it saved none) to the
+    /// restarted monitor's first loop.
     pub missing_before_restart: u64,
     /// The newest missing loop, listed or not: an omitted range grows while loops go on missing.
     #[serde(skip)]
-    last: Option<u64>,
+    pub(crate) last: Option<u64>,
 }
 
 impl MissingLoops {
@@ -242,6 +243,11 @@ pub struct FaultEffect {
     /// or dying out.
     pub error_peak_first_s: Option<f64>,
     pub error_peak_last_s: Option<f64>,
+    /// No loop from the injection to the next fault or the end was recorded: no monitor ran
+    /// then (it was restarting), or the run ended before it. Nothing is known of its effect,
+    /// and `within_limits` says nothing.
+    #[serde(default)]
+    pub unrecorded: bool,
 }
 
 #[cfg(test)]

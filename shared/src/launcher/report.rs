@@ -193,7 +193,7 @@ fn missing_text(m: &MissingLoops) -> String {
     };
     let before_restart = match m.missing_before_restart {
         0 => String::new(),
-        n => format!("; the first {n} were before the monitor restarted"),
+        n => format!("; {n} of them while the monitor restarted"),
     };
     format!("; no record for {} loops: {}{omitted}{before_restart}", m.missing_loops, ranges.join(", "))
 }
@@ -307,6 +307,7 @@ fn render_faults(out: &mut String, s: &Summary) {
     for f in &s.faults {
         let back = f.restarted_after_ms.or(f.resumed_after_ms);
         let (outage, during, after, recovery, limits) = match &f.effect {
+            Some(e) if e.unrecorded => ("-".into(), "-".into(), "-".into(), "-".into(), "unrecorded"),
             Some(e) => (
                 format!("{} ticks", e.outage_ticks),
                 e.worst_error_during.map_or("-".into(), |v| format!("{v:.4}")),
@@ -329,6 +330,13 @@ fn render_faults(out: &mut String, s: &Summary) {
     }
     // The fault and the verdict are text; the columns between them are numbers.
     write_table(out, &rows, &[false, true, true, true, true, true, true, false]);
+    for f in s.faults.iter().filter(|f| f.effect.as_ref().is_some_and(|e| e.unrecorded)) {
+        let _ = writeln!(
+            out,
+            "  note: no loop after `{}` was recorded (the monitor was restarting, or the run had ended): its effect is unknown",
+            f.fault
+        );
+    }
     // Real time: a kill or stop the launcher sent later than planned (it was stopped or starved).
     for f in &s.faults {
         if let Some(late) = f.injected_at_ms.map(|at| at - f.at_s * 1e3).filter(|late| *late > LATE_INJECTION_MS) {
@@ -438,6 +446,19 @@ mod tests {
             let end_of = |line: &str, cell: &str| line.find(cell).map(|i| i + cell.len());
             assert_eq!(end_of(lines[header], title), end_of(lines[header + 1], value), "{title}");
         }
+    }
+
+    #[test]
+    fn a_fault_no_monitor_recorded_is_not_kept_but_unrecorded() {
+        let mut s = summary_with_fault();
+        s.faults[0].effect = Some(FaultEffect { unrecorded: true, within_limits: true, ..Default::default() });
+        let text = render(&s);
+        let row = text.lines().find(|l| l.trim_start().starts_with("kill controller at 1s")).expect("its row");
+        assert_eq!(cells(row)[3..], ["-", "-", "-", "-", "unrecorded"]);
+        assert!(
+            text.contains("note: no loop after `kill controller at 1s` was recorded (the monitor was restarting"),
+            "{text}"
+        );
     }
 
     #[test]

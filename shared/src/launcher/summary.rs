@@ -205,14 +205,15 @@ pub struct Jitter {
 /// What the monitor recorded of the loop.
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct MonitorCounts {
-    /// Loops with their loop record (the last monitor's, after restarts).
+    /// Loops with their loop record, over the whole run (a restarted monitor goes on from the
+    /// last one's count).
     pub records: u64,
     /// Loop records the plant published that never reached the monitor while it ran.
     pub lost: u64,
     /// Which loops have no record (`missing`, as inclusive ranges, the first 100 listed), how
     /// many (`missing_loops`: `records` + `missing_loops` = `loops`), and why: not published
-    /// (skipped ticks, loops without command), lost, or before a restarted monitor's first
-    /// loop (`missing_before_restart`).
+    /// (skipped ticks, loops without command), lost, or while the monitor restarted
+    /// (`missing_before_restart`).
     #[serde(flatten)]
     pub missing: MissingLoops,
     /// Samples the monitor received per topic.

@@ -50,7 +50,7 @@ const COMMANDS_KEPT: usize = 512;
 
 /// For metrics: how long the command in effect had been held, and how old the oldest sample
 /// behind it was, when each period began.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct ActuationAge {
     /// The last loops' (t, command, oldest sample time behind it), to find the loop whose
     /// command the vehicle is acting on.

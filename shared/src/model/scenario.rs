@@ -305,4 +305,45 @@ pub trait Metrics: Send {
     fn notes(&self) -> Vec<String> {
         Vec::new()
     }
+    /// What has been observed so far, for a restarted monitor to go on from ([`Metrics::thaw`]).
+    /// None (the default): these metrics cannot be carried over, and a restarted monitor's
+    /// cover only the loops it saw. [`freeze_value`] and [`thaw_value`] do the encoding.
+    fn freeze(&self) -> Option<Vec<u8>> {
+        None
+    }
+    /// Goes on from what [`Metrics::freeze`] returned (into metrics made fresh for the same run).
+    fn thaw(&mut self, _frozen: &[u8]) -> anyhow::Result<()> {
+        Err(anyhow::anyhow!("these metrics cannot be carried over a monitor restart"))
+    }
+}
+
+/// `freeze` and `thaw` of [`Metrics`] for the listed fields (what `observe` changes; the rest
+/// comes from the launch file): each field encoded on its own, so any number of them, and
+/// every f64 exactly, NaN included.
+macro_rules! frozen_fields {
+    ($($field:ident),+ $(,)?) => {
+        fn freeze(&self) -> Option<Vec<u8>> {
+            let fields: Vec<Vec<u8>> = vec![$($crate::model::scenario::freeze_value(&self.$field)),+];
+            Some($crate::model::scenario::freeze_value(&fields))
+        }
+        fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
+            let fields: Vec<Vec<u8>> = $crate::model::scenario::thaw_value(frozen)?;
+            let mut fields = fields.iter();
+            $(self.$field = $crate::model::scenario::thaw_value(
+                fields.next().ok_or_else(|| anyhow::anyhow!("frozen metrics: too few fields"))?,
+            )?;)+
+            Ok(())
+        }
+    };
+}
+pub(crate) use frozen_fields;
+
+/// One value as bytes, for [`frozen_fields`].
+pub fn freeze_value<T: serde::Serialize>(value: &T) -> Vec<u8> {
+    bincode::serde::encode_to_vec(value, bincode::config::standard()).expect("plain data encodes")
+}
+
+/// A value from [`freeze_value`]'s bytes.
+pub fn thaw_value<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> anyhow::Result<T> {
+    Ok(bincode::serde::decode_from_slice(bytes, bincode::config::standard())?.0)
 }

@@ -14,7 +14,7 @@ const MAX_DRIFT: f64 = 1e-3;
 const BOUND_STRETCHES: usize = 32;
 
 /// One NTP exchange: `t1` local send, `t2` remote receive, `t3` remote send, `t4` local receive.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct NtpSample {
     pub t1: u64,
     pub t2: u64,
@@ -109,7 +109,7 @@ impl ClockFit {
 /// Fits one remote host's clock, fed sample by sample. Each window of local time keeps three samples:
 /// the smallest round trip (the offset the network blurred least, for the fit) and the smallest
 /// `t2 − t1` and largest `t3 − t4` (the tightest one-way bounds, for the uncertainty).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ClockFitter {
     window_ns: u64,
     windows: BTreeMap<u64, Window>,
@@ -117,7 +117,7 @@ pub struct ClockFitter {
     last_receive: u64,
 }
 
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct Window {
     best: NtpSample,
     min_out: NtpSample,

@@ -10,6 +10,7 @@ use crate::contract::report::{ClockReport, CrossingReport, HOPS};
 use crate::monitor::clock_fit::{ClockFit, ClockFitter, DEFAULT_WINDOW_NS, ntp_samples};
 use crate::monitor::distribution::Distribution;
 
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Crossing {
     /// Per stamp: 1 if it is the other host's clock, 0 if ours.
     hosts: [u8; 8],

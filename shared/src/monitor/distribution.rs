@@ -12,8 +12,11 @@ pub fn histogram() -> Histogram<u64> {
     Histogram::new_with_bounds(1, HISTOGRAM_MAX_NS, 3).expect("valid histogram bounds")
 }
 
-/// An HDR histogram with exact extremes and mean.
+/// An HDR histogram with exact extremes and mean. Serialisable, so that a restarted monitor
+/// goes on from the last one's (the histogram in HdrHistogram's V2 format).
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Distribution {
+    #[serde(with = "v2")]
     histogram: Histogram<u64>,
     min: u64,
     max: u64,
@@ -61,5 +64,23 @@ impl Distribution {
             max: Some(self.max),
             mean: Some(self.sum as f64 / count as f64),
         }
+    }
+}
+
+/// A histogram as HdrHistogram's V2 bytes (compact: runs of empty buckets take a byte or two).
+mod v2 {
+    use hdrhistogram::Histogram;
+    use hdrhistogram::serialization::{Deserializer as V2Reader, Serializer as _, V2Serializer};
+    use serde::{Deserialize, Deserializer, Serializer, de::Error as _, ser::Error as _};
+
+    pub fn serialize<S: Serializer>(histogram: &Histogram<u64>, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut bytes = vec![];
+        V2Serializer::new().serialize(histogram, &mut bytes).map_err(|e| S::Error::custom(format!("{e:?}")))?;
+        serializer.serialize_bytes(&bytes)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Histogram<u64>, D::Error> {
+        let bytes = serde_bytes::ByteBuf::deserialize(deserializer)?;
+        V2Reader::new().deserialize(&mut &bytes[..]).map_err(|e| D::Error::custom(format!("{e:?}")))
     }
 }

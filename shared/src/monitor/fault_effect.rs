@@ -8,7 +8,9 @@ use crate::contract::role::Role;
 use crate::model::scenario::ErrorMeasure;
 use crate::monitor::join::LoopParts;
 
-/// Follows one fault through the loops the monitor writes.
+/// Follows one fault through the loops the monitor writes. Serialisable: a restarted monitor
+/// goes on from the last one's.
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct FaultTracker {
     /// The process's slot in `Header::incarnations`, if it has one.
     slot: Option<usize>,
@@ -25,6 +27,8 @@ pub struct FaultTracker {
     back: Option<u64>,
     rejoined: Option<u64>,
     last_outside: Option<u64>,
+    /// A loop of its window was recorded.
+    recorded: bool,
     effect: FaultEffect,
 }
 
@@ -57,6 +61,7 @@ impl FaultTracker {
                     back: None,
                     rejoined: None,
                     last_outside: None,
+                    recorded: false,
                     effect: FaultEffect { within_limits: true, ..Default::default() },
                 }
             })
@@ -73,6 +78,7 @@ impl FaultTracker {
         if k >= self.window_end {
             return;
         }
+        self.recorded = true;
         if self.rejoined.is_none()
             && self.incarnation_before.is_some()
             && incarnation.is_some_and(|i| Some(i) != self.incarnation_before)
@@ -119,6 +125,7 @@ impl FaultTracker {
     /// the recorder's `t` (k·dt would print 0.009000000000000001).
     pub fn finish(mut self, rate_hz: f64) -> FaultEffect {
         let at = |k: u64| k as f64 / rate_hz;
+        self.effect.unrecorded = !self.recorded;
         self.effect.commands_back_at_s = self.back.map(at);
         self.effect.rejoined_at_s = self.rejoined.map(at);
         self.effect.recovery_s = match self.last_outside {
@@ -213,6 +220,7 @@ mod tests {
                 within_limits: true,
                 error_peak_first_s: Some(0.5),
                 error_peak_last_s: Some(0.5),
+                unrecorded: false,
             }
         );
         assert_eq!(
@@ -227,6 +235,7 @@ mod tests {
                 within_limits: false,
                 error_peak_first_s: Some(1.2),
                 error_peak_last_s: Some(1.2),
+                unrecorded: false,
             }
         );
     }

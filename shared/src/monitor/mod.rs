@@ -9,6 +9,7 @@
 //!   [`clock_fit`] fits it from the loops' own stamps.
 //! - [`sinks`]: the files of the run folder, one sink each; [`live`]: what the dashboard shows,
 //!   sent with each status.
+//! - [`resume`]: the running state each checkpoint leaves for a restarted monitor to go on from.
 
 pub mod clock_fit;
 pub mod crossing;
@@ -19,6 +20,7 @@ pub mod layout;
 pub mod live;
 pub mod process;
 pub mod recording;
+pub mod resume;
 pub mod sinks;
 pub mod stall;
 pub mod stats;

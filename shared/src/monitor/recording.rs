@@ -3,7 +3,7 @@
 //! ends with the [`MonitorReport`]. No IPC, no threads, no output but the sinks': the monitor
 //! process feeds it from iceoryx2, an in-process run feeds it directly.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
@@ -11,19 +11,25 @@ use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::msg::{MONITOR_BUFFER, PlantCounters};
 use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
-use crate::contract::role::{Role, Topic};
+use crate::contract::role::Role;
 use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 use crate::monitor::crossing::Crossing;
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::join::{Joiner, LoopParts, Sample};
 use crate::monitor::layout::Layout;
 use crate::monitor::live::Live;
+use crate::monitor::resume::{self, Frozen, Thawed};
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
 use crate::monitor::stats::LoopStats;
 
 /// A loop still missing parts once this many newer loops have arrived is written as it is: by
 /// then the monitor's buffer of that topic has overflowed past it.
 const JOIN_WINDOW: u64 = 2 * MONITOR_BUFFER as u64;
+
+/// Loops between snapshots besides the checkpoints' (a lockstep run can go through thousands
+/// of loops between two checkpoints): a killed monitor loses at most this many more than were
+/// still queued for it.
+const SNAPSHOT_LOOPS: u64 = 256;
 
 /// Called with the live numbers at each [`Recording::checkpoint`].
 pub type StatusCallback = Box<dyn FnMut(&MonitorStatus) -> Result<()> + Send>;
@@ -46,6 +52,21 @@ pub struct Recording {
     /// A restarted monitor starts at the first loop it sees; the first one starts at 0.
     started: bool,
     restarted: bool,
+    /// Where the running state goes at each checkpoint, for the next monitor ([`resume`]).
+    snapshot: Option<PathBuf>,
+    /// The first loop this recording has no state of: 0, or where the last monitor's snapshot
+    /// ended (a restarted monitor's loops before its first are missing from here on).
+    resume_k: u64,
+    /// The highest loop-record sequence number received, by this monitor or the ones before.
+    last_record_sequence: u64,
+    /// This monitor's first loop record came (a restarted one counts those before it).
+    records_started: bool,
+    /// Restarted without the last monitor's metrics: they cover the loops from this one on.
+    metrics_from: Option<u64>,
+    /// Why the last monitor's snapshot could not be used.
+    resume_failed: Option<String>,
+    /// The loop after which the next snapshot is due, checkpoint or not.
+    next_snapshot_k: u64,
 }
 
 impl Recording {
@@ -80,30 +101,103 @@ impl Recording {
             status,
             started: !restarted,
             restarted,
+            snapshot: None,
+            resume_k: 0,
+            last_record_sequence: 0,
+            records_started: false,
+            metrics_from: None,
+            resume_failed: None,
+            next_snapshot_k: SNAPSHOT_LOOPS,
         })
+    }
+
+    /// Writes the running state to `path` at each checkpoint; a restarted recording first goes
+    /// on from the one there, if the last monitor wrote one (else, as without it, the loops
+    /// before its first are missing and its numbers cover its own span).
+    pub fn with_snapshot(mut self, path: PathBuf, scenario: &dyn Scenario) -> Self {
+        if self.restarted {
+            match resume::read(&path) {
+                Ok(Some(frozen)) => {
+                    if let Err(e) = self.thaw(frozen, scenario) {
+                        self.resume_failed = Some(format!("{e:#}"));
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => self.resume_failed = Some(format!("{e:#}")),
+            }
+        }
+        self.snapshot = Some(path);
+        self
+    }
+
+    /// Goes on from the last monitor's state; on an error, leaves the recording as it was.
+    fn thaw(&mut self, frozen: Thawed, scenario: &dyn Scenario) -> Result<()> {
+        let mut report: MonitorReport = serde_json::from_str(&frozen.report)?;
+        report.missing.last = frozen.missing_newest;
+        match &frozen.metrics {
+            Some(bytes) => {
+                let mut metrics = scenario.metrics();
+                metrics.thaw(bytes)?;
+                self.metrics = metrics;
+            }
+            // Marked at the first loop this monitor sees.
+            None => self.metrics_from = Some(0),
+        }
+        self.report = report;
+        self.stats = frozen.stats;
+        self.faults = frozen.faults;
+        self.last_counters = frozen.last_counters;
+        self.resume_k = frozen.next_k;
+        self.last_record_sequence = frozen.last_record_sequence;
+        Ok(())
+    }
+
+    /// Writes the running state for the next monitor.
+    fn freeze(&self, path: &Path) -> Result<()> {
+        let report = serde_json::to_string(&self.report)?;
+        resume::write(
+            path,
+            &Frozen {
+                // Loops still waiting for parts are not in the state: they are the next one's.
+                next_k: self.joiner.next_k(),
+                report,
+                missing_newest: self.report.missing.last,
+                last_record_sequence: self.last_record_sequence,
+                stats: &self.stats,
+                faults: &self.faults,
+                metrics: self.metrics.freeze(),
+                last_counters: self.last_counters,
+            },
+        )
     }
 
     /// Takes one message; writes every loop it completes.
     pub fn take(&mut self, sample: Sample) -> Result<()> {
         let (k, topic) = sample.key();
         if !self.started {
-            // The loops before this one were the last monitor's; this report has no record of them.
+            // The loops from where the last monitor's state ended to this one went with it (or
+            // came while none ran): this report has no record of them.
             self.started = true;
-            self.joiner.start_at(k);
-            if k > 0 {
-                self.report.missing.add(0, k - 1);
-                self.report.missing.missing_before_restart = k;
+            let first = k.max(self.resume_k);
+            self.joiner.start_at(first);
+            if first > self.resume_k {
+                self.report.missing.add(self.resume_k, first - 1);
+                self.report.missing.missing_before_restart += first - self.resume_k;
             }
-        }
-        if let Sample::Loop(record) = &sample
-            && self.restarted
-            && !self.report.received.contains_key(Topic::Loop.name())
-        {
-            // The first record: those before it went out before this monitor was up. (The
-            // first monitor is up before the loop starts.)
-            self.report.records_before_start = record.sequence.saturating_sub(1);
+            if self.metrics_from.is_some() {
+                self.metrics_from = Some(first);
+            }
+            self.next_snapshot_k = first + SNAPSHOT_LOOPS;
         }
         if let Sample::Loop(record) = &sample {
+            if self.restarted && !self.records_started {
+                // This monitor's first record: those since the last one counted went out while
+                // no monitor was up to count them. (The first monitor is up before the loop starts.)
+                self.report.records_before_start +=
+                    record.sequence.saturating_sub(1).saturating_sub(self.last_record_sequence);
+            }
+            self.records_started = true;
+            self.last_record_sequence = self.last_record_sequence.max(record.sequence);
             for stage in Role::STAGES {
                 let incarnation = record.header.incarnations[stage.slot().expect("a stage has a slot")] as usize;
                 let counts = self.report.records_by_incarnation.entry(stage).or_default();
@@ -119,8 +213,21 @@ impl Recording {
             while let Some((k, parts)) = self.joiner.next_settled() {
                 self.write(k, &parts)?;
             }
+            if self.snapshot.is_some() && self.joiner.next_k() >= self.next_snapshot_k {
+                self.save()?;
+            }
         }
         Ok(())
+    }
+
+    /// Flushes every sink, then leaves the running state for the next monitor.
+    fn save(&mut self) -> Result<()> {
+        self.sinks.iter_mut().try_for_each(|sink| sink.flush())?;
+        self.next_snapshot_k = self.joiner.next_k() + SNAPSHOT_LOOPS;
+        match &self.snapshot {
+            Some(path) => self.freeze(path),
+            None => Ok(()),
+        }
     }
 
     /// Reports the status (if there is a callback) and flushes every sink.
@@ -134,7 +241,7 @@ impl Recording {
             };
             callback(&status)?;
         }
-        self.sinks.iter_mut().try_for_each(|sink| sink.flush())
+        self.save()
     }
 
     /// Everything has arrived: writes the loops still waiting for parts, finishes every sink and
@@ -162,6 +269,22 @@ impl Recording {
             .collect();
         report.metrics = self.metrics.finish();
         report.notes = self.metrics.notes();
+        if let Some(k) = self.metrics_from {
+            report.notes.insert(
+                0,
+                format!(
+                    "the metrics cover the loops from {k} on (t = {} s): the monitor restarted, and this scenario's \
+                     metrics cannot be carried over a restart",
+                    k as f64 / self.rate_hz
+                ),
+            );
+        }
+        if let Some(e) = &self.resume_failed {
+            report.notes.insert(
+                0,
+                format!("the monitor restarted and could not go on from the last one's numbers ({e}): the numbers cover its own span"),
+            );
+        }
         if let Some(k) = report.diverged_at {
             report.notes.insert(
                 0,
@@ -233,7 +356,13 @@ mod tests {
 
     /// A lockstep pendulum run of 6 loops, recorded into a fresh folder.
     fn setup(name: &str) -> (LaunchConfig, Box<dyn Scenario>, std::path::PathBuf) {
-        let overrides = ["mode=lockstep", "duration_s=0.006"].map(|o| Override::parse(o).unwrap());
+        setup_with(name, &[])
+    }
+
+    fn setup_with(name: &str, faults: &[&str]) -> (LaunchConfig, Box<dyn Scenario>, std::path::PathBuf) {
+        let mut overrides: Vec<Override> =
+            ["mode=lockstep", "duration_s=0.006"].iter().map(|o| Override::parse(o).unwrap()).collect();
+        overrides.extend(faults.iter().map(|f| Override::fault(f).unwrap()));
         let (config, scenario) = resolve("pendulum", &overrides).unwrap();
         let dir = std::env::temp_dir().join(format!("looplab-recording-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -323,5 +452,43 @@ mod tests {
         // appends (loop 2 went to neither).
         let ks: Vec<&str> = rows.iter().map(|r| r.split(',').next().unwrap()).collect();
         assert_eq!(ks, ["0", "1", "3", "4", "5"]);
+    }
+
+    #[test]
+    fn a_restarted_recording_goes_on_from_the_last_ones_snapshot() {
+        // The first fault's window (loops 3 and 4) falls wholly while no monitor runs.
+        let (config, scenario, dir) = setup_with("resume", &["stop controller at 3ms for 1ms", "kill sensors at 5ms"]);
+        let snapshot = dir.join("monitor.state");
+        let mut first = Recording::new(&config, scenario.as_ref(), &dir, 0, None)
+            .unwrap()
+            .with_snapshot(snapshot.clone(), &*scenario);
+        for k in 0..3 {
+            whole(k).into_iter().try_for_each(|s| first.take(s)).unwrap();
+        }
+        first.checkpoint().unwrap();
+        // Loop 3 reaches it after its last checkpoint: it dies with it.
+        whole(3).into_iter().try_for_each(|s| first.take(s)).unwrap();
+        drop(first);
+        let mut second =
+            Recording::new(&config, scenario.as_ref(), &dir, 1, None).unwrap().with_snapshot(snapshot, &*scenario);
+        for k in 5..6 {
+            whole(k).into_iter().try_for_each(|s| second.take(s)).unwrap();
+        }
+        let report = second.finish().unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+
+        assert_eq!((report.records, report.loops_seen), (4, 6));
+        assert_eq!(report.missing.ranges, [[3, 4]]);
+        assert_eq!((report.missing.missing_loops, report.missing.missing_before_restart), (2, 2));
+        assert_eq!(report.received["loop"], 4, "the three before the snapshot and this monitor's one");
+        // Records 4 and 5 went out while no monitor counted (4 reached the first after its
+        // checkpoint): not lost.
+        assert_eq!(report.records_before_start, 2);
+        assert_eq!(report.lost_records(6), 0);
+        assert_eq!(report.end_to_end.count, 4);
+        assert_eq!(report.records_by_incarnation[&Role::Controller], [4]);
+        assert!(report.notes.iter().all(|n| !n.contains("restart")), "{:?}", report.notes);
+        assert!(report.faults[0].unrecorded, "{:?}", report.faults[0]);
+        assert!(!report.faults[1].unrecorded, "{:?}", report.faults[1]);
     }
 }

@@ -7,6 +7,7 @@ pub use crate::monitor::distribution::{Distribution, histogram};
 use crate::monitor::join::LoopParts;
 
 /// Every distribution the report gives, fed one joined loop at a time.
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct LoopStats {
     pub end_to_end: Distribution,
     pub hops: [Distribution; HOPS.len()],

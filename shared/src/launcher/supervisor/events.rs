@@ -12,7 +12,35 @@ use crate::launcher::inject::DetectedBy;
 
 use super::{Event, Supervisor};
 
+/// How long a process whose output ended may take to be reapable before its death is handled
+/// anyway (its exit status then unknown).
+pub(super) const REAP_WAIT: Duration = Duration::from_secs(2);
+
 impl Supervisor<'_> {
+    /// Reaps `role`, waiting up to `limit` (where nothing else is to go on meanwhile).
+    pub(super) fn reap_within(&mut self, role: Role, limit: Duration) {
+        let until = Instant::now() + limit;
+        while !self.processes[role].try_reap() && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// The processes whose output ended that are reaped now, or that were waited for long
+    /// enough: their deaths are to be handled.
+    pub(super) fn reaped(&mut self) -> Vec<Role> {
+        let now = Instant::now();
+        let processes = &mut self.processes;
+        let mut done = vec![];
+        self.closing.retain(|&(role, until)| {
+            let gone = processes[role].try_reap() || now >= until;
+            if gone {
+                done.push(role);
+            }
+            !gone
+        });
+        done
+    }
+
     /// Files an event; returns the process whose output ended.
     pub(super) fn handle(&mut self, event: Event) -> Option<Role> {
         let ChildLine { role, incarnation, line } = match event {
@@ -43,14 +71,8 @@ impl Supervisor<'_> {
         let event = match line {
             Line::Event(event) => event,
             Line::Unreadable { .. } => return None,
-            Line::Closed => {
-                // Its output ends when it exits: reap it (it may take a moment to go).
-                let until = Instant::now() + Duration::from_secs(2);
-                while !self.processes[role].try_reap() && Instant::now() < until {
-                    std::thread::sleep(Duration::from_millis(1));
-                }
-                return Some(role);
-            }
+            // Its output ends when it exits; the caller reaps it.
+            Line::Closed => return Some(role),
         };
         match event {
             ChildEvent::Ready => self.ready(role, incarnation),

@@ -116,6 +116,11 @@ struct Supervisor<'a> {
     faults: FaultLedger<'a>,
     /// Lockstep: the plant is paused and waits for `go`.
     paused: bool,
+    /// Processes whose output ended, not reaped yet, and when to stop waiting for that. A
+    /// dying process can take a while to be reapable (a killed monitor's writer thread, at nice
+    /// 19, needs the CPU to exit, hundreds of ms on a busy machine); the supervision goes on
+    /// meanwhile instead of waiting for it.
+    closing: Vec<(Role, Instant)>,
     /// When the monitor's last status came (CLOCK_MONOTONIC ns).
     last_status_ns: u64,
     removed_dead_nodes: u64,
@@ -172,6 +177,7 @@ impl<'a> Supervisor<'a> {
             log: RunLog::default(),
             faults: FaultLedger::new(&config.faults),
             paused: false,
+            closing: vec![],
             last_status_ns: now_ns(),
             removed_dead_nodes: 0,
             stop,
@@ -264,6 +270,7 @@ impl<'a> Supervisor<'a> {
             match self.events.recv_timeout(Duration::from_millis(50)) {
                 Ok(event) => {
                     if let Some(ended) = self.handle(event) {
+                        self.reap_within(ended, events::REAP_WAIT);
                         return Err(NotReady::Ended(ended));
                     }
                 }
@@ -393,14 +400,17 @@ impl<'a> Supervisor<'a> {
             }
             match self.events.recv_timeout(SUPERVISE_TICK) {
                 Ok(event) => {
-                    if let Some(role) = self.handle(event)
-                        && let Some(outcome) = self.ended(role)
-                    {
-                        return outcome;
+                    if let Some(role) = self.handle(event) {
+                        self.closing.push((role, Instant::now() + events::REAP_WAIT));
                     }
                 }
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => return Outcome::Failed("lost every process's output".into()),
+            }
+            for role in self.reaped() {
+                if let Some(outcome) = self.ended(role) {
+                    return outcome;
+                }
             }
         }
     }

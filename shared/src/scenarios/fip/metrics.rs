@@ -88,6 +88,29 @@ impl FipMetrics {
 }
 
 impl Metrics for FipMetrics {
+    crate::model::scenario::frozen_fields!(
+        zp,
+        zp_max,
+        zp_z,
+        vl_hat_speed,
+        b_err,
+        b_hat,
+        b,
+        thrust,
+        thrust_max,
+        rate_max,
+        theta_max,
+        theta_max_at,
+        theta_max_steady,
+        omega_err,
+        vl_err,
+        q_hat_err,
+        previous_theta,
+        lap_period,
+        speed_err_max,
+        actuation
+    );
+
     fn observe(&mut self, row: &Row) {
         let (t, x, est) = (row.t, row.state, row.estimate);
         let point = self.reference.at(t);

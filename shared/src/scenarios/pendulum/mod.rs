@@ -327,6 +327,8 @@ struct PendulumMetrics {
 }
 
 impl Metrics for PendulumMetrics {
+    crate::model::scenario::frozen_fields!(saturated, last, theta_max_abs, bias_last_outside, recent);
+
     fn observe(&mut self, row: &Row) {
         let (theta, wheel_speed, bias_estimate) = (row.state[0], row.state[2], row.estimate[3]);
         if row.command[0].abs() >= self.current_limit {

@@ -382,6 +382,27 @@ fn block_change(now: &[f64], initial: &[f64]) -> f64 {
 }
 
 impl Metrics for QuadcopterMetrics {
+    crate::model::scenario::frozen_fields!(
+        z1_steady,
+        z1_max_after_5s,
+        z1_last,
+        snr_steady,
+        t_last,
+        xi_initial,
+        xi3_change,
+        xi4_change,
+        xi_last,
+        xi_true_last,
+        mass_last,
+        mass_true_last,
+        mass_before,
+        mass_recent,
+        z1_before_step,
+        z1_after_step,
+        z1_max_after_step,
+        actuation
+    );
+
     fn observe(&mut self, row: &Row) {
         let t = row.t;
         let z1 = self.reference.as_mut().expect("built with a reference").error(t, row.state);

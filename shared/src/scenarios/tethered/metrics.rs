@@ -77,6 +77,24 @@ impl TetheredMetrics {
 }
 
 impl Metrics for TetheredMetrics {
+    crate::model::scenario::frozen_fields!(
+        etrack,
+        etrack_phase,
+        etrack_max_phase3,
+        last_unconverged_s,
+        phase3_error,
+        phase3_error_max,
+        last_branch,
+        switches,
+        plus,
+        ticks,
+        link_force_min,
+        thrust_phase1_end,
+        thrust_final,
+        lost_at,
+        last_t
+    );
+
     fn observe(&mut self, row: &Row) {
         let (t, x, e) = (row.t, row.state, row.estimate);
         self.last_t = t;

@@ -71,7 +71,7 @@ fn finite(values: &[f64]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
 
-#[derive(Debug, Default, Clone, Copy)]
+#[derive(Debug, Default, Clone, Copy, serde::Serialize, serde::Deserialize)]
 struct Rms {
     sum_sq: f64,
     n: u64,
@@ -213,6 +213,22 @@ impl TiltrotorMetrics {
 }
 
 impl Metrics for TiltrotorMetrics {
+    crate::model::scenario::frozen_fields!(
+        rows,
+        prior_x_errors,
+        d_hat_z,
+        corrections,
+        fix_ages,
+        tracking,
+        position_error_max,
+        load_velocity,
+        load_swing_max,
+        iavu,
+        last_applied,
+        thrust_limit_rows,
+        tick
+    );
+
     fn observe(&mut self, row: &Row) {
         if row.state.len() < STATE_LEN || row.estimate.len() < layout::LEN || row.applied.len() < INPUTS {
             return;
