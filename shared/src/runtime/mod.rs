@@ -10,6 +10,7 @@ pub mod plant;
 pub mod reader_state;
 pub mod relay;
 pub mod shared_file;
+pub mod shm_secret;
 pub mod signals;
 pub mod snapshot;
 pub mod task;
