@@ -190,3 +190,74 @@ fn files_planted_under_a_runs_names_as_it_starts_neither_fail_nor_hang_it() {
         assert!(won, "the racer never got its files in before the run's (registry empty: {registry_empty})");
     }
 }
+
+/// The newest loop the monitor has written to `loops.csv` so far.
+fn newest_loop(dir: &Path) -> u64 {
+    let text = std::fs::read_to_string(dir.join("loops.csv")).unwrap_or_default();
+    let whole = &text[..text.rfind('\n').unwrap_or(0)];
+    whole.rsplit('\n').next().and_then(|line| line.split(',').next()?.parse().ok()).unwrap_or(0)
+}
+
+/// The command lines of the launcher's children.
+fn children(launcher: u32) -> Vec<(i32, Vec<String>)> {
+    let list = std::fs::read_to_string(format!("/proc/{launcher}/task/{launcher}/children")).unwrap_or_default();
+    list.split_whitespace()
+        .filter_map(|pid| {
+            let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
+            let args = cmdline.split(|&b| b == 0).map(|a| String::from_utf8_lossy(a).into_owned()).collect();
+            Some((pid.parse().ok()?, args))
+        })
+        .collect()
+}
+
+/// Links planted in a run folder where the run writes (`trajectory.csv`, reopened by a restarted
+/// monitor, and `summary.partial`) are refused, not followed: the files they point at are
+/// unchanged, the run fails with a line naming the file, and nothing is left in /dev/shm.
+#[test]
+fn links_planted_in_a_run_folder_are_refused_not_followed() {
+    let dir = fresh_dir("planted-links");
+    let victims = fresh_dir("link-victims");
+    std::fs::create_dir_all(&victims).unwrap();
+    let mut launcher = looplab()
+        .args(["run", "pendulum", "--duration", "5", "-q", "--out"])
+        .arg(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let until = Instant::now() + HANG;
+    while newest_loop(&dir) < 300 {
+        assert!(Instant::now() < until && launcher.try_wait().unwrap().is_none(), "the run did not start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let processes = children(launcher.id());
+    let arg_after = |flag: &str| {
+        processes.iter().find_map(|(_, args)| Some(args[args.iter().position(|a| a == flag)? + 1].clone()))
+    };
+    let run_id = arg_after("--run-id").expect("a process with the run id");
+    for name in ["trajectory.csv", "summary.partial"] {
+        std::fs::write(victims.join(name), b"precious").unwrap();
+        let _ = std::fs::remove_file(dir.join(name));
+        std::os::unix::fs::symlink(victims.join(name), dir.join(name)).unwrap();
+    }
+    // The monitor dies; its successor reopens trajectory.csv to append to it.
+    let monitor = processes.iter().find(|(_, args)| args[0].ends_with("looplab-monitor")).expect("the monitor").0;
+    // SAFETY: a child of our launcher.
+    unsafe { libc::kill(monitor, libc::SIGKILL) };
+    let output = launcher.wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(output.status.code(), Some(1), "{said}");
+    let error = said.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("no error line: {said}"));
+    let summary_partial = dir.join("summary.partial").display().to_string();
+    assert!(error.contains(&format!("cannot write {summary_partial}: it is a symbolic link")), "{error}");
+    let log = std::fs::read_to_string(dir.join("logs/monitor.log")).unwrap();
+    let trajectory = dir.join("trajectory.csv").display().to_string();
+    assert!(log.contains(&format!("cannot write {trajectory}: it is a symbolic link")), "{log}");
+    for name in ["trajectory.csv", "summary.partial"] {
+        assert_eq!(std::fs::read(victims.join(name)).unwrap(), b"precious", "{name} was written through");
+    }
+    let left = looplab_shared::runtime::ipc::files_of_run(&run_id);
+    assert!(left.is_empty(), "files of run {run_id} left behind: {left:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+    std::fs::remove_dir_all(&victims).unwrap();
+}

@@ -9,6 +9,7 @@ pub mod ipc;
 pub mod plant;
 pub mod reader_state;
 pub mod relay;
+pub mod run_file;
 pub mod shared_file;
 pub mod shm_secret;
 pub mod signals;
