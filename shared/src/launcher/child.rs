@@ -226,11 +226,7 @@ pub fn spawn<E: Send + 'static>(
 ) -> Result<Spawned> {
     let log_path = args.run_dir.join("logs").join(format!("{role}.log"));
     // A restarted process appends to its log.
-    let log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&log_path)
-        .with_context(|| format!("create {}", log_path.display()))?;
+    let log = crate::runtime::run_file::open(&log_path, crate::runtime::run_file::Existing::Append)?;
     let process_args = ProcessArgs {
         launch: args.launch_file.to_path_buf(),
         run_id: args.run_id.to_owned(),

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result, bail};
 
 use crate::config::launch::LaunchConfig;
+use crate::runtime::run_file;
 
 /// Begins a run in its folder: writes the resolved `launch.toml` (the file the processes load)
 /// and returns its path and the wall-clock start (UTC, RFC 3339) for the summary.
@@ -19,7 +20,7 @@ pub fn begin_run(run_dir: &Path, config: &LaunchConfig) -> Result<(PathBuf, Stri
 pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     let dir = match out {
         Some(dir) => {
-            check_own_folder(dir)?;
+            check_own_folder(dir, "--out")?;
             if dir.exists() && !dir.is_dir() {
                 bail!("--out {}: is a file, not a folder; give a new or empty folder", dir.display());
             }
@@ -32,6 +33,7 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
             let stamp = chrono::Local::now().format("%Y%m%d-%H%M%S");
             let base = PathBuf::from("runs").join(format!("{stamp}-{scenario}"));
             std::fs::create_dir_all("runs").context("cannot create the runs folder")?;
+            check_own_folder(Path::new("runs"), "the runs folder")?;
             // Claim a new folder atomically: two runs started in the same second get two.
             let mut n = 1;
             loop {
@@ -52,26 +54,31 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     Ok(dir)
 }
 
-/// An existing `--out` folder must be the user's own, and no one else's to write in: another user
-/// could put links there (`trajectory.csv` → a file of ours) between our check and our writes.
-fn check_own_folder(dir: &Path) -> Result<()> {
+/// An existing `--out` folder (or `runs/`, `what` says which) must be the user's own, and no one
+/// else's to write in: another user could put links there (`trajectory.csv` → a file of ours)
+/// between our check and our writes, or swap a run's folder for one of their own.
+/// `runs/` may be a link of the user's own to a folder elsewhere; that folder is checked then.
+fn check_own_folder(dir: &Path, what: &str) -> Result<()> {
     use std::os::unix::fs::MetadataExt;
-    let Ok(meta) = std::fs::symlink_metadata(dir) else { return Ok(()) };
-    if meta.file_type().is_symlink() {
-        bail!("--out {}: is a symbolic link; give the folder itself", dir.display());
-    }
+    let Ok(mut meta) = std::fs::symlink_metadata(dir) else { return Ok(()) };
     // SAFETY: geteuid has no preconditions.
     let me = unsafe { libc::geteuid() };
+    if meta.file_type().is_symlink() {
+        if what == "--out" || meta.uid() != me {
+            bail!("{what} {}: is a symbolic link; give the folder itself", dir.display());
+        }
+        meta = std::fs::metadata(dir).with_context(|| format!("{what} {}", dir.display()))?;
+    }
     if meta.uid() != me {
         bail!(
-            "--out {}: the folder belongs to another user (uid {}); give a folder of your own",
+            "{what} {}: the folder belongs to another user (uid {}); give a folder of your own",
             dir.display(),
             meta.uid()
         );
     }
     if meta.mode() & 0o022 != 0 {
         bail!(
-            "--out {}: others may write in the folder (mode {:o}); give a folder only you can write in",
+            "{what} {}: others may write in the folder (mode {:o}); give a folder only you can write in",
             dir.display(),
             meta.mode() & 0o777
         );
@@ -106,8 +113,10 @@ pub fn new_run_id() -> String {
 /// behind that a script could take for the real one, and says which file it was.
 pub fn write_atomically(path: &Path, contents: &str) -> Result<()> {
     let partial = path.with_extension("partial");
-    let written = std::fs::write(&partial, contents).and_then(|()| std::fs::rename(&partial, path));
-    if let Err(e) = written {
+    // A link planted as `partial` is refused (and left), never written through; one planted as
+    // `path` is replaced by the rename, which does not follow it.
+    run_file::write(&partial, contents.as_bytes())?;
+    if let Err(e) = std::fs::rename(&partial, path) {
         let _ = std::fs::remove_file(&partial);
         bail!("cannot write {}: {e}", path.display());
     }

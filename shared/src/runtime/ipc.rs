@@ -2,8 +2,10 @@
 //! the same name that wakes the next stage.
 //!
 //! Every run has its own id. It is in every service name (`looplab/<run>/<topic>`) and in the
-//! iceoryx2 file prefix (`looplab_<run>_`), so two runs on one machine never see each other and
-//! the launcher can check that nothing of a run is left in shared memory when it ends.
+//! iceoryx2 file prefix (`looplab_<run>_<secret>_`), so two runs on one machine never see each
+//! other and the launcher can check that nothing of a run is left in shared memory when it ends;
+//! the secret ([`crate::runtime::shm_secret`]) keeps another user from creating a run's files
+//! before the run does.
 //!
 //! Quality of service, identical for every process of a run:
 //! - real-time mode: safe overflow. A slow reader loses its oldest samples; no publisher ever
@@ -39,6 +41,7 @@ use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::msg::{MONITOR_BUFFER, layout_fingerprint};
 use crate::runtime::reader_state::ReaderState;
+use crate::runtime::shm_secret::{read_secret, write_secret};
 use crate::runtime::signals::StopFlag;
 use crate::runtime::wait::{sleep_until, timespec};
 
@@ -55,19 +58,27 @@ const CONNECT_TIMEOUT: Duration = Duration::from_secs(20);
 
 pub use crate::contract::role::Topic;
 
-/// The iceoryx2 file prefix of a run: every file the run creates starts with it.
+/// The public part of a run's file names: every file of the run in `SHM_DIR` starts with it
+/// (clean-up matches it, and needs no secret), and so may a file another user made.
 pub fn file_prefix(run_id: &str) -> String {
     format!("looplab_{run_id}_")
 }
 
-/// The iceoryx2 configuration every process of a run uses: the run's file prefix, and the run's
-/// private folder as iceoryx2's root (checked to be private before it is used).
+/// The iceoryx2 file prefix of a run: its public part and the run's secret on this host.
+fn shm_prefix(run_id: &str, secret: &str) -> String {
+    format!("{}{secret}_", file_prefix(run_id))
+}
+
+/// The iceoryx2 configuration every process of a run uses: the run's file prefix (with the
+/// secret kept in its private folder), and that folder as iceoryx2's root (checked to be private
+/// before it is used).
 pub fn run_config(run_id: &str) -> Result<Config> {
-    let mut config = Config::default();
-    config.global.prefix = FileName::new(file_prefix(run_id).as_bytes())
-        .map_err(|e| anyhow!("run id {run_id:?} does not make a valid file prefix: {e:?}"))?;
     let folder = run_folder(run_id);
     check_private(&folder)?;
+    let prefix = shm_prefix(run_id, &read_secret(&folder)?);
+    let mut config = Config::default();
+    config.global.prefix = FileName::new(prefix.as_bytes())
+        .map_err(|e| anyhow!("run id {run_id:?} does not make a valid file prefix: {e:?}"))?;
     let root = format!("{}/", folder.display());
     config.global.set_root_path(
         &Path::new(root.as_bytes()).map_err(|e| anyhow!("{root} is not a valid iceoryx2 root path: {e:?}"))?,
@@ -470,11 +481,11 @@ fn owner_lock_path(run_id: &str) -> PathBuf {
     run_folder(run_id).join("launcher.lock")
 }
 
-/// Creates the run's private folder and takes its owner lock; refuses a folder that exists
-/// already (planted by someone else, or a reused id) instead of trusting it. Drop the returned
-/// file to release the lock.
+/// Creates the run's private folder with the run's secret and takes its owner lock; refuses a
+/// folder that exists already (planted by someone else, or a reused id) instead of trusting it.
+/// What it made is removed again if it fails. Drop the returned file to release the lock.
 pub fn create_run_storage(run_id: &str) -> Result<std::fs::File> {
-    use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
+    use std::os::unix::fs::DirBuilderExt;
     let folder = run_folder(run_id);
     std::fs::DirBuilder::new().mode(0o700).create(&folder).map_err(|e| {
         if e.kind() == std::io::ErrorKind::AlreadyExists {
@@ -483,7 +494,18 @@ pub fn create_run_storage(run_id: &str) -> Result<std::fs::File> {
             anyhow!("cannot create the run's shared-memory folder {}: {e}", folder.display())
         }
     })?;
+    fill_run_storage(run_id).inspect_err(|_| remove_own_files(run_id))
+}
+
+/// Longest the run's first iceoryx2 node may take to create the run's node registry.
+const REGISTRY_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The secret, the lock and the node registry in the run's new folder.
+fn fill_run_storage(run_id: &str) -> Result<std::fs::File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let folder = run_folder(run_id);
     check_private(&folder)?;
+    let secret = write_secret(&folder)?;
     let path = owner_lock_path(run_id);
     // Locked under another name, then renamed into place (the lock stays with the file): a
     // lock file that exists is always locked while its launcher lives, so another launcher's
@@ -502,16 +524,63 @@ pub fn create_run_storage(run_id: &str) -> Result<std::fs::File> {
     }
     std::fs::rename(&fresh, &path).with_context(|| format!("rename {} to {}", fresh.display(), path.display()))?;
     // iceoryx2 creates its registry segment world-writable; create it now, before any other
-    // process of the run exists, and make it the owner's alone.
-    drop(node("looplab", &run_config(run_id)?)?);
-    for path in paths_of_run(run_id) {
-        if path.to_string_lossy().ends_with(".global_mgmt") {
+    // process of the run exists, and make it the owner's alone (only ours: a file another user
+    // planted under the run's public name is not touched).
+    create_registry(run_id)?;
+    let ours = shm_prefix(run_id, &secret);
+    for path in paths_of_run(run_id).into_iter().filter(|p| is_ours(p)) {
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if name.starts_with(&ours) && name.ends_with(".global_mgmt") {
             use std::os::unix::fs::PermissionsExt;
             std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600))
                 .with_context(|| format!("make {} private", path.display()))?;
         }
     }
     Ok(lock)
+}
+
+/// Creates the run's node registry through a first node, in a thread, for at most
+/// [`REGISTRY_TIMEOUT`] and until a stop request: iceoryx2 waits without end on a registry file
+/// that is empty, and this is where it opens one first. The secret in the name means no one else
+/// can have made it; the bound holds if that ever fails.
+fn create_registry(run_id: &str) -> Result<()> {
+    use std::sync::mpsc::RecvTimeoutError;
+    let config = run_config(run_id)?;
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::Builder::new()
+        .name("iceoryx2 registry".into())
+        .spawn(move || _ = tx.send(node("looplab", &config).map(drop)))
+        .context("start a thread")?;
+    let until = Instant::now() + REGISTRY_TIMEOUT;
+    loop {
+        match rx.recv_timeout(Duration::from_millis(20)) {
+            Ok(created) => return created,
+            Err(RecvTimeoutError::Disconnected) => bail!("iceoryx2 failed creating the run's node registry"),
+            Err(RecvTimeoutError::Timeout) => {}
+        }
+        if StopFlag::installed().is_some_and(|stop| stop.requested()) {
+            return Err(crate::runtime::signals::Interrupted.into());
+        }
+        if Instant::now() > until {
+            bail!(
+                "iceoryx2 did not create the run's node registry in {SHM_DIR} within {} s (it waits on a \
+                 file with the run's name that is not initialised); giving up",
+                REGISTRY_TIMEOUT.as_secs()
+            );
+        }
+    }
+}
+
+/// Removes every file of the run this user made, and its folder (a run storage that could not
+/// be made whole).
+fn remove_own_files(run_id: &str) {
+    for path in paths_of_run(run_id).into_iter().filter(|p| is_ours(p)) {
+        if path.is_dir() && !path.is_symlink() {
+            let _ = std::fs::remove_dir_all(&path);
+        } else {
+            let _ = std::fs::remove_file(&path);
+        }
+    }
 }
 
 /// The run's storage on another host, for the bridge there: created as the launcher creates its
@@ -608,13 +677,7 @@ pub fn clean_up_run(run_id: &str) -> Result<Cleanup> {
     // iceoryx2 keeps one registry segment per prefix for good. The prefix is this run's alone, so
     // once no process of the run is alive, it goes too, with the folder.
     if alive.is_empty() {
-        for path in paths_of_run(run_id).into_iter().filter(|p| is_ours(p)) {
-            if path.is_dir() && !path.is_symlink() {
-                let _ = std::fs::remove_dir_all(&path);
-            } else {
-                let _ = std::fs::remove_file(&path);
-            }
-        }
+        remove_own_files(run_id);
     }
     let foreign = paths_of_run(run_id).into_iter().filter(|p| !is_ours(p)).map(|p| p.display().to_string()).collect();
     Ok(Cleanup { removed_dead_nodes, leftover: files_of_run(run_id), foreign })
@@ -686,7 +749,7 @@ pub fn clean_abandoned_runs() -> Abandoned {
             if check_private(&folder).is_err() || launcher_alive(&id) {
                 continue;
             }
-        } else if !segments_are_mine(&id) {
+        } else if !paths_of_run(&id).iter().any(|p| is_ours(p)) {
             continue;
         }
         if folder.exists()
@@ -704,15 +767,12 @@ pub fn clean_abandoned_runs() -> Abandoned {
                 std::thread::sleep(Duration::from_millis(10));
             }
         }
-        let cleanup = if folder.exists() {
-            clean_up_run(&id).map(|c| c.leftover).unwrap_or_else(|_| files_of_run(&id))
-        } else {
-            // Segments with no folder: the run had removed its folder, or never made one.
-            for path in paths_of_run(&id) {
-                let _ = std::fs::remove_file(path);
-            }
+        // Without its folder (the run had removed it, or never made it) or its secret (it died
+        // making its storage), what is the run's is found by the public part of its names.
+        let cleanup = clean_up_run(&id).map(|c| c.leftover).unwrap_or_else(|_| {
+            remove_own_files(&id);
             files_of_run(&id)
-        };
+        });
         done.leftover.extend(cleanup);
         done.runs.push(id);
     }
@@ -733,12 +793,4 @@ fn launcher_alive(run_id: &str) -> bool {
     };
     // SAFETY: flock on a file descriptor we own; the lock is dropped with the file.
     unsafe { libc::flock(std::os::fd::AsRawFd::as_raw_fd(&file), libc::LOCK_EX | libc::LOCK_NB) != 0 }
-}
-
-/// Whether every segment of a run without a folder belongs to this user.
-fn segments_are_mine(run_id: &str) -> bool {
-    use std::os::unix::fs::MetadataExt;
-    // SAFETY: geteuid has no preconditions.
-    let me = unsafe { libc::geteuid() };
-    paths_of_run(run_id).iter().all(|p| std::fs::symlink_metadata(p).is_ok_and(|m| m.uid() == me && m.is_file()))
 }

@@ -9,12 +9,14 @@ use std::sync::{Arc, Mutex};
 #[derive(Clone, Debug)]
 pub struct StopFlag(Arc<AtomicUsize>);
 
+/// The process's flag, once [`StopFlag::install`] has made it.
+static INSTALLED: Mutex<Option<StopFlag>> = Mutex::new(None);
+
 impl StopFlag {
     /// Installs the handlers for SIGTERM and SIGINT, once per process: every caller shares one
     /// count, so a stop request reaches whatever part of a command (a sweep's next run, a
     /// bench's next part) looks next.
     pub fn install() -> std::io::Result<Self> {
-        static INSTALLED: Mutex<Option<StopFlag>> = Mutex::new(None);
         let mut installed = INSTALLED.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(flag) = installed.as_ref() {
             return Ok(flag.clone());
@@ -29,6 +31,12 @@ impl StopFlag {
         let flag = Self(count);
         *installed = Some(flag.clone());
         Ok(flag)
+    }
+
+    /// The flag, if this process has installed it (a library wait that must stop when asked,
+    /// without taking the signals over where its caller has not).
+    pub fn installed() -> Option<Self> {
+        INSTALLED.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     pub fn requested(&self) -> bool {

@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context as _, Result};
+use anyhow::Result;
 use serde::Serialize;
 
 use crate::config::faults::FaultKind;
@@ -214,7 +214,7 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
     let path = out.join("sweep.json");
     let written = serde_json::to_string_pretty(&report)
         .map_err(anyhow::Error::from)
-        .and_then(|text| std::fs::write(&path, text + "\n").with_context(|| format!("write {}", path.display())));
+        .and_then(|text| crate::runtime::run_file::write(&path, (text + "\n").as_bytes()));
     if let Err(e) = written {
         tell!("error: {e:#}");
         return ExitCode::FAILURE;

@@ -148,7 +148,7 @@ impl McapRecording {
 
     /// A recording of a run of `config` into `path` (replaced if it exists).
     pub fn create(path: &Path, config: &LaunchConfig, layout: &Layout, detail: Detail) -> Result<Self> {
-        let file = File::create(path).with_context(|| format!("create {}", path.display()))?;
+        let file = crate::runtime::run_file::open(path, crate::runtime::run_file::Existing::Replace)?;
         // zstd's fastest level, in this thread: it shrinks the file fivefold (pendulum, 1 kHz: 72 MB
         // a minute to 14 MB) for about 3 µs a loop, and no compression threads compete with the
         // loop's processes.

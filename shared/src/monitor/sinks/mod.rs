@@ -17,6 +17,7 @@ use crate::contract::msg::TickTiming;
 use crate::contract::report::MonitorReport;
 use crate::monitor::join::LoopParts;
 use crate::monitor::layout::Layout;
+use crate::runtime::run_file::{self, Existing};
 
 /// What a sink is opened with.
 pub struct SinkSetup<'a> {
@@ -73,13 +74,7 @@ pub fn open(setup: &SinkSetup) -> Result<Vec<Box<dyn RunSink>>> {
 pub fn create(dir: &Path, name: &str, restarted: bool) -> Result<(BufWriter<File>, bool)> {
     let path = dir.join(name);
     let append = restarted && path.exists();
-    let file = std::fs::OpenOptions::new()
-        .create(true)
-        .write(true)
-        .append(append)
-        .truncate(!append)
-        .open(&path)
-        .with_context(|| format!("create {}", path.display()))?;
+    let file = run_file::open(&path, if append { Existing::Append } else { Existing::Replace })?;
     Ok((BufWriter::new(file), !append))
 }
 

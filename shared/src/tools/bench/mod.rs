@@ -614,7 +614,7 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
         in_process_loops_per_s: in_process,
         wall_time_s: began.elapsed().as_secs_f64(),
     };
-    std::fs::write(out.join("bench.json"), serde_json::to_string_pretty(&report)?)?;
+    crate::runtime::run_file::write(&out.join("bench.json"), serde_json::to_string_pretty(&report)?.as_bytes())?;
     let mut curves: Vec<(String, Vec<u64>)> =
         report.loops.iter().filter(|l| l.rate_hz == 1000.0).map(|l| (l.name.clone(), l.e2e.clone())).collect();
     if let Some(spin) = floor.get("spin") {

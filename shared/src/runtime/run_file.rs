@@ -1,0 +1,73 @@
+//! The one way LoopLab creates a file in a run folder (or any output folder of its own): never
+//! through a symbolic link (`O_NOFOLLOW`), and closed in the processes it starts (`O_CLOEXEC`).
+//! A link planted where a run's file goes would make the run write wherever it points (a root
+//! run would overwrite any file); it is refused instead, with one line naming the file. Files
+//! get the user's umask, as other tools' files do.
+
+use std::fs::File;
+use std::path::Path;
+
+use anyhow::{Result, anyhow};
+
+/// What to do with a file that is there already.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Existing {
+    /// Emptied and written anew.
+    Replace,
+    /// Written on at its end (a restarted process's log or recording).
+    Append,
+}
+
+/// Opens `path` for writing, created if missing, never through a symbolic link.
+pub fn open(path: &Path, existing: Existing) -> Result<File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .append(existing == Existing::Append)
+        .truncate(existing == Existing::Replace)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+        .open(path)
+        .map_err(|e| refused(path, e))
+}
+
+/// Writes `contents` into `path`, replacing what is there, never through a symbolic link.
+pub fn write(path: &Path, contents: &[u8]) -> Result<()> {
+    use std::io::Write as _;
+    open(path, Existing::Replace)?.write_all(contents).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
+}
+
+/// The error for a file that could not be opened: a symbolic link is named as such.
+fn refused(path: &Path, e: std::io::Error) -> anyhow::Error {
+    if e.raw_os_error() == Some(libc::ELOOP) {
+        anyhow!("cannot write {}: it is a symbolic link, and LoopLab does not write through one", path.display())
+    } else {
+        anyhow!("cannot write {}: {e}", path.display())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_link_is_refused_and_its_target_untouched() {
+        let dir = std::env::temp_dir().join(format!("looplab-run-file-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let victim = dir.join("victim");
+        std::fs::write(&victim, b"precious").unwrap();
+        let link = dir.join("trajectory.csv");
+        std::os::unix::fs::symlink(&victim, &link).unwrap();
+        for existing in [Existing::Replace, Existing::Append] {
+            let e = open(&link, existing).unwrap_err().to_string();
+            assert!(e.contains("trajectory.csv") && e.contains("symbolic link"), "{e}");
+        }
+        assert!(write(&link, b"x").is_err());
+        assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+        write(&dir.join("plain"), b"a").unwrap();
+        use std::io::Write as _;
+        open(&dir.join("plain"), Existing::Append).unwrap().write_all(b"b").unwrap();
+        assert_eq!(std::fs::read(dir.join("plain")).unwrap(), b"ab");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
