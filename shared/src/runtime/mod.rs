@@ -10,6 +10,7 @@ pub mod plant;
 pub mod reader_state;
 pub mod relay;
 pub mod run_file;
+pub mod run_storage;
 pub mod shared_file;
 pub mod shm_secret;
 pub mod signals;
