@@ -278,8 +278,7 @@ fn a_restarted_monitor_accounts_for_every_loop_and_continues_the_latency_log() {
 #[test]
 fn a_restarted_monitor_reports_the_whole_run_as_if_it_had_never_died() {
     // The pendulum leans most in its first loops (its initial angle); the controller's kill
-    // (which lockstep makes harmless) is over by loop 101; the monitor dies at loop 2500, long
-    // after its first snapshot (every 256 loops it has written, and every 100 ms).
+    // (which lockstep makes harmless) is over by loop 101; the monitor dies at loop 2500.
     let common = ["--mode", "lockstep", "--duration", "3.5", "--fault", "kill controller at 0.1s"];
     let killed = run("kill-monitor-whole", &[&common[..], &["--fault", "kill monitor at 2.5s"]].concat());
     let whole = run("kill-monitor-baseline", &common);
@@ -288,10 +287,12 @@ fn a_restarted_monitor_reports_the_whole_run_as_if_it_had_never_died() {
     assert_eq!(s.restarts[&Role::Monitor], 1);
     assert_eq!(m.records + m.missing.missing_loops, s.loops, "{m:?}");
     assert_eq!(m.lost, 0, "{m:?}");
-    // Only the loops between the dead monitor's last snapshot and its successor's first are
-    // missing; the rest, the first monitor's included, is in the report.
-    assert_eq!(m.missing.missing_before_restart, m.missing.missing_loops, "{m:?}");
-    assert!(m.records >= 1000 + 256, "{m:?}");
+    // Lockstep holds the kill until the monitor has written and saved every loop before it:
+    // its successor goes on from loop 2500 and no loop is missing.
+    assert_eq!((m.records, m.missing.missing_loops), (s.loops, 0), "{m:?}");
+    // The files too: the successor appended where its predecessor stopped, byte for byte.
+    let trajectory = |dir: &std::path::Path| std::fs::read(dir.join("trajectory.csv")).unwrap();
+    assert!(trajectory(&killed.dir) == trajectory(&whole.dir), "trajectory.csv differs from the run without the kill");
     assert_eq!(killed.metric("theta_max_abs_rad"), whole.metric("theta_max_abs_rad"));
     assert_eq!(killed.metric("current_at_limit_s"), whole.metric("current_at_limit_s"));
     // The controller's kill, before the restart, keeps the effect the first monitor saw.

@@ -122,6 +122,9 @@ pub enum ChildEvent {
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct MonitorStatus {
     pub loops_recorded: u64,
+    /// Every loop before this one is written and saved (a restarted monitor goes on from it).
+    #[serde(default)]
+    pub loops_written: u64,
     pub end_to_end_p99_ns: Option<u64>,
     pub deadline_misses: u64,
     /// What happened since the previous status (the monitor process sends it; a recording with

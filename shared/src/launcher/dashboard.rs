@@ -555,6 +555,7 @@ mod tests {
         for (i, p99) in [3_000, 6_000, 12_000].into_iter().enumerate() {
             view.apply(Update::Status(Box::new(MonitorStatus {
                 loops_recorded: 100 * (i as u64 + 1),
+                loops_written: 100 * (i as u64 + 1),
                 end_to_end_p99_ns: Some(p99),
                 deadline_misses: 1,
                 live: Some(LiveStatus {

@@ -114,8 +114,17 @@ pub fn new_run_id() -> String {
 pub fn write_atomically(path: &Path, contents: &str) -> Result<()> {
     let partial = path.with_extension("partial");
     // A link planted as `partial` is refused (and left), never written through; one planted as
-    // `path` is replaced by the rename, which does not follow it.
-    run_file::write(&partial, contents.as_bytes())?;
+    // `path` is replaced by the rename, which does not follow it. Any other failure (a full
+    // disk, a removed folder) names the file the user knows.
+    let written = run_file::open_io(&partial, run_file::Existing::Replace)
+        .and_then(|mut file| std::io::Write::write_all(&mut file, contents.as_bytes()));
+    if let Err(e) = written {
+        if e.raw_os_error() == Some(libc::ELOOP) {
+            return Err(run_file::refused(&partial, e));
+        }
+        let _ = std::fs::remove_file(&partial);
+        bail!("cannot write {}: {e}", path.display());
+    }
     if let Err(e) = std::fs::rename(&partial, path) {
         let _ = std::fs::remove_file(&partial);
         bail!("cannot write {}: {e}", path.display());

@@ -232,16 +232,19 @@ impl Recording {
 
     /// Reports the status (if there is a callback) and flushes every sink.
     pub fn checkpoint(&mut self) -> Result<()> {
+        // Saved first: the status says how far a successor would go on from.
+        self.save()?;
         if let Some(callback) = &mut self.status {
             let status = MonitorStatus {
                 loops_recorded: self.report.records,
+                loops_written: self.joiner.next_k(),
                 end_to_end_p99_ns: self.stats.end_to_end.quantile(0.99),
                 deadline_misses: self.last_counters.deadline_misses,
                 live: self.live.as_mut().map(|live| live.take(&self.stats)),
             };
             callback(&status)?;
         }
-        self.save()
+        Ok(())
     }
 
     /// Everything has arrived: writes the loops still waiting for parts, finishes every sink and

@@ -20,6 +20,11 @@ pub enum Existing {
 
 /// Opens `path` for writing, created if missing, never through a symbolic link.
 pub fn open(path: &Path, existing: Existing) -> Result<File> {
+    open_io(path, existing).map_err(|e| refused(path, e))
+}
+
+/// [`open`] with the system's error as it is (ELOOP: a symbolic link).
+pub fn open_io(path: &Path, existing: Existing) -> std::io::Result<File> {
     use std::os::unix::fs::OpenOptionsExt;
     std::fs::OpenOptions::new()
         .write(true)
@@ -28,7 +33,6 @@ pub fn open(path: &Path, existing: Existing) -> Result<File> {
         .truncate(existing == Existing::Replace)
         .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
         .open(path)
-        .map_err(|e| refused(path, e))
 }
 
 /// Writes `contents` into `path`, replacing what is there, never through a symbolic link.
@@ -38,7 +42,7 @@ pub fn write(path: &Path, contents: &[u8]) -> Result<()> {
 }
 
 /// The error for a file that could not be opened: a symbolic link is named as such.
-fn refused(path: &Path, e: std::io::Error) -> anyhow::Error {
+pub fn refused(path: &Path, e: std::io::Error) -> anyhow::Error {
     if e.raw_os_error() == Some(libc::ELOOP) {
         anyhow!("cannot write {}: it is a symbolic link, and LoopLab does not write through one", path.display())
     } else {

@@ -114,6 +114,7 @@ impl Supervisor<'_> {
             }
             ChildEvent::Status(status) => {
                 self.last_status_ns = now_ns();
+                self.monitor_written = status.loops_written;
                 self.live.status(status);
             }
             ChildEvent::PlantReport(r) => self.reports.plant = Some(r),

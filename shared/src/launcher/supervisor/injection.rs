@@ -11,6 +11,9 @@ use crate::launcher::outcome::Outcome;
 
 use super::Supervisor;
 
+/// Lockstep: how long a fault on the monitor waits for it to write the loops before it.
+const MONITOR_CATCH_UP_NS: u64 = 5_000_000_000;
+
 /// How long the monitor may stay silent (it reports ten times a second) before it counts as
 /// stalled.
 const MONITOR_SILENCE_NS: u64 = 300_000_000;
@@ -28,13 +31,46 @@ impl Supervisor<'_> {
         }
     }
 
-    /// Lockstep: the plant holds loop `k`; injects the faults due there. The plant goes on once
-    /// every process is back up.
+    /// Lockstep: the plant holds loop `k`; injects the faults due there (the monitor's once it
+    /// has written every loop before `k`). The plant goes on once every process is back up.
     pub(super) fn pause_at(&mut self, k: u64) {
-        for i in self.faults.due_at_loop(self.config.rate_hz, k) {
+        let (on_monitor, others): (Vec<usize>, Vec<usize>) = self
+            .faults
+            .due_at_loop(self.config.rate_hz, k)
+            .into_iter()
+            .partition(|&i| inject::target(self.faults.spec(i)) == Role::Monitor);
+        for i in others {
             self.inject(i);
         }
+        if !on_monitor.is_empty() {
+            self.monitor_faults_held = Some((k, now_ns(), on_monitor));
+        }
         self.paused = true;
+    }
+
+    /// Lockstep: injects the monitor's held faults once it has written and saved every loop
+    /// before the paused one (its writer may lag the loop by thousands of loops), or, noted,
+    /// once it has not done so within [`MONITOR_CATCH_UP_NS`].
+    pub(super) fn inject_held_monitor_faults(&mut self, now: u64) {
+        let Some((k, since, _)) = self.monitor_faults_held else { return };
+        let caught_up = self.monitor_written >= k;
+        if !caught_up && now.saturating_sub(since) < MONITOR_CATCH_UP_NS {
+            return;
+        }
+        let (_, _, held) = self.monitor_faults_held.take().expect("checked above");
+        if !caught_up {
+            self.note(
+                now,
+                format!(
+                    "the monitor had written {} of the {k} loops before its fault after {} s; injected anyway",
+                    self.monitor_written,
+                    MONITOR_CATCH_UP_NS / 1_000_000_000
+                ),
+            );
+        }
+        for i in held {
+            self.inject(i);
+        }
     }
 
     /// Sends SIGCONT to the processes whose stop is over at `now` (ns).

@@ -116,6 +116,12 @@ struct Supervisor<'a> {
     faults: FaultLedger<'a>,
     /// Lockstep: the plant is paused and waits for `go`.
     paused: bool,
+    /// Lockstep: the faults on the monitor due at the paused loop, held until the monitor has
+    /// written and saved every loop before it, so that its successor goes on from there and no
+    /// loop is lost: (the loop, when the pause began (ns), the faults).
+    monitor_faults_held: Option<(u64, u64, Vec<usize>)>,
+    /// Every loop before this one is written and saved by the monitor (its last status).
+    monitor_written: u64,
     /// Processes whose output ended, not reaped yet, and when to stop waiting for that. A
     /// dying process can take a while to be reapable (a killed monitor's writer thread, at nice
     /// 19, needs the CPU to exit, hundreds of ms on a busy machine); the supervision goes on
@@ -177,6 +183,8 @@ impl<'a> Supervisor<'a> {
             log: RunLog::default(),
             faults: FaultLedger::new(&config.faults),
             paused: false,
+            monitor_faults_held: None,
+            monitor_written: 0,
             closing: vec![],
             last_status_ns: now_ns(),
             removed_dead_nodes: 0,
@@ -421,6 +429,7 @@ impl<'a> Supervisor<'a> {
     fn due_actions(&mut self) -> Option<Outcome> {
         let now = now_ns();
         self.inject_due_by_time();
+        self.inject_held_monitor_faults(now);
         self.continue_stopped(now);
         self.continue_past_run_end(now);
         if let Some(outcome) = self.lockstep_plant_stall(now) {
@@ -436,7 +445,7 @@ impl<'a> Supervisor<'a> {
     /// Lockstep: once the faults due at the paused tick are in and every process is back up,
     /// lets the plant go on.
     fn release_pause(&mut self) -> Option<Outcome> {
-        if !self.paused || !self.processes.all_up() {
+        if !self.paused || self.monitor_faults_held.is_some() || !self.processes.all_up() {
             return None;
         }
         self.paused = false;
