@@ -75,7 +75,8 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     // Its running state goes on across restarts: the report covers the whole run.
     let recording =
         Recording::new(config, context.scenario.as_ref(), &context.run_dir, context.incarnation, Some(status))?
-            .with_snapshot(crate::monitor::resume::path(&context.run_id)?, context.scenario.as_ref());
+            .with_snapshot(crate::monitor::resume::path(&context.run_id)?, context.scenario.as_ref())
+            .with_injections(crate::monitor::injections::path(&context.run_id)?);
     // The mode's one say in the monitor process. In real time the monitor must never slow the
     // loop: its writer (histograms, metrics, files: nearly all its work) runs at the lowest
     // priority, and the buffers hold a second of samples to catch up with. The receive loop
