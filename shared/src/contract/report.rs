@@ -248,6 +248,10 @@ pub struct FaultEffect {
     /// and `within_limits` says nothing.
     #[serde(default)]
     pub unrecorded: bool,
+    /// Real time: the launcher never injected it (its process was not running at its time, or
+    /// the run ended first). `unrecorded` too: it had no effect to judge.
+    #[serde(default)]
+    pub not_injected: bool,
 }
 
 #[cfg(test)]

@@ -66,6 +66,17 @@ fn noted_at_its_time(kind: FaultKind) -> bool {
     kind.from_outside() || kind == FaultKind::Cut
 }
 
+/// Real time: the loop a fault injected at `injected_ns` takes effect at: the first of the
+/// plant's ticks at or after it (tick k at `start_ns + k·period_ns`, as the plant keeps them).
+pub fn loop_at(injected_ns: u64, start_ns: u64, period_ns: u64) -> u64 {
+    injected_ns.saturating_sub(start_ns).div_ceil(period_ns.max(1))
+}
+
+/// The plant's tick period at `rate_hz`, in whole ns, rounded as the plant rounds it.
+pub fn period_ns(rate_hz: f64) -> u64 {
+    (1.0 / rate_hz * 1e9).round() as u64
+}
+
 /// Lockstep: the faults the launcher injects at loop `k`, not injected yet.
 pub fn due_at_loop(faults: &[FaultSpec], seen: &[FaultSeen], rate_hz: f64, k: u64) -> Vec<usize> {
     (0..faults.len())
@@ -118,6 +129,21 @@ mod tests {
         assert_eq!(due_by_time(&f, &seen, start, start + 2_000_000_000), [0, 1]);
         seen[0].injected_ns = Some(start + 1_000_000_000);
         assert_eq!(due_by_time(&f, &seen, start, start + 3_000_000_000), [1]);
+    }
+
+    #[test]
+    fn a_fault_takes_effect_at_the_first_tick_at_or_after_its_real_injection() {
+        let start = 5_000_000_000;
+        let period = period_ns(1000.0);
+        assert_eq!(period, 1_000_000);
+        assert_eq!(loop_at(start, start, period), 0);
+        assert_eq!(loop_at(start + 2_000_000_000, start, period), 2000, "on a tick: that tick");
+        assert_eq!(loop_at(start + 2_000_000_001, start, period), 2001, "just after: the next");
+        // Planned at 2 s, sent 1.0005 s late by a launcher that was stopped.
+        assert_eq!(loop_at(start + 3_000_500_000, start, period), 3001);
+        // The plant's period in whole ns, as it keeps its ticks: 3 Hz ticks at 333 333 333 ns.
+        assert_eq!(period_ns(3.0), 333_333_333);
+        assert_eq!(loop_at(start + 1_000_000_000, start, period_ns(3.0)), 4);
     }
 
     #[test]

@@ -307,6 +307,7 @@ fn render_faults(out: &mut String, s: &Summary) {
     for f in &s.faults {
         let back = f.restarted_after_ms.or(f.resumed_after_ms);
         let (outage, during, after, recovery, limits) = match &f.effect {
+            Some(e) if e.not_injected => ("-".into(), "-".into(), "-".into(), "-".into(), "not injected"),
             Some(e) if e.unrecorded => ("-".into(), "-".into(), "-".into(), "-".into(), "unrecorded"),
             Some(e) => (
                 format!("{} ticks", e.outage_ticks),
@@ -330,7 +331,7 @@ fn render_faults(out: &mut String, s: &Summary) {
     }
     // The fault and the verdict are text; the columns between them are numbers.
     write_table(out, &rows, &[false, true, true, true, true, true, true, false]);
-    for f in s.faults.iter().filter(|f| f.effect.as_ref().is_some_and(|e| e.unrecorded)) {
+    for f in s.faults.iter().filter(|f| f.effect.as_ref().is_some_and(|e| e.unrecorded && !e.not_injected)) {
         let _ = writeln!(
             out,
             "  note: no loop after `{}` was recorded (the monitor was restarting, or the run had ended): its effect is unknown",
@@ -459,6 +460,17 @@ mod tests {
             text.contains("note: no loop after `kill controller at 1s` was recorded (the monitor was restarting"),
             "{text}"
         );
+    }
+
+    #[test]
+    fn a_fault_never_injected_says_so_not_kept_nor_unrecorded() {
+        let mut s = summary_with_fault();
+        s.faults[0].effect =
+            Some(FaultEffect { not_injected: true, unrecorded: true, within_limits: true, ..Default::default() });
+        let text = render(&s);
+        let row = text.lines().find(|l| l.trim_start().starts_with("kill controller at 1s")).expect("its row");
+        assert_eq!(cells(row)[3..], ["-", "-", "-", "-", "not injected"]);
+        assert!(!text.contains("was recorded"), "{text}");
     }
 
     #[test]

@@ -1,5 +1,14 @@
 //! What each fault of the launch file did, followed through the loops as they are joined: the
 //! command outage, when the loop was whole again, the worst error and the recovery time.
+//!
+//! In real time a kill or a stop happens when the launcher sends its signal, which a stopped or
+//! starved launcher sends late: its tracker waits for the loop at which it really happened
+//! ([`crate::monitor::injections`]), keeping what it needs of each loop from the planned one on,
+//! and judges the effect from there.
+
+use std::collections::VecDeque;
+
+use serde::{Deserialize, Serialize};
 
 use crate::config::faults::FaultKind;
 use crate::config::launch::LaunchConfig;
@@ -8,9 +17,37 @@ use crate::contract::role::Role;
 use crate::model::scenario::ErrorMeasure;
 use crate::monitor::join::LoopParts;
 
+/// Loops a tracker keeps while it waits for its fault's injection: the launcher's lateness and
+/// the monitor's time to hear of it (a checkpoint, 100 ms) are far shorter. Past it, the oldest
+/// loops count as before the fault.
+const AWAITED_LOOPS: usize = 1 << 15;
+
+/// What the tracker needs of one loop.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct Seen {
+    k: u64,
+    /// The target process's incarnation in the loop's record.
+    incarnation: Option<u32>,
+    /// The loop's record says its command was fresh.
+    fresh: bool,
+    /// The error measure of its state (only for loops from the fault on).
+    error: Option<f64>,
+}
+
+/// A fault injected from outside, in real time, whose injection the monitor has not heard of.
+#[derive(Serialize, Deserialize)]
+struct Awaiting {
+    /// The loops from its planned tick on, in order.
+    log: VecDeque<Seen>,
+    /// The planned starts of the faults after it, and the run's end: its window ends at the
+    /// first after its real injection.
+    later_starts: Vec<u64>,
+    loops: u64,
+}
+
 /// Follows one fault through the loops the monitor writes. Serialisable: a restarted monitor
 /// goes on from the last one's.
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Serialize, Deserialize)]
 pub struct FaultTracker {
     /// The process's slot in `Header::incarnations`, if it has one.
     slot: Option<usize>,
@@ -29,6 +66,10 @@ pub struct FaultTracker {
     last_outside: Option<u64>,
     /// A loop of its window was recorded.
     recorded: bool,
+    /// Real time, a kill or a stop: its injection is not known yet.
+    awaiting: Option<Awaiting>,
+    /// The launcher did not inject it (its process was not running).
+    not_injected: bool,
     effect: FaultEffect,
 }
 
@@ -50,6 +91,11 @@ impl FaultTracker {
                     _ => f.ticks(config.rate_hz).1.unwrap_or(loops),
                 };
                 let window_end = starts.iter().copied().filter(|&s| s > from).min().unwrap_or(loops);
+                let awaiting = (wall_clock && f.kind.from_outside()).then(|| Awaiting {
+                    log: VecDeque::new(),
+                    later_starts: starts.iter().copied().filter(|&s| s > from).collect(),
+                    loops,
+                });
                 Self {
                     slot: f.process.parse::<Role>().ok().and_then(Role::slot),
                     from,
@@ -62,6 +108,8 @@ impl FaultTracker {
                     rejoined: None,
                     last_outside: None,
                     recorded: false,
+                    awaiting,
+                    not_injected: false,
                     effect: FaultEffect { within_limits: true, ..Default::default() },
                 }
             })
@@ -71,6 +119,50 @@ impl FaultTracker {
     /// Takes loop `k`; loops come in order.
     pub fn observe(&mut self, k: u64, part: &LoopParts, measure: &ErrorMeasure) {
         let incarnation = self.slot.zip(part.record.as_ref()).map(|(i, r)| r.header.incarnations[i]);
+        let fresh = part.record.as_ref().is_some_and(|r| r.deadline_miss == 0 && r.rejected == 0 && r.lost == 0);
+        // The error only in the fault's window (which an awaited injection may move on).
+        let needed = k >= self.from && (k < self.window_end || self.awaiting.is_some());
+        let error = part.state.as_ref().filter(|_| needed).map(|s| (measure.of_state)(s.header.t, &s.x));
+        let seen = Seen { k, incarnation, fresh, error };
+        match &mut self.awaiting {
+            Some(awaiting) if k >= self.from => {
+                awaiting.log.push_back(seen);
+                if awaiting.log.len() > AWAITED_LOOPS
+                    && let Some(oldest) = awaiting.log.pop_front()
+                {
+                    self.incarnation_before = oldest.incarnation.or(self.incarnation_before);
+                }
+            }
+            _ => self.take(seen, measure),
+        }
+    }
+
+    /// The launcher injected the fault before loop `k` (real time): its effect is judged from
+    /// there, on the loops kept meanwhile first. Once only; nothing if it was not awaited.
+    pub fn injected_at(&mut self, k: u64, measure: &ErrorMeasure) {
+        let Some(awaiting) = self.awaiting.take() else { return };
+        // Never before its planned tick: the plant's period is rounded to whole ns.
+        let shift = k.saturating_sub(self.from);
+        self.from += shift;
+        // A stop's SIGCONT comes its duration after the real injection.
+        self.end += shift;
+        self.window_end =
+            awaiting.later_starts.iter().copied().filter(|&s| s > self.from).min().unwrap_or(awaiting.loops);
+        for seen in awaiting.log {
+            self.take(seen, measure);
+        }
+    }
+
+    /// The launcher did not inject the fault (its process was not running at its time).
+    pub fn not_injected(&mut self) {
+        if self.awaiting.take().is_some() {
+            self.not_injected = true;
+        }
+    }
+
+    /// Takes one loop, the fault's injection known.
+    fn take(&mut self, seen: Seen, measure: &ErrorMeasure) {
+        let Seen { k, incarnation, fresh, error } = seen;
         if k < self.from {
             self.incarnation_before = incarnation.or(self.incarnation_before);
             return;
@@ -85,7 +177,6 @@ impl FaultTracker {
         {
             self.rejoined = Some(k);
         }
-        let fresh = part.record.as_ref().is_some_and(|r| r.deadline_miss == 0 && r.rejected == 0 && r.lost == 0);
         // After a kill, commands are back once they carry the restarted process's work (a
         // command or two may still come from before the kill landed).
         let restarted = !self.after_restart || self.rejoined.is_some();
@@ -96,8 +187,7 @@ impl FaultTracker {
                 self.effect.outage_ticks += 1;
             }
         }
-        if let Some(state) = &part.state {
-            let error = (measure.of_state)(state.header.t, &state.x);
+        if let Some(error) = error {
             let worst = if self.back.is_none() {
                 &mut self.effect.worst_error_during
             } else {
@@ -125,6 +215,10 @@ impl FaultTracker {
     /// the recorder's `t` (k·dt would print 0.009000000000000001).
     pub fn finish(mut self, rate_hz: f64) -> FaultEffect {
         let at = |k: u64| k as f64 / rate_hz;
+        // Still awaited at the end: the run ended before the launcher injected it.
+        if self.not_injected || self.awaiting.is_some() {
+            return FaultEffect { not_injected: true, unrecorded: true, within_limits: true, ..Default::default() };
+        }
         self.effect.unrecorded = !self.recorded;
         self.effect.commands_back_at_s = self.back.map(at);
         self.effect.rejoined_at_s = self.rejoined.map(at);
@@ -221,6 +315,7 @@ mod tests {
                 error_peak_first_s: Some(0.5),
                 error_peak_last_s: Some(0.5),
                 unrecorded: false,
+                not_injected: false,
             }
         );
         assert_eq!(
@@ -236,6 +331,7 @@ mod tests {
                 error_peak_first_s: Some(1.2),
                 error_peak_last_s: Some(1.2),
                 unrecorded: false,
+                not_injected: false,
             }
         );
     }
@@ -254,6 +350,147 @@ mod tests {
         assert_eq!(effect.commands_back_at_s, None);
         assert_eq!(effect.outage_ticks, 0, "delayed commands are fresh");
         assert_eq!(effect.worst_error_during, Some(0.5));
+    }
+
+    /// A pendulum run of `seconds` at 1 kHz with one fault, tracked as in real time.
+    fn real_time_tracker(fault: &str, seconds: f64) -> (LaunchConfig, FaultTracker) {
+        let mut overrides = vec![Override::parse(&format!("duration_s={seconds}")).unwrap()];
+        overrides.push(Override::fault(fault).unwrap());
+        let config = resolve("pendulum", &overrides).unwrap().0;
+        let tracker = FaultTracker::for_faults(&config, true).pop().unwrap();
+        (config, tracker)
+    }
+
+    /// A kill of the estimator that really happened at loop 300: no record from 300 to 499, its
+    /// restarted incarnation from 500 on, the error 0.5 in the outage and back within the band
+    /// at 520.
+    fn killed_at_300(k: u64) -> LoopParts {
+        match k {
+            ..300 => loop_with(0.0, Some((false, 0))),
+            300..500 => loop_with(0.5, None),
+            500..520 => loop_with(0.2, Some((false, 1))),
+            _ => loop_with(0.0, Some((false, 1))),
+        }
+    }
+
+    #[test]
+    fn a_kill_injected_late_is_judged_from_when_it_really_happened() {
+        let (config, mut tracker) = real_time_tracker("kill estimator at 100ms", 1.0);
+        assert_eq!((tracker.from, config.loops()), (100, 1000));
+        // The monitor hears of the injection at a checkpoint, in the middle of the outage.
+        for k in 0..350 {
+            tracker.observe(k, &killed_at_300(k), &measure());
+        }
+        tracker.injected_at(300, &measure());
+        for k in 350..1000 {
+            tracker.observe(k, &killed_at_300(k), &measure());
+        }
+        let effect = tracker.finish(config.rate_hz);
+        assert_eq!(
+            effect,
+            FaultEffect {
+                outage_ticks: 200,
+                commands_back_at_s: Some(0.5),
+                rejoined_at_s: Some(0.5),
+                worst_error_during: Some(0.5),
+                worst_error_after: Some(0.2),
+                // From the injection at 300 to the first loop back within the band, 520.
+                recovery_s: Some(0.22),
+                within_limits: true,
+                error_peak_first_s: Some(0.5),
+                error_peak_last_s: Some(0.5),
+                unrecorded: false,
+                not_injected: false,
+            }
+        );
+    }
+
+    /// A stop of the controller that really happened at loop 400, for 200 loops: no fresh
+    /// command from 400 to 599.
+    fn stopped_at_400(k: u64) -> LoopParts {
+        let outage = (400..600).contains(&k);
+        loop_with(if outage { 0.5 } else { 0.0 }, Some((outage, 0)))
+    }
+
+    #[test]
+    fn a_stop_injected_after_its_planned_end_has_its_whole_outage() {
+        let stop = "stop controller at 100ms for 200ms";
+        let (config, mut tracker) = real_time_tracker(stop, 1.0);
+        // As if judged from the planned tick: over by 300, before it began.
+        let (_, mut planned) = real_time_tracker(stop, 1.0);
+        planned.awaiting = None;
+        for k in 0..1000 {
+            if k == 450 {
+                tracker.injected_at(400, &measure());
+            }
+            tracker.observe(k, &stopped_at_400(k), &measure());
+            planned.observe(k, &stopped_at_400(k), &measure());
+        }
+        let planned = planned.finish(config.rate_hz);
+        assert_eq!((planned.outage_ticks, planned.commands_back_at_s), (0, Some(0.3)), "{planned:?}");
+        let effect = tracker.finish(config.rate_hz);
+        assert_eq!((effect.outage_ticks, effect.commands_back_at_s), (200, Some(0.6)), "{effect:?}");
+        assert_eq!((effect.worst_error_during, effect.worst_error_after), (Some(0.5), Some(0.0)));
+        // The SIGCONT came 200 ms after the injection: the error was back at once.
+        assert_eq!(effect.recovery_s, Some(0.0));
+    }
+
+    #[test]
+    fn a_fault_never_injected_is_reported_so_not_as_kept() {
+        let (config, mut tracker) = real_time_tracker("kill estimator at 100ms", 1.0);
+        let (_, mut told) = real_time_tracker("kill estimator at 100ms", 1.0);
+        for k in 0..1000 {
+            if k == 150 {
+                told.not_injected();
+            }
+            tracker.observe(k, &loop_with(0.0, Some((false, 0))), &measure());
+            told.observe(k, &loop_with(0.0, Some((false, 0))), &measure());
+        }
+        // The run ended before the launcher injected it; or it said it did not.
+        for effect in [tracker.finish(config.rate_hz), told.finish(config.rate_hz)] {
+            assert!(effect.not_injected && effect.unrecorded, "{effect:?}");
+            assert_eq!((effect.outage_ticks, effect.worst_error_during), (0, None));
+        }
+    }
+
+    #[test]
+    fn an_awaited_fault_keeps_a_bounded_log_across_a_monitor_restart() {
+        let (config, mut tracker) = real_time_tracker("kill estimator at 100ms", 40.0);
+        // Heard of long after its planned tick, 10 loops after it really happened; the
+        // restarted estimator is in the loop 50 loops after that.
+        let heard = 100 + AWAITED_LOOPS as u64 + 1000;
+        let injected = heard - 10;
+        let parts = |k: u64| match k {
+            _ if k < injected => loop_with(0.0, Some((false, 0))),
+            _ if k < injected + 50 => loop_with(0.0, None),
+            _ => loop_with(0.0, Some((false, 1))),
+        };
+        for k in 0..heard {
+            tracker.observe(k, &parts(k), &measure());
+        }
+        assert_eq!(tracker.awaiting.as_ref().unwrap().log.len(), AWAITED_LOOPS);
+        // Frozen into `monitor.state` and thawed by the next monitor, still awaiting.
+        let bytes = bincode::serde::encode_to_vec(&tracker, bincode::config::standard()).unwrap();
+        let (mut tracker, _): (FaultTracker, _) =
+            bincode::serde::decode_from_slice(&bytes, bincode::config::standard()).unwrap();
+        tracker.injected_at(injected, &measure());
+        assert!(tracker.awaiting.is_none());
+        for k in heard..heard + 100 {
+            tracker.observe(k, &parts(k), &measure());
+        }
+        let effect = tracker.finish(config.rate_hz);
+        assert_eq!(effect.outage_ticks, 50, "{effect:?}");
+        assert_eq!(effect.rejoined_at_s, Some((injected + 50) as f64 / 1000.0));
+    }
+
+    #[test]
+    fn only_real_time_kills_and_stops_await_their_injection() {
+        let config = config(&["kill plant at 5ms", "stop controller at 6ms for 3ms", "drop sensors 50% at 7ms"]);
+        let awaits = |wall_clock| -> Vec<bool> {
+            FaultTracker::for_faults(&config, wall_clock).iter().map(|t| t.awaiting.is_some()).collect()
+        };
+        assert_eq!(awaits(true), [true, true, false]);
+        assert_eq!(awaits(false), [false, false, false], "lockstep: injected at their loop");
     }
 
     #[test]

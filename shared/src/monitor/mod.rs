@@ -10,11 +10,13 @@
 //! - [`sinks`]: the files of the run folder, one sink each; [`live`]: what the dashboard shows,
 //!   sent with each status.
 //! - [`resume`]: the running state each checkpoint leaves for a restarted monitor to go on from.
+//! - [`injections`]: when the launcher really injected each kill and stop (real time).
 
 pub mod clock_fit;
 pub mod crossing;
 pub mod distribution;
 pub mod fault_effect;
+pub mod injections;
 pub mod join;
 pub mod layout;
 pub mod live;

@@ -72,10 +72,12 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     // Only shown, so dropped when the launcher is not reading (stopped): the recording goes on.
     let status: StatusCallback =
         Box::new(|status| emit_if_room(&ChildEvent::Status(Box::new(status.clone()))).map(|_| ()));
-    // Its running state goes on across restarts: the report covers the whole run.
+    // Its running state goes on across restarts: the report covers the whole run. Each kill and
+    // stop is judged from when the launcher says it really injected it.
     let recording =
         Recording::new(config, context.scenario.as_ref(), &context.run_dir, context.incarnation, Some(status))?
-            .with_snapshot(crate::monitor::resume::path(&context.run_id)?, context.scenario.as_ref());
+            .with_snapshot(crate::monitor::resume::path(&context.run_id)?, context.scenario.as_ref())
+            .with_injections(crate::monitor::injections::path(&context.run_id)?);
     // The mode's one say in the monitor process. In real time the monitor must never slow the
     // loop: its writer (histograms, metrics, files: nearly all its work) runs at the lowest
     // priority, and the buffers hold a second of samples to catch up with. The receive loop

@@ -15,6 +15,7 @@ use crate::contract::role::Role;
 use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 use crate::monitor::crossing::Crossing;
 use crate::monitor::fault_effect::FaultTracker;
+use crate::monitor::injections::{self, Injection};
 use crate::monitor::join::{Joiner, LoopParts, Sample};
 use crate::monitor::layout::Layout;
 use crate::monitor::live::Live;
@@ -67,6 +68,10 @@ pub struct Recording {
     resume_failed: Option<String>,
     /// The loop after which the next snapshot is due, checkpoint or not.
     next_snapshot_k: u64,
+    /// Real time: where the launcher says when it injected each kill and stop.
+    injections: Option<PathBuf>,
+    /// Why that could not be read, the last time it could not.
+    injections_failed: Option<String>,
 }
 
 impl Recording {
@@ -108,7 +113,34 @@ impl Recording {
             metrics_from: None,
             resume_failed: None,
             next_snapshot_k: SNAPSHOT_LOOPS,
+            injections: None,
+            injections_failed: None,
         })
+    }
+
+    /// Judges each kill and stop from when the launcher says, in `path`, it injected it (real
+    /// time), read at each checkpoint and at the end.
+    pub fn with_injections(mut self, path: PathBuf) -> Self {
+        self.injections = Some(path);
+        self
+    }
+
+    /// Tells each fault tracker what the launcher wrote of its fault's injection.
+    fn learn_injections(&mut self) {
+        let Some(path) = &self.injections else { return };
+        match injections::read(path) {
+            Ok(injections) => {
+                self.injections_failed = None;
+                for (i, injection) in injections {
+                    let Some(tracker) = self.faults.get_mut(i) else { continue };
+                    match injection {
+                        Injection::AtLoop(k) => tracker.injected_at(k, &self.measure),
+                        Injection::NotInjected => tracker.not_injected(),
+                    }
+                }
+            }
+            Err(e) => self.injections_failed = Some(format!("{e:#}")),
+        }
     }
 
     /// Writes the running state to `path` at each checkpoint; a restarted recording first goes
@@ -232,7 +264,8 @@ impl Recording {
 
     /// Reports the status (if there is a callback) and flushes every sink.
     pub fn checkpoint(&mut self) -> Result<()> {
-        // Saved first: the status says how far a successor would go on from.
+        self.learn_injections();
+        // Saved before the status: the status says how far a successor would go on from.
         self.save()?;
         if let Some(callback) = &mut self.status {
             let status = MonitorStatus {
@@ -253,6 +286,8 @@ impl Recording {
         while let Some((k, parts)) = self.joiner.next_remaining() {
             self.write(k, &parts)?;
         }
+        // The launcher stops the monitor after its last injection.
+        self.learn_injections();
         let mut report = std::mem::take(&mut self.report);
         if let Some(crossing) = &mut self.stats.crossing {
             report.crossing = Some(crossing.finish(&mut self.stats.hops));
@@ -280,6 +315,12 @@ impl Recording {
                      metrics cannot be carried over a restart",
                     k as f64 / self.rate_hz
                 ),
+            );
+        }
+        if let Some(e) = &self.injections_failed {
+            report.notes.insert(
+                0,
+                format!("the monitor could not read when the launcher injected its faults ({e}): those it never heard of are reported as not injected"),
             );
         }
         if let Some(e) = &self.resume_failed {
@@ -363,8 +404,12 @@ mod tests {
     }
 
     fn setup_with(name: &str, faults: &[&str]) -> (LaunchConfig, Box<dyn Scenario>, std::path::PathBuf) {
+        setup_in("lockstep", name, faults)
+    }
+
+    fn setup_in(mode: &str, name: &str, faults: &[&str]) -> (LaunchConfig, Box<dyn Scenario>, std::path::PathBuf) {
         let mut overrides: Vec<Override> =
-            ["mode=lockstep", "duration_s=0.006"].iter().map(|o| Override::parse(o).unwrap()).collect();
+            [&format!("mode={mode}"), "duration_s=0.006"].iter().map(|o| Override::parse(o).unwrap()).collect();
         overrides.extend(faults.iter().map(|f| Override::fault(f).unwrap()));
         let (config, scenario) = resolve("pendulum", &overrides).unwrap();
         let dir = std::env::temp_dir().join(format!("looplab-recording-{name}-{}", std::process::id()));
@@ -493,5 +538,34 @@ mod tests {
         assert!(report.notes.iter().all(|n| !n.contains("restart")), "{:?}", report.notes);
         assert!(report.faults[0].unrecorded, "{:?}", report.faults[0]);
         assert!(!report.faults[1].unrecorded, "{:?}", report.faults[1]);
+    }
+
+    #[test]
+    fn real_time_faults_are_judged_from_the_loop_the_launcher_says_it_injected_them_at() {
+        let faults = ["stop controller at 1ms for 1ms", "kill sensors at 2ms", "kill estimator at 3ms"];
+        let (config, scenario, dir) = setup_in("realtime", "injections", &faults);
+        let injections = dir.join("injections.json");
+        let mut recording =
+            Recording::new(&config, scenario.as_ref(), &dir, 0, None).unwrap().with_injections(injections.clone());
+        // The launcher, late, stopped the controller before loop 3 (planned: 1).
+        let mut told = injections::Injections::from([(0, Injection::AtLoop(3))]);
+        injections::write(&injections, &told).unwrap();
+        for k in 0..4 {
+            whole(k).into_iter().try_for_each(|s| recording.take(s)).unwrap();
+        }
+        recording.checkpoint().unwrap();
+        // Then found the sensors not running; the estimator's kill never came.
+        told.insert(1, Injection::NotInjected);
+        injections::write(&injections, &told).unwrap();
+        for k in 4..6 {
+            whole(k).into_iter().try_for_each(|s| recording.take(s)).unwrap();
+        }
+        let report = recording.finish().unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+
+        // Every loop's command was fresh: back at the stop's end, 1 ms after its real injection.
+        assert_eq!(report.faults[0].commands_back_at_s, Some(0.004), "{:?}", report.faults[0]);
+        assert!(!report.faults[0].not_injected);
+        assert!(report.faults[1].not_injected && report.faults[2].not_injected, "{:?}", report.faults);
     }
 }

@@ -6,16 +6,19 @@
 use crate::config::faults::{FaultKind, FaultSpec};
 use crate::contract::role::Role;
 use crate::launcher::inject::{self, DetectedBy, FaultSeen};
+use crate::monitor::injections::{Injection, Injections};
 
 pub(super) struct FaultLedger<'a> {
     specs: &'a [FaultSpec],
     /// What was seen of `specs[i]`, at `i`.
     seen: Vec<FaultSeen>,
+    /// Real time: the loop each kill and stop took effect at, for the monitor.
+    landed: Injections,
 }
 
 impl<'a> FaultLedger<'a> {
     pub(super) fn new(specs: &'a [FaultSpec]) -> Self {
-        Self { specs, seen: vec![FaultSeen::default(); specs.len()] }
+        Self { specs, seen: vec![FaultSeen::default(); specs.len()], landed: Injections::new() }
     }
 
     pub(super) fn spec(&self, i: usize) -> &'a FaultSpec {
@@ -36,6 +39,12 @@ impl<'a> FaultLedger<'a> {
     /// Fault `i` was injected at `ns` (or found its process not running then).
     pub(super) fn injected(&mut self, i: usize, ns: u64) {
         self.seen[i].injected_ns = Some(ns);
+    }
+
+    /// Real time: fault `i` took effect as `injection` says. Returns every injection so far.
+    pub(super) fn landed(&mut self, i: usize, injection: Injection) -> &Injections {
+        self.landed.insert(i, injection);
+        &self.landed
     }
 
     /// Fault `i`, a stop, is to be continued at `at_ns`.

@@ -8,6 +8,7 @@ use crate::contract::clock::now_ns;
 use crate::contract::role::Role;
 use crate::launcher::inject::{self, DetectedBy};
 use crate::launcher::outcome::Outcome;
+use crate::monitor::injections::{self, Injection};
 
 use super::Supervisor;
 
@@ -150,6 +151,7 @@ impl Supervisor<'_> {
         }
         if !self.processes[role].running() {
             self.note(ns, format!("{}: not injected, {role} is not running", fault.describe()));
+            self.tell_monitor(i, Injection::NotInjected);
             return;
         }
         if let Some((signal, continue_at_ns)) = inject::injection(fault, ns) {
@@ -162,6 +164,24 @@ impl Supervisor<'_> {
             self.faults.continue_at(i, continue_at_ns);
         }
         self.note(ns, format!("inject: {}", fault.describe()));
+        if let Some(start) = self.log.plant_start_ns {
+            let k = inject::loop_at(ns, start, inject::period_ns(self.config.rate_hz));
+            self.tell_monitor(i, Injection::AtLoop(k));
+        }
+    }
+
+    /// Real time: tells the monitor how fault `i` (a kill or a stop) went, so that it judges its
+    /// effect from when it really happened (a stopped launcher injects late). A cut is the
+    /// bridge's own, by loop index: on time whatever the launcher does.
+    fn tell_monitor(&mut self, i: usize, injection: Injection) {
+        if self.config.mode != Mode::Realtime {
+            return;
+        }
+        let injections = self.faults.landed(i, injection);
+        if let Err(e) = injections::path(&self.run_id).and_then(|path| injections::write(&path, injections)) {
+            let fault = self.faults.spec(i).describe();
+            self.note(now_ns(), format!("{fault}: the monitor cannot be told when it was injected ({e:#})"));
+        }
     }
 
     /// Only a stop fault on the monitor makes it silent while alive: its silence past
