@@ -1,7 +1,8 @@
 //! Layer 0, the contract between the processes: the messages, the clock they are stamped with,
-//! and the launcher↔child protocol. Depends on nothing else in the crate.
+//! the launcher↔child protocol, and how state is serialised. Depends on nothing else in the crate.
 
 pub mod clock;
+pub mod codec;
 pub mod msg;
 pub mod protocol;
 pub mod report;

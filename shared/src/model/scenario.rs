@@ -340,10 +340,10 @@ pub(crate) use frozen_fields;
 
 /// One value as bytes, for [`frozen_fields`].
 pub fn freeze_value<T: serde::Serialize>(value: &T) -> Vec<u8> {
-    bincode::serde::encode_to_vec(value, bincode::config::standard()).expect("plain data encodes")
+    crate::contract::codec::to_bytes(value).expect("plain data encodes")
 }
 
 /// A value from [`freeze_value`]'s bytes.
 pub fn thaw_value<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> anyhow::Result<T> {
-    Ok(bincode::serde::decode_from_slice(bytes, bincode::config::standard())?.0)
+    crate::contract::codec::decode(bytes)
 }

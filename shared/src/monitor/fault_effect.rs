@@ -470,9 +470,8 @@ mod tests {
         }
         assert_eq!(tracker.awaiting.as_ref().unwrap().log.len(), AWAITED_LOOPS);
         // Frozen into `monitor.state` and thawed by the next monitor, still awaiting.
-        let bytes = bincode::serde::encode_to_vec(&tracker, bincode::config::standard()).unwrap();
-        let (mut tracker, _): (FaultTracker, _) =
-            bincode::serde::decode_from_slice(&bytes, bincode::config::standard()).unwrap();
+        let bytes = crate::contract::codec::to_bytes(&tracker).unwrap();
+        let mut tracker: FaultTracker = crate::contract::codec::decode(&bytes).unwrap();
         tracker.injected_at(injected, &measure());
         assert!(tracker.awaiting.is_none());
         for k in heard..heard + 100 {

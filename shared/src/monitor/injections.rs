@@ -9,12 +9,12 @@
 //! reader never sees half of it.
 
 use std::collections::BTreeMap;
-use std::io::{Read, Write};
-use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result};
 use serde::{Deserialize, Serialize};
+
+use crate::runtime::private_file;
 
 /// What became of one fault the launcher injects.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -36,37 +36,14 @@ pub fn path(run_id: &str) -> Result<PathBuf> {
     Ok(folder.join("injections.json"))
 }
 
-fn options() -> std::fs::OpenOptions {
-    let mut options = std::fs::OpenOptions::new();
-    options.mode(0o600).custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC);
-    options
-}
-
 /// Writes `injections` to `path`, whole or not at all.
 pub fn write(path: &Path, injections: &Injections) -> Result<()> {
-    let bytes = serde_json::to_vec(injections)?;
-    let fresh = path.with_extension("new");
-    // Ours to truncate: the folder is private (checked in `path`).
-    let mut file = options()
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .open(&fresh)
-        .with_context(|| format!("create {}", fresh.display()))?;
-    file.write_all(&bytes).with_context(|| format!("write {}", fresh.display()))?;
-    drop(file);
-    std::fs::rename(&fresh, path).with_context(|| format!("rename {} to {}", fresh.display(), path.display()))
+    private_file::write(path, &serde_json::to_vec(injections)?)
 }
 
 /// What the launcher wrote; nothing if it wrote nothing yet.
 pub fn read(path: &Path) -> Result<Injections> {
-    let mut file = match options().read(true).open(path) {
-        Ok(file) => file,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Injections::new()),
-        Err(e) => return Err(e).with_context(|| format!("open {}", path.display())),
-    };
-    let mut bytes = vec![];
-    file.read_to_end(&mut bytes).with_context(|| format!("read {}", path.display()))?;
+    let Some(bytes) = private_file::read(path)? else { return Ok(Injections::new()) };
     serde_json::from_slice(&bytes).with_context(|| format!("decode {}", path.display()))
 }
 

@@ -7,16 +7,16 @@
 //! it. It is written under another name and renamed into place, so a monitor killed mid-write
 //! leaves the previous one whole.
 
-use std::io::{Read, Write};
-use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::contract::codec;
 use crate::contract::msg::PlantCounters;
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::stats::LoopStats;
+use crate::runtime::private_file;
 
 /// The snapshot file of run `run_id`'s monitor.
 pub fn path(run_id: &str) -> Result<PathBuf> {
@@ -48,41 +48,15 @@ pub struct Frozen<Stats, Faults> {
 pub type FrozenRef<'a> = Frozen<&'a LoopStats, &'a [FaultTracker]>;
 pub type Thawed = Frozen<LoopStats, Vec<FaultTracker>>;
 
-fn options() -> std::fs::OpenOptions {
-    let mut options = std::fs::OpenOptions::new();
-    options.mode(0o600).custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC);
-    options
-}
-
 /// Writes `frozen` to `path`, whole or not at all.
 pub fn write(path: &Path, frozen: &FrozenRef) -> Result<()> {
-    let bytes = bincode::serde::encode_to_vec(frozen, bincode::config::standard())?;
-    let fresh = path.with_extension("new");
-    // Ours to truncate: the folder is private (checked in `path`), so a file there was the last
-    // monitor's, killed mid-write.
-    let mut file = options()
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .open(&fresh)
-        .with_context(|| format!("create {}", fresh.display()))?;
-    file.write_all(&bytes).with_context(|| format!("write {}", fresh.display()))?;
-    drop(file);
-    std::fs::rename(&fresh, path).with_context(|| format!("rename {} to {}", fresh.display(), path.display()))
+    private_file::write(path, &codec::to_bytes(frozen)?)
 }
 
 /// The last monitor's state, if it wrote one.
 pub fn read(path: &Path) -> Result<Option<Thawed>> {
-    let mut file = match options().read(true).open(path) {
-        Ok(file) => file,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e).with_context(|| format!("open {}", path.display())),
-    };
-    let mut bytes = vec![];
-    file.read_to_end(&mut bytes).with_context(|| format!("read {}", path.display()))?;
-    let (frozen, _) = bincode::serde::decode_from_slice(&bytes, bincode::config::standard())
-        .with_context(|| format!("decode {}", path.display()))?;
-    Ok(Some(frozen))
+    let Some(bytes) = private_file::read(path)? else { return Ok(None) };
+    Ok(Some(codec::decode(&bytes).with_context(|| format!("decode {}", path.display()))?))
 }
 
 #[cfg(test)]

@@ -20,7 +20,6 @@
 //! skipped and named as such.
 
 pub mod anatomy;
-pub mod codec;
 pub mod own_stage;
 pub mod pingpong;
 pub mod raw_floor;

@@ -22,9 +22,9 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::codec;
 use crate::config::wait::{Strategy, WaitSettings};
 use crate::contract::clock::now_ns;
+use crate::contract::codec;
 use crate::runtime::ipc::{doze, retry, run_config};
 use crate::runtime::wait::{ArrivalModel, Waiter, sleep_until};
 

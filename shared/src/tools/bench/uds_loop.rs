@@ -16,8 +16,8 @@ use std::time::Duration;
 use anyhow::{Context, Result, anyhow};
 use serde::{Deserialize, Serialize};
 
-use super::codec;
 use crate::contract::clock::{cpu_seconds, now_ns};
+use crate::contract::codec;
 use crate::contract::msg::{Command as CommandMessage, Estimate, Measurements, PlantState};
 use crate::contract::role::Role;
 use crate::runtime::signals::{Interrupted, StopFlag};

@@ -1,5 +1,6 @@
-//! The Unix-socket baseline's serialisation: bincode 2 through serde, in one place. (bincode
-//! 3.0.0 on crates.io is an empty release that does not compile.)
+//! Binary serialisation: bincode 2 through serde, in one place (the monitor's saved state, a
+//! scenario's frozen metrics, the bench's Unix-socket baseline). (bincode 3.0.0 on crates.io is
+//! an empty release that does not compile.)
 
 use anyhow::{Result, anyhow};
 use serde::Serialize;
@@ -10,6 +11,13 @@ pub fn encode<T: Serialize>(value: &T, out: &mut Vec<u8>) -> Result<()> {
     bincode::serde::encode_into_std_write(value, out, bincode::config::standard())
         .map_err(|e| anyhow!("bincode encode: {e}"))?;
     Ok(())
+}
+
+/// `value` as a new byte vector.
+pub fn to_bytes<T: Serialize>(value: &T) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    encode(value, &mut out)?;
+    Ok(out)
 }
 
 pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T> {
