@@ -21,8 +21,10 @@ const OVERSLEEP_WINDOW: usize = 32;
 /// busy.
 const BUSY_YIELD_NS: u64 = 30_000;
 
-/// On a busy machine, this many waits block before polling is tried again.
+/// On a busy machine, this many waits block before polling is tried again; each try that finds it
+/// still busy doubles them, up to [`MAX_BUSY_WAITS`] (a try costs the CPU for a time slice).
 const BUSY_WAITS: u32 = 1000;
+const MAX_BUSY_WAITS: u32 = 64_000;
 
 /// `ns` nanoseconds as a timespec.
 pub fn timespec(ns: u64) -> libc::timespec {
@@ -176,6 +178,8 @@ pub struct Waiter {
     /// task. There a yield hands the CPU over for a whole time slice (milliseconds), while a
     /// blocked waiter is woken ahead of a busy task the moment its input comes.
     busy_waits_left: u32,
+    /// Adaptive: how many waits block the next time the machine is found busy.
+    busy_waits_next: u32,
     /// Adaptive: one poll's yield (a field, so that tests choose what it finds).
     yield_cpu: fn() -> bool,
 }
@@ -217,6 +221,7 @@ impl Waiter {
             oversleeps: VecDeque::with_capacity(OVERSLEEP_WINDOW),
             silent: false,
             busy_waits_left: 0,
+            busy_waits_next: BUSY_WAITS,
             yield_cpu: yield_found_cpu_wanted,
         }
     }
@@ -307,9 +312,12 @@ impl Waiter {
                 return Ok(true);
             }
             if (self.yield_cpu)() {
-                self.busy_waits_left = BUSY_WAITS;
+                self.busy_waits_left = self.busy_waits_next;
+                self.busy_waits_next = (self.busy_waits_next * 2).min(MAX_BUSY_WAITS);
                 return ready();
             }
+            // A yield that came straight back: the machine is not busy (any more).
+            self.busy_waits_next = BUSY_WAITS;
         }
         Ok(false)
     }
@@ -441,6 +449,12 @@ mod tests {
             w.wait(Some(now_ns() + HOUR), u64::MAX, || Ok(false), |_| panic!("no doze while busy"), block).unwrap();
         }
         assert_eq!((blocks.get(), w.counts.busy, w.counts.blocked, w.counts.caught), (1001, 1001, 0, 0));
+        // Still busy at the next try: twice as many waits block before the one after.
+        w.yield_cpu = || true;
+        w.wait(Some(now_ns()), u64::MAX, || Ok(false), |_| Ok(()), || Ok(())).unwrap();
+        assert_eq!(w.busy_waits_left, 2 * BUSY_WAITS);
+        w.busy_waits_left = 0;
+        w.yield_cpu = || false;
         let here = Cell::new(false);
         let doze = |_| {
             dozes.set(dozes.get() + 1);
