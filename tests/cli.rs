@@ -396,6 +396,22 @@ fn in_process_implies_lockstep_and_refuses_real_time_and_faults_done_from_outsid
     }
 }
 
+/// `looplab man` documents every subcommand, each on a page of its own after looplab(1).
+#[test]
+fn man_has_a_page_for_every_subcommand() {
+    let man = looplab().arg("man").output().unwrap();
+    assert!(man.status.success());
+    let text = String::from_utf8_lossy(&man.stdout);
+    let titles: Vec<&str> =
+        text.lines().filter_map(|l| l.strip_prefix(".TH ")).map(|l| l.split(' ').next().unwrap()).collect();
+    for page in ["looplab", "looplab-run", "looplab-sweep", "looplab-plot", "looplab-export", "looplab-bench"] {
+        assert!(titles.contains(&page), "{page} missing: {titles:?}");
+    }
+    assert!(!titles.contains(&"looplab-help"), "{titles:?}");
+    let run_page = &text[text.find(".TH looplab-run ").unwrap()..];
+    assert!(run_page.contains("in\\-process"), "the run page has run's options");
+}
+
 /// Standard output whose reader has gone (`looplab show pendulum | head -1`, a closed terminal):
 /// the text is lost, not the run, and nothing panics.
 #[test]

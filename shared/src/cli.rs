@@ -281,7 +281,7 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         }
         Some(Command::Man) => {
             let mut text = vec![];
-            let rendered = clap_mangen::Man::new(Cli::command()).render(&mut text);
+            let rendered = render_man_pages(&mut text);
             say_raw!("{}", String::from_utf8_lossy(&text));
             report_failure(rendered.map_err(anyhow::Error::from))
         }
@@ -404,6 +404,20 @@ fn sweep(args: SweepCli, catalog: &Catalog) -> ExitCode {
         },
         catalog,
     )
+}
+
+/// looplab(1), then a page for each subcommand (looplab-run(1), ...), one after the other: `man -l`
+/// shows them in turn.
+fn render_man_pages(out: &mut Vec<u8>) -> std::io::Result<()> {
+    let mut command = Cli::command();
+    command.build();
+    clap_mangen::Man::new(command.clone()).render(out)?;
+    let source = format!("looplab {}", env!("CARGO_PKG_VERSION"));
+    for sub in command.get_subcommands().filter(|sub| !sub.is_hide_set() && sub.get_name() != "help") {
+        let name = format!("looplab-{}", sub.get_name());
+        clap_mangen::Man::new(sub.clone().bin_name(name.clone())).title(name).source(source.clone()).render(out)?;
+    }
+    Ok(())
 }
 
 /// The launch-file overrides the command line gives, in the order they apply: the options,

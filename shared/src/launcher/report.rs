@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 
 // The scenarios' old path to this type, until issue 11 moves it below them.
+use crate::config::launch::Mode;
 use crate::contract::report::{HOPS, MissingLoops, Stats};
 use crate::launcher::outcome::{EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Outcome};
 pub use crate::launcher::summary::ErrorMeasureInfo;
@@ -83,10 +84,15 @@ pub fn render(s: &Summary) -> String {
         Some(k) => format!("{status}, the simulation DIVERGED at loop {k}"),
         None => status,
     };
+    // Lockstep has no clock, so no deadline to miss: a 0 there would read as a result.
+    let misses = match s.mode {
+        Mode::Realtime => s.deadline_misses.to_string(),
+        Mode::Lockstep => "n/a (lockstep)".into(),
+    };
     let _ = writeln!(
         out,
-        "  {status}: {} of {} loops in {:.2} s ({:.0} loops/s) · deadline misses {} · rejected commands {}",
-        s.loops, s.loops_planned, s.wall_time_s, s.loops_per_s, s.deadline_misses, s.rejected_commands
+        "  {status}: {} of {} loops in {:.2} s ({:.0} loops/s) · deadline misses {misses} · rejected commands {}",
+        s.loops, s.loops_planned, s.wall_time_s, s.loops_per_s, s.rejected_commands
     );
     let _ = writeln!(
         out,
@@ -526,6 +532,10 @@ mod tests {
         let text = render(&s);
         let lines: Vec<&str> = text.lines().collect();
         assert!(lines[2].starts_with("  completed: 1000 of 1000 loops in 1.00 s (1000 loops/s)"), "{}", lines[2]);
+        // Lockstep has no deadline: no count that would read as a result.
+        assert!(lines[2].contains(" · deadline misses n/a (lockstep) · "), "{}", lines[2]);
+        let realtime = render(&Summary { mode: Mode::Realtime, deadline_misses: 27, ..s.clone() });
+        assert!(realtime.lines().nth(2).unwrap().contains(" · deadline misses 27 · "), "{realtime}");
         let header = lines.iter().position(|l| l.trim_start().starts_with("process ")).expect("restarts table");
         assert_eq!(cells(lines[header]), ["process", "died at", "cleaned", "backoff", "started", "ready"]);
         assert_eq!(cells(lines[header + 1]), ["sensors", "1500.3", "4.0", "10.0", "12.5", "-"]);

@@ -339,7 +339,12 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
         let _ = writeln!(out, "{}", line.trim_end());
     }
     if r.points.iter().all(|p| p.verdict == Verdict::NoFault) {
-        let _ = writeln!(out, "\n  no fault to judge the loop by: the metrics above say what each value did");
+        let what = if metrics.is_empty() {
+            "each run's summary.json has its metrics (--metric NAME shows one here)"
+        } else {
+            "the metrics above say what each value did"
+        };
+        let _ = writeln!(out, "\n  no fault to judge the loop by: {what}");
         return out;
     }
     let _ = writeln!(
@@ -392,6 +397,33 @@ mod tests {
         assert_eq!(swept_fault("sensors.encoder.bias"), None);
         assert_eq!(value_text(31.0), "31");
         assert_eq!(value_text(0.25), "0.25");
+    }
+
+    /// A sweep without a fault and without --metric says where the metrics are, not "above".
+    #[test]
+    fn a_sweep_without_a_fault_says_where_its_metrics_are() {
+        let point = SweepPoint {
+            value: 1.0,
+            completed: true,
+            stopped_because: None,
+            verdict: Verdict::NoFault,
+            growth: None,
+            worst_error: None,
+            within_limits: None,
+            metrics: [("theta_max_abs_rad".to_string(), 0.25)].into(),
+            run_dir: "r".into(),
+        };
+        let report = SweepReport {
+            scenario: "pendulum".into(),
+            param: "seed".into(),
+            points: vec![point],
+            first_unstable: None,
+            theory: None,
+        };
+        let bare = render(&report, &[]);
+        assert!(bare.ends_with("no fault to judge the loop by: each run's summary.json has its metrics (--metric NAME shows one here)\n"), "{bare}");
+        let shown = render(&report, &["theta_max_abs_rad".to_string()]);
+        assert!(shown.contains("0.25000") && shown.contains("the metrics above say what each value did"), "{shown}");
     }
 
     #[test]
