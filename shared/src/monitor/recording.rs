@@ -27,11 +27,6 @@ use crate::monitor::stats::LoopStats;
 /// then the monitor's buffer of that topic has overflowed past it.
 const JOIN_WINDOW: u64 = 2 * MONITOR_BUFFER as u64;
 
-/// Loops between snapshots besides the checkpoints' (a lockstep run can go through thousands
-/// of loops between two checkpoints): a killed monitor loses at most this many more than were
-/// still queued for it.
-const SNAPSHOT_LOOPS: u64 = 256;
-
 /// Called with the live numbers at each [`Recording::checkpoint`].
 pub type StatusCallback = Box<dyn FnMut(&MonitorStatus) -> Result<()> + Send>;
 
@@ -66,8 +61,6 @@ pub struct Recording {
     metrics_from: Option<u64>,
     /// Why the last monitor's snapshot could not be used.
     resume_failed: Option<String>,
-    /// The loop after which the next snapshot is due, checkpoint or not.
-    next_snapshot_k: u64,
     /// Real time: where the launcher says when it injected each kill and stop.
     injections: Option<PathBuf>,
     /// Why that could not be read, the last time it could not.
@@ -112,7 +105,6 @@ impl Recording {
             records_started: false,
             metrics_from: None,
             resume_failed: None,
-            next_snapshot_k: SNAPSHOT_LOOPS,
             injections: None,
             injections_failed: None,
         })
@@ -219,7 +211,6 @@ impl Recording {
             if self.metrics_from.is_some() {
                 self.metrics_from = Some(first);
             }
-            self.next_snapshot_k = first + SNAPSHOT_LOOPS;
         }
         if let Sample::Loop(record) = &sample {
             if self.restarted && !self.records_started {
@@ -245,9 +236,6 @@ impl Recording {
             while let Some((k, parts)) = self.joiner.next_settled() {
                 self.write(k, &parts)?;
             }
-            if self.snapshot.is_some() && self.joiner.next_k() >= self.next_snapshot_k {
-                self.save()?;
-            }
         }
         Ok(())
     }
@@ -255,14 +243,14 @@ impl Recording {
     /// Flushes every sink, then leaves the running state for the next monitor.
     fn save(&mut self) -> Result<()> {
         self.sinks.iter_mut().try_for_each(|sink| sink.flush())?;
-        self.next_snapshot_k = self.joiner.next_k() + SNAPSHOT_LOOPS;
         match &self.snapshot {
             Some(path) => self.freeze(path),
             None => Ok(()),
         }
     }
 
-    /// Reports the status (if there is a callback) and flushes every sink.
+    /// Learns the launcher's injections, flushes every sink, saves the running state for the
+    /// next monitor, then reports the status (if there is a callback).
     pub fn checkpoint(&mut self) -> Result<()> {
         self.learn_injections();
         // Saved before the status: the status says how far a successor would go on from.
