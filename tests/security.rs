@@ -28,10 +28,12 @@ fn watch_shm() -> i32 {
 }
 
 /// The next run folder (`looplab_<16 hex digits>`) created in /dev/shm, within `HANG`.
-fn next_run_folder(fd: i32) -> Option<String> {
+fn next_run_folder(fd: i32, seen: &mut std::collections::VecDeque<String>) -> Option<String> {
     let until = Instant::now() + HANG;
     let mut buffer = [0u64; 512];
-    while Instant::now() < until {
+    // One read may bring several runs' folders (the other test starts runs too): every one is
+    // kept, so that ours is not lost behind another's.
+    while seen.is_empty() && Instant::now() < until {
         let mut pfd = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
         // SAFETY: one valid pollfd.
         if unsafe { libc::poll(&mut pfd, 1, 100) } <= 0 {
@@ -48,11 +50,11 @@ fn next_run_folder(fd: i32) -> Option<String> {
             at += 16 + len;
             let id = name.strip_prefix("looplab_").unwrap_or("");
             if mask & libc::IN_ISDIR != 0 && id.len() == 16 && id.bytes().all(|b| b.is_ascii_hexdigit()) {
-                return Some(id.to_owned());
+                seen.push_back(id.to_owned());
             }
         }
     }
-    None
+    seen.pop_front()
 }
 
 /// Whether the process `pid` has a file open in another run's folder than `run_id`'s.
@@ -114,6 +116,7 @@ fn derivable_names(run_id: &str, registry_empty: bool) -> Vec<String> {
 /// that appeared was another run's (another test run on the machine).
 fn raced_run(registry_empty: bool) -> Option<bool> {
     let inotify = watch_shm();
+    let mut folders = std::collections::VecDeque::new();
     let dir = fresh_dir("raced");
     let mut launcher = looplab()
         .args(["run", "pendulum", "--mode", "lockstep", "--duration", "1", "-q", "--out"])
@@ -124,7 +127,7 @@ fn raced_run(registry_empty: bool) -> Option<bool> {
         .unwrap();
     let pid = launcher.id();
     let (run_id, planted, won) = loop {
-        let run_id = next_run_folder(inotify).expect("the run's folder appeared");
+        let run_id = next_run_folder(inotify, &mut folders).expect("the run's folder appeared");
         // SAFETY: our own child.
         unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
         if in_another_run(pid, &run_id) {
