@@ -99,9 +99,13 @@ pub(crate) fn run_process_as(
     // SAFETY: as above.
     if unsafe { libc::getppid() } != launcher {
         let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
-        while crate::runtime::ipc::clean_up_run(&args.run_id).is_ok_and(|c| !c.leftover.is_empty())
-            && std::time::Instant::now() < until
-        {
+        // An error (another process removing the run's files at the same moment) is tried
+        // again too: it must not end the last process's clean-up.
+        let cleaned = || {
+            crate::runtime::ipc::files_of_run(&args.run_id).is_empty()
+                || crate::runtime::ipc::clean_up_run(&args.run_id).is_ok_and(|c| c.leftover.is_empty())
+        };
+        while !cleaned() && std::time::Instant::now() < until {
             std::thread::sleep(std::time::Duration::from_millis(20));
         }
     }
