@@ -385,6 +385,7 @@ fn in_process_implies_lockstep_and_refuses_real_time_and_faults_done_from_outsid
     for (args, why) in [
         (&["pendulum", "--mode", "realtime"][..], "only lockstep runs in one process"),
         (&["pendulum", "--mode", "lockstep", "--fault", "stop controller at 1s for 100ms"][..], "`stop controller"),
+        (&["pendulum", "--set", "realtime.mlock=true"][..], "[realtime]"),
     ] {
         let out_dir = fresh_dir("in-process-refused");
         let output = looplab().arg("run").args(args).arg("--in-process").arg("--out").arg(&out_dir).output().unwrap();

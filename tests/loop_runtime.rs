@@ -6,8 +6,8 @@ mod common;
 use std::time::{Duration, Instant};
 
 use common::{
-    Exit, Mode, Role, StopReason, Summary, Table, alive, assert_loops_csv_integers, fresh_dir, load_summary, looplab,
-    run,
+    Exit, Mode, Role, StopReason, Summary, Table, alive, assert_loops_csv_integers, assert_nothing_left, fresh_dir,
+    last_incarnations, load_summary, looplab, run,
 };
 
 const STATS_FIELDS: [&str; 8] = ["count", "min", "p50", "p90", "p99", "p999", "max", "mean"];
@@ -526,4 +526,48 @@ fn a_full_disk_stops_the_monitor_once_and_the_error_names_the_file() {
     assert!(said.contains(&format!("cannot write {}: No space left on device", out.join("summary.json").display())));
     assert!(report.contains(", exit 3, "), "the report is printed, with the monitor's exit: {report}");
     assert!(!report.contains("monitor restart 1"), "{report}");
+}
+
+/// `[realtime]` as root: each loop process runs at SCHED_FIFO 10 with its memory locked, as the
+/// kernel reports it once the process is ready; the monitor keeps its normal low priority.
+#[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, for a real-time priority")]
+fn real_time_priority_and_locked_memory_are_applied_and_read_back() {
+    let sets = ["realtime.priority=10", "realtime.mlock=true", "wait.lockstep=\"block\""];
+    let mut args = vec!["pendulum", "--mode", "lockstep", "--duration", "0.2"];
+    args.extend(sets.iter().flat_map(|s| ["--set", s]));
+    let run = run("realtime", &args);
+    let last = last_incarnations(run.summary());
+    for role in Role::LOOP {
+        let scheduling = last[&role].scheduling.as_ref().unwrap_or_else(|| panic!("{role}: none read back"));
+        assert_eq!((scheduling.policy.as_str(), scheduling.priority), ("fifo", 10), "{role}");
+        assert!(scheduling.locked_kib > 0, "{role}: nothing locked");
+    }
+    assert_eq!(last[&Role::Monitor].scheduling, None);
+    let report = String::from_utf8_lossy(&run.output.stdout);
+    assert!(report.contains("real time, as the kernel reports it: plant fifo 10, "), "{report}");
+    assert_nothing_left(run.summary());
+}
+
+/// Without CAP_SYS_NICE and with no real-time limit, a priority is refused before anything
+/// starts: one line naming the file and the key, exit 2, no run folder.
+#[test]
+#[cfg_attr(netns_unavailable, ignore = "needs root, to drop a capability")]
+fn a_real_time_priority_without_permission_is_refused_before_the_run() {
+    let dir = fresh_dir("realtime-refused");
+    let output = std::process::Command::new("prlimit")
+        .args(["--rtprio=0", "setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice"])
+        .arg(env!("CARGO_BIN_EXE_looplab"))
+        .args(["run", "pendulum", "--duration", "0.2", "--set", "realtime.priority=20", "--out"])
+        .arg(&dir)
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("--set realtime.priority=20: key `realtime.priority`"), "{stderr}");
+    assert!(stderr.contains("CAP_SYS_NICE") && stderr.contains("now 0"), "{stderr}");
+    assert!(!dir.exists(), "no run folder for a refused run");
 }

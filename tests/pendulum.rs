@@ -82,6 +82,18 @@ fn bias_observer_finds_the_bias_and_stops_the_wheel() {
     }
 }
 
+/// A small bias, δ = 0.03 rad: 2 % of it (0.0006 rad) is less than one encoder count (0.000628
+/// rad), which the estimate cannot resolve, so the settling band is two counts: the bias settles
+/// within the first second, as it does for larger biases, not 12-20 s later.
+#[test]
+fn the_settling_band_is_never_narrower_than_two_encoder_counts() {
+    let r = run_in_process("small-bias", &["pendulum", "--duration", "4", "--set", "sensors.encoder.bias=0.03"]);
+    let settling = r.metric("observer_settling_s");
+    assert!(settling > 0.0 && settling < 1.0, "observer settling {settling} s");
+    let estimate = r.metric("bias_estimate_final_rad");
+    assert!((estimate - 0.03).abs() < 2.0 * 6.283185307179586e-4, "δ̂ = {estimate}, more than two counts from δ");
+}
+
 /// The sensors' zero-order hold, through the real sensors process: with the noise off, a
 /// sensor's value changes only at its own sample instants (plus its transport delay) and there
 /// equals the quantised truth plus bias.

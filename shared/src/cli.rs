@@ -454,6 +454,9 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
     {
         return bad_input(format!("--in-process: {why}; leave out --in-process to run the five processes"));
     }
+    if let Some((key, why)) = crate::runtime::realtime::refusal(&config, crate::runtime::wait::available_cpus()) {
+        return bad_input(config.error(key, why));
+    }
     if args.dashboard && !std::io::stdout().is_terminal() {
         return bad_input("--dashboard: standard output is not a terminal; run it in one, or leave out --dashboard");
     }

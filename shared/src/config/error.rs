@@ -4,7 +4,7 @@
 use std::fmt;
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-pub const COMMON_KEYS: [&str; 11] = [
+pub const COMMON_KEYS: [&str; 12] = [
     "scenario",
     "mode",
     "rate_hz",
@@ -14,6 +14,7 @@ pub const COMMON_KEYS: [&str; 11] = [
     "faults",
     "supervision",
     "wait",
+    "realtime",
     "hosts",
     "stages",
 ];

@@ -51,6 +51,29 @@ fn stats_row(out: &mut String, label: &str, s: &Stats) {
     );
 }
 
+/// With `[realtime]`: how the kernel scheduled each loop process once it was ready (its last
+/// start), and the memory it had locked.
+fn scheduling_line(s: &Summary) -> Option<String> {
+    let mut last = std::collections::BTreeMap::new();
+    for p in &s.processes {
+        if let Some(scheduling) = &p.scheduling {
+            last.insert(p.name.slot(), (p.name, scheduling));
+        }
+    }
+    let each: Vec<String> = last
+        .values()
+        .map(|(role, sch)| {
+            let policy = if sch.policy == "normal" {
+                "normal priority".into()
+            } else {
+                format!("{} {}", sch.policy, sch.priority)
+            };
+            format!("{role} {policy}, {:.1} MiB locked", sch.locked_kib as f64 / 1024.0)
+        })
+        .collect();
+    (!each.is_empty()).then(|| format!("  real time, as the kernel reports it: {}", each.join(" · ")))
+}
+
 /// The human-readable report.
 /// A finished run's summary.json, read back for `looplab report`.
 pub fn read_summary(run_dir: &std::path::Path) -> anyhow::Result<Summary> {
@@ -103,6 +126,9 @@ pub fn render(s: &Summary) -> String {
         s.skipped_ticks,
         missing_text(&s.monitor.missing)
     );
+    if let Some(line) = scheduling_line(s) {
+        let _ = writeln!(out, "{line}");
+    }
 
     let _ = writeln!(
         out,

@@ -23,6 +23,7 @@ use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
 pub use crate::model::scenario::ErrorMeasureInfo;
 use crate::model::scenario::Scenario;
+use crate::runtime::realtime::Scheduling;
 
 /// The layout version of `summary.json`: bump it on any incompatible change (a key removed,
 /// renamed, retyped or given another meaning). New keys are compatible.
@@ -186,6 +187,9 @@ pub struct ProcessInfo {
     /// A stage of the user's own (`[stages.<role>] command`): its command, as one line.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub command: Option<String>,
+    /// With `[realtime]`: how the kernel scheduled it once it was ready, and its locked memory.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scheduling: Option<Scheduling>,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
@@ -329,6 +333,9 @@ pub struct RunLog {
     pub faults: Vec<FaultSeen>,
     pub timeline: Vec<TimelineEntry>,
     pub restarts: Vec<RestartRecord>,
+    /// How each loop process was scheduled once it was ready, by role and incarnation (read
+    /// only when `[realtime]` asks for something).
+    pub scheduling: BTreeMap<(Role, u32), Scheduling>,
 }
 
 impl RunLog {
@@ -399,7 +406,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         wall_time_s,
         loops_per_s: if wall_ns > 0 { plant.loops.saturating_sub(1) as f64 / wall_time_s } else { 0.0 },
         restarts: starts.iter().map(|(&role, runs)| (role, runs.len().saturating_sub(1) as u32)).collect(),
-        processes: processes(config, starts, reports, &monitor),
+        processes: processes(config, starts, reports, &monitor, &log.scheduling),
         adaptive_waits: adaptive_waits(&plant, reports),
         latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
         jitter_ns: Jitter {
@@ -440,6 +447,7 @@ fn processes(
     starts: &BTreeMap<Role, Vec<Start>>,
     reports: &Reports,
     monitor: &MonitorReport,
+    scheduling: &BTreeMap<(Role, u32), Scheduling>,
 ) -> Vec<ProcessInfo> {
     let mut processes = vec![];
     for role in Role::BRIDGES.into_iter().chain(Role::START_ORDER) {
@@ -456,6 +464,7 @@ fn processes(
                 processed: report.map(|r| r.processed).or_else(|| recorded.map(|r| r.get(n).copied().unwrap_or(0))),
                 skipped: report.map(|r| r.skipped),
                 command: config.stages.command(role).map(|stage| stage.text()),
+                scheduling: scheduling.get(&(role, incarnation)).cloned(),
             });
         }
     }
@@ -755,6 +764,7 @@ pub(crate) mod tests {
             processed: None,
             skipped: None,
             command: None,
+            scheduling: None,
         }];
         let json = serde_json::to_value(&s).unwrap();
         let keys: Vec<&String> = json["restarts"].as_object().unwrap().keys().collect();

@@ -79,6 +79,10 @@ pub(crate) fn run_process_as(
     let result = (|| -> Result<()> {
         let stop = StopFlag::install()?;
         let (config, scenario) = catalog.load_resolved(Path::new(&args.launch))?;
+        // Before any thread starts, so that they all inherit it; the monitor stays low.
+        if role.in_loop() {
+            crate::runtime::realtime::apply(&config.realtime)?;
+        }
         let ipc = Ipc::with_layout(name, &args.run_id, config.mode, layout)?;
         let context = Context {
             config,

@@ -33,6 +33,11 @@ pub fn refusal(config: &LaunchConfig) -> Option<String> {
     if let Some((host, _)) = config.hosts.remote() {
         return Some(format!("the launch file places a stage on host {host}; one process runs on one machine"));
     }
+    if config.realtime.any() {
+        return Some(
+            "[realtime] sets the priority of the loop's processes, and one process has none of its own".into(),
+        );
+    }
     if let Some((role, stage)) = config.stages.commands.iter().next() {
         return Some(format!("stages.{role}.command runs the {role} as a process of its own (`{}`)", stage.text()));
     }

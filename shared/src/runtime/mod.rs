@@ -9,6 +9,7 @@ pub mod ipc;
 pub mod plant;
 pub mod private_file;
 pub mod reader_state;
+pub mod realtime;
 pub mod relay;
 pub mod run_file;
 pub mod run_storage;

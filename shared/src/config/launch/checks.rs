@@ -8,6 +8,7 @@ use crate::config::faults::{
     FAULT_KINDS, FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, Supervision,
 };
 use crate::config::launch::types::{LaunchConfig, MAX_DURATION_S, MAX_LOOPS, MAX_RATE_HZ, Origins, PerComponent};
+use crate::config::realtime::MAX_PRIORITY;
 use crate::config::wait::{MAX_WAIT_US, WaitSettings};
 use crate::contract::msg::MAX_SENSORS;
 use crate::contract::role::Role;
@@ -275,4 +276,14 @@ pub(super) fn check_wait(w: &WaitSettings, config: &LaunchConfig) -> Result<(), 
         }
     }
     Ok(())
+}
+
+pub(super) fn check_realtime(config: &LaunchConfig) -> Result<(), LaunchError> {
+    match config.realtime.priority {
+        Some(p) if !(1..=MAX_PRIORITY).contains(&p) => {
+            Err(config
+                .error("realtime.priority", format!("must be a SCHED_FIFO priority, 1 to {MAX_PRIORITY}, got {p}")))
+        }
+        _ => Ok(()),
+    }
 }

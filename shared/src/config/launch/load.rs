@@ -10,10 +10,11 @@ use crate::config::error::{COMMON_KEYS, LaunchError};
 use crate::config::faults::{FaultSpec, Supervision};
 use crate::config::hosts::Hosts;
 use crate::config::launch::checks::{
-    check_common, check_fault, check_finite, check_sensors, check_supervision, check_wait,
+    check_common, check_fault, check_finite, check_realtime, check_sensors, check_supervision, check_wait,
 };
 use crate::config::launch::overrides::{Override, merge, set_dotted};
 use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
+use crate::config::realtime::RealtimeSettings;
 use crate::config::schema::ScenarioSchema;
 use crate::config::stages::Stages;
 use crate::config::wait::WaitSettings;
@@ -35,6 +36,8 @@ struct CommonKeys {
     supervision: Supervision,
     #[serde(default)]
     wait: WaitSettings,
+    #[serde(default)]
+    realtime: RealtimeSettings,
     /// Read by `Hosts::parse`, for errors that name the key.
     #[serde(default)]
     hosts: toml::Table,
@@ -211,6 +214,7 @@ fn from_document(
         faults: common.faults,
         supervision: common.supervision,
         wait: common.wait,
+        realtime: common.realtime,
         hosts,
         stages,
         document,
@@ -221,6 +225,7 @@ fn from_document(
     check_sensors(&config)?;
     check_supervision(&config.supervision, &config)?;
     check_wait(&config.wait, &config)?;
+    check_realtime(&config)?;
     for (i, fault) in config.faults.iter().enumerate() {
         check_fault(fault, &config, &format!("faults.{i}"))?;
     }

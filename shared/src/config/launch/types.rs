@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::error::LaunchError;
 use crate::config::faults::{FaultSpec, Supervision};
 use crate::config::hosts::Hosts;
+use crate::config::realtime::RealtimeSettings;
 use crate::config::schema::{ScenarioSchema, SignalLayout};
 use crate::config::stages::Stages;
 use crate::config::wait::WaitSettings;
@@ -108,6 +109,8 @@ pub struct LaunchConfig {
     pub supervision: Supervision,
     /// How each loop process waits for its input.
     pub wait: WaitSettings,
+    /// Real-time priority and memory locking of the loop's processes.
+    pub realtime: RealtimeSettings,
     /// Stages placed on another host (none: the whole loop runs here).
     pub hosts: Hosts,
     /// Stages of the user's own, run in place of the built-in ones.

@@ -134,6 +134,14 @@ impl Supervisor<'_> {
     fn ready(&mut self, role: Role, incarnation: u32) {
         let ns = now_ns();
         self.processes[role].became_ready(ns);
+        // It set its own priority and locked its memory before it said ready: read back what it got.
+        if role.in_loop()
+            && self.config.realtime.any()
+            && let Some(pid) = self.processes[role].row().pid
+            && let Ok(scheduling) = crate::runtime::realtime::read(pid)
+        {
+            self.log.scheduling.insert((role, incarnation), scheduling);
+        }
         if incarnation == 0 {
             return;
         }

@@ -145,6 +145,8 @@ pub struct Pendulum {
     encoder: usize,
     wheel_speed: usize,
     bias_true: f64,
+    /// The encoder's count, rad (0: not quantised).
+    encoder_quantum: f64,
     dt: f64,
 }
 
@@ -231,6 +233,7 @@ impl Pendulum {
             encoder,
             wheel_speed,
             bias_true,
+            encoder_quantum: encoder_spec.quantum,
             dt: c.dt(),
         })
     }
@@ -297,12 +300,21 @@ impl ScenarioParts for Pendulum {
     fn metrics(&self) -> Box<dyn Metrics> {
         Box::new(PendulumMetrics {
             bias_true: self.bias_true,
+            bias_band: settling_band(self.bias_true, self.encoder_quantum),
             current_limit: self.model.current_limit_a,
             observer: self.estimator.kind == Kind::BiasObserver,
             dt: self.dt,
             ..Default::default()
         })
     }
+}
+
+/// The band the bias estimate settles into: 2 % of the bias, but never narrower than two encoder
+/// counts. The estimate cannot resolve less than a count, and the rounded angle's limit cycle
+/// keeps it wandering by up to about 1.4 counts for good (δ = 0.03 rad, 20 s): a 2 % band there
+/// (0.0006 rad, under one 0.000628 rad count) called it unsettled until 12-20 s.
+fn settling_band(bias: f64, encoder_quantum: f64) -> f64 {
+    (0.02 * bias.abs()).max(2.0 * encoder_quantum)
 }
 
 /// Seconds at the end of the run over which the settled values are averaged (the encoder's
@@ -320,7 +332,9 @@ struct PendulumMetrics {
     dt: f64,
     last: Option<(f64, f64, f64, f64)>,
     theta_max_abs: f64,
-    /// Last time the bias estimate was outside the 2% band (None: never).
+    /// Half-width of the band the bias estimate settles into, rad.
+    bias_band: f64,
+    /// Last time the bias estimate was outside the band (None: never).
     bias_last_outside: Option<f64>,
     /// (t, θ, φ̇) of the rows in the final window.
     recent: std::collections::VecDeque<(f64, f64, f64)>,
@@ -336,7 +350,7 @@ impl Metrics for PendulumMetrics {
         }
         self.last = Some((row.t, theta, wheel_speed, bias_estimate));
         self.theta_max_abs = max_keeping_nan(self.theta_max_abs, self.reference.error(row.t, row.state));
-        if (bias_estimate - self.bias_true).abs() >= 0.02 * self.bias_true.abs() {
+        if (bias_estimate - self.bias_true).abs() >= self.bias_band {
             self.bias_last_outside = Some(row.t);
         }
         self.recent.push_back((row.t, theta, wheel_speed));
@@ -360,7 +374,7 @@ impl Metrics for PendulumMetrics {
         m.insert("bias_true_rad".into(), self.bias_true);
         m.insert("bias_estimate_final_rad".into(), bias_estimate);
         // Settled means inside the band from some time on; a run that ends outside it (or a
-        // zero bias, which has no 2% band) has no settling time.
+        // zero bias, which has nothing to settle to) has no settling time.
         if self.observer && self.bias_true != 0.0 {
             match self.bias_last_outside {
                 None => {
