@@ -4,10 +4,11 @@
 use std::fmt;
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-pub const COMMON_KEYS: [&str; 11] = [
+pub const COMMON_KEYS: [&str; 12] = [
     "scenario",
     "mode",
     "rate_hz",
+    "deadline_us",
     "duration_s",
     "seed",
     "sensors",
