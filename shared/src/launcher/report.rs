@@ -113,8 +113,8 @@ pub fn render(s: &Summary) -> String {
     let crossing = |hop: &str| s.network.as_ref().is_some_and(|n| n.crossing_hops.iter().any(|h| h == hop));
     for (hop, _, _) in HOPS {
         let label = if crossing(hop) { format!("{} ⇄", hop.replace('_', " ")) } else { hop.replace('_', " ") };
-        if s.ran_in_process() {
-            // Calls in one thread: no hop has an IPC meaning there.
+        if s.ran_in_process() && hop.contains("_to_") {
+            // Calls in one thread: a hop from one process to the next has no meaning there.
             let _ = writeln!(
                 out,
                 "  {label:<26}{:>9}      n/a: in one process, not IPC",

@@ -8,6 +8,7 @@ use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::coord::combinators::{BindKeyPoints, LogCoord, WithKeyPoints};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::contract::report::HOPS;
 use crate::launcher::summary::Summary;
@@ -310,14 +311,16 @@ fn draw_cdf(area: &Area, title: &str, series: &[Series], deadlines_ns: &[u64], s
         let points = cdf_points(samples, floor_share, hi * 1.25);
         chart.draw_series(LineSeries::new(points, colour(i).stroke_width(2))).map_err(plot_error)?;
     }
-    let label_style = (FONT, sizes.text - 1).into_font().color(&BLACK);
+    // Left of its line, which may be at the chart's right edge.
+    let label_style = (FONT, sizes.text - 1).into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Top));
     for deadline in deadlines_ns {
         let x = us(*deadline);
         chart
             .draw_series(DashedLineSeries::new([(x, floor_share), (x, 1.0)], 6, 4, BLACK.stroke_width(1)))
             .map_err(plot_error)?;
         let text = format!("deadline {}", duration_label(*deadline));
-        chart.draw_series(std::iter::once(Text::new(text, (x, 1.0), label_style.clone()))).map_err(plot_error)?;
+        let label = EmptyElement::at((x, 1.0)) + Text::new(text, (-4, 3), label_style.clone());
+        chart.draw_series(std::iter::once(label)).map_err(plot_error)?;
     }
     let left = plot.get_base_pixel().0 + (sizes.text * 4 + 5) as i32 + 12 - area.get_base_pixel().0;
     draw_legend(&legend, left, series, sizes)
@@ -329,8 +332,8 @@ pub fn latency_or_missed(ns: u64) -> String {
     if ns == MISSED { "missed".into() } else { duration_label(ns) }
 }
 
-/// What the legend says of a series after its name: p50, p99, max, and the share of loops at
-/// +∞ where there are any.
+/// What the legend says of a series after its name: p50, p99, max, and the loops at +∞ (no
+/// command came) where there are any, as a share of the series' loops.
 pub fn legend_stats(samples: &[u64]) -> Vec<String> {
     let mut stats: Vec<String> = match samples {
         [] => vec!["no samples".into()],
@@ -344,7 +347,7 @@ pub fn legend_stats(samples: &[u64]) -> Vec<String> {
     };
     let missed = missed_count(samples);
     if missed > 0 {
-        stats.push(format!("{missed} missed ({:.1} %)", missed as f64 * 100.0 / samples.len() as f64));
+        stats.push(format!("{missed} without a command ({:.1} %)", missed as f64 * 100.0 / samples.len() as f64));
     }
     stats
 }
@@ -467,6 +470,21 @@ mod tests {
         assert_eq!(duration_label(8_513_516), "8.51 ms");
         assert_eq!(duration_label(12_345_678), "12.3 ms");
         assert_eq!(duration_label(1_234_567_890), "1235 ms");
+    }
+
+    #[test]
+    fn loops_without_a_command_are_at_infinity_and_the_curve_plateaus_at_their_share() {
+        // 8 loops got a command (1 to 8 µs), 2 never did.
+        let mut samples: Vec<u64> = (1..=8).map(|us| us * 1000).collect();
+        samples.extend([MISSED, MISSED]);
+        assert_eq!(missed_count(&samples), 2);
+        let points = cdf_points(&samples, 0.01, 500.0);
+        assert_eq!(points.first(), Some(&(1.0, 1.0)));
+        // The slowest finite loop, then the plateau at 2 of 10 out to the chart's edge.
+        assert_eq!(points[points.len() - 3..], [(8.0, 0.3), (8.0, 0.2), (500.0, 0.2)]);
+        assert_eq!(legend_stats(&samples), ["p50 5.00 µs", "p99 missed", "max missed", "2 without a command (20.0 %)"]);
+        // Every loop missed: a flat line at 100 %.
+        assert_eq!(cdf_points(&[MISSED], 0.01, 500.0), [(0.01, 1.0), (500.0, 1.0)]);
     }
 
     #[test]
