@@ -8,6 +8,7 @@ pub const COMMON_KEYS: [&str; 12] = [
     "scenario",
     "mode",
     "rate_hz",
+    "deadline_us",
     "duration_s",
     "seed",
     "sensors",

@@ -383,7 +383,7 @@ fn render_title(frame: &mut Frame, area: Rect, view: &View) {
             status.loops_recorded,
             view.header.loops_planned,
             status.loops_recorded as f64 * 100.0 / planned as f64,
-            status.deadline_misses
+            crate::contract::protocol::misses_text(status)
         )),
     ]);
     let [left, right] = Layout::horizontal([Constraint::Min(0), Constraint::Length(10)]).areas(area);
@@ -646,7 +646,9 @@ mod tests {
     fn the_whole_screen_fits_120_by_40() {
         let view = view();
         let lines = screen(120, 40, |f| render(f, &view));
-        assert!(lines[0].contains("pendulum · realtime · 1000 Hz · loop 300 / 2000 (15 %) · deadline misses 1"));
+        assert!(
+            lines[0].contains("pendulum · realtime · 1000 Hz · loop 300 / 2000 (15 %) · deadline misses 1 (0.3 %)")
+        );
         assert!(lines[0].ends_with("q: quit"));
         assert!(lines.iter().any(|l| l.contains("┌ theta [rad]: true, estimate ")));
         assert!(lines.iter().any(|l| l.contains("┌ current [A]: command ")));

@@ -109,7 +109,7 @@ pub fn render(s: &Summary) -> String {
     };
     // Lockstep has no clock, so no deadline to miss: a 0 there would read as a result.
     let misses = match s.mode {
-        Mode::Realtime => s.deadline_misses.to_string(),
+        Mode::Realtime => deadline_text(s),
         Mode::Lockstep => "n/a (lockstep)".into(),
     };
     let _ = writeln!(
@@ -139,7 +139,16 @@ pub fn render(s: &Summary) -> String {
     let crossing = |hop: &str| s.network.as_ref().is_some_and(|n| n.crossing_hops.iter().any(|h| h == hop));
     for (hop, _, _) in HOPS {
         let label = if crossing(hop) { format!("{} ⇄", hop.replace('_', " ")) } else { hop.replace('_', " ") };
-        stats_row(&mut out, &label, s.latency_ns.hops.get(hop).unwrap_or(&empty));
+        if s.ran_in_process() && hop.contains("_to_") {
+            // Calls in one thread: a hop from one process to the next has no meaning there.
+            let _ = writeln!(
+                out,
+                "  {label:<26}{:>9}      n/a: in one process, not IPC",
+                s.latency_ns.hops.get(hop).map_or(0, |h| h.count)
+            );
+        } else {
+            stats_row(&mut out, &label, s.latency_ns.hops.get(hop).unwrap_or(&empty));
+        }
     }
     stats_row(&mut out, "END TO END", &s.latency_ns.end_to_end);
     if let Some(network) = &s.network {
@@ -208,6 +217,13 @@ pub fn render(s: &Summary) -> String {
         dir = s.run_dir
     );
     out
+}
+
+/// Real time: "1508 of 10000 (15.1 %), deadline 1.000 ms".
+fn deadline_text(s: &Summary) -> String {
+    let share = s.deadline_miss_share.unwrap_or(s.deadline_misses as f64 / s.loops.max(1) as f64);
+    let deadline = s.deadline_us.map_or(String::new(), |us| format!(", deadline {:.3} ms", us / 1e3));
+    format!("{} of {} ({:.1} %){deadline}", s.deadline_misses, s.loops, share * 100.0)
 }
 
 /// The loops without a record, for the report's monitor line.
@@ -560,8 +576,15 @@ mod tests {
         assert!(lines[2].starts_with("  completed: 1000 of 1000 loops in 1.00 s (1000 loops/s)"), "{}", lines[2]);
         // Lockstep has no deadline: no count that would read as a result.
         assert!(lines[2].contains(" · deadline misses n/a (lockstep) · "), "{}", lines[2]);
-        let realtime = render(&Summary { mode: Mode::Realtime, deadline_misses: 27, ..s.clone() });
-        assert!(realtime.lines().nth(2).unwrap().contains(" · deadline misses 27 · "), "{realtime}");
+        let realtime = render(&Summary {
+            mode: Mode::Realtime,
+            deadline_misses: 27,
+            deadline_us: Some(1000.0),
+            deadline_miss_share: Some(0.027),
+            ..s.clone()
+        });
+        let line = realtime.lines().nth(2).unwrap();
+        assert!(line.contains(" · deadline misses 27 of 1000 (2.7 %), deadline 1.000 ms · "), "{realtime}");
         let header = lines.iter().position(|l| l.trim_start().starts_with("process ")).expect("restarts table");
         assert_eq!(cells(lines[header]), ["process", "died at", "cleaned", "backoff", "started", "ready"]);
         assert_eq!(cells(lines[header + 1]), ["sensors", "1500.3", "4.0", "10.0", "12.5", "-"]);

@@ -67,7 +67,16 @@ pub struct Summary {
     /// Why the run ended early, when it did.
     #[schemars(with = "Option<String>")]
     pub stopped_because: Option<StopReason>,
+    /// Real time: loops whose state went out but whose command did not reach the plant by the
+    /// deadline (late, or never). Lockstep has no deadline: always 0 there.
     pub deadline_misses: u64,
+    /// Real time: how long after its tick was due each loop's command had to reach the plant,
+    /// µs (`deadline_us`, by default one loop period). None in lockstep, which has no deadline.
+    #[serde(default)]
+    pub deadline_us: Option<f64>,
+    /// Real time: `deadline_misses` as a share of `loops` (0 to 1). None in lockstep.
+    #[serde(default)]
+    pub deadline_miss_share: Option<f64>,
     pub rejected_commands: u64,
     pub skipped_ticks: u64,
     /// Ticks integrated with `supervision.on_stale` applied (real time: no fresh command).
@@ -119,6 +128,14 @@ pub struct Summary {
     /// With a stage on another host: the link, the other host's clock and the crossing topics.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub network: Option<Network>,
+}
+
+impl Summary {
+    /// The loop ran in one process (`--in-process`): no process was started, so its hops are
+    /// calls, not IPC.
+    pub fn ran_in_process(&self) -> bool {
+        self.processes.is_empty()
+    }
 }
 
 /// A map by process written with its keys in alphabetical order, as `summary.json` always had.
@@ -373,6 +390,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
     let plant = reports.plant.clone().unwrap_or_default();
     let monitor = reports.monitor.clone().unwrap_or_default();
     let counters = plant.counters;
+    let realtime = config.mode == Mode::Realtime;
     let wall_ns = plant.last_publish_ns.saturating_sub(plant.first_publish_ns);
     let wall_time_s = wall_ns as f64 * 1e-9;
     let missing = monitor.missing.clone().up_to(monitor.loops_seen, plant.loops);
@@ -398,6 +416,8 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         completed: *outcome == Outcome::Completed && !plant.stopped_early && plant.loops == config.loops(),
         stopped_because: StopReason::of(outcome, plant.stopped_early),
         deadline_misses: counters.deadline_misses,
+        deadline_us: realtime.then(|| config.deadline_ns() as f64 / 1e3),
+        deadline_miss_share: realtime.then(|| counters.deadline_misses as f64 / plant.loops.max(1) as f64),
         rejected_commands: counters.rejected_commands,
         skipped_ticks: counters.skipped_ticks,
         stale_ticks: counters.stale_ticks,
@@ -565,6 +585,8 @@ pub(crate) mod tests {
             completed: true,
             stopped_because: None,
             deadline_misses: 0,
+            deadline_us: None,
+            deadline_miss_share: None,
             rejected_commands: 0,
             skipped_ticks: 0,
             stale_ticks: 0,

@@ -56,6 +56,18 @@ impl LoopParts {
         self.record.map(|r| r.header.trace.end_to_end_ns())
     }
 
+    /// Whether the loop missed its deadline (real time, `wall_clock`): its record says so, or
+    /// its state went out and no command ever reached the plant. None where that is not known
+    /// (neither part arrived) and in lockstep, which has no deadline. The plant counts the same
+    /// loops (`PlantCore::advance`).
+    pub fn deadline_missed(&self, wall_clock: bool) -> Option<bool> {
+        match (&self.record, &self.state) {
+            (Some(r), _) => Some(r.deadline_miss != 0),
+            (None, Some(_)) if wall_clock => Some(true),
+            _ => None,
+        }
+    }
+
     /// Each hop of [`HOPS`], from the loop record.
     pub fn hops_ns(&self) -> Option<[u64; HOPS.len()]> {
         self.record.map(|r| {

@@ -46,6 +46,8 @@ pub struct PlantCore {
     /// Real-time mode: when tick 0 was and the period (ns); tick j is due at start + j·period.
     /// None in lockstep mode, where every command is in time by construction.
     schedule: Option<(u64, u64)>,
+    /// Real time: command k is in time if it arrives by tick k's due time + this (ns).
+    deadline_ns: u64,
     /// The command in effect (zero-order hold): the last valid one that has taken effect.
     held: [f64; MAX_INPUT],
     /// What the actuator applied over the last period: the held command, or what the
@@ -59,6 +61,8 @@ pub struct PlantCore {
     queued: VecDeque<(u64, [f64; MAX_INPUT])>,
     /// The newest loop whose command arrived in time (valid or not).
     pub in_time_k: Option<u64>,
+    /// The newest loop whose command arrived at all, in time or late.
+    pub arrived_k: Option<u64>,
     /// The newest tick whose state was published.
     pub published_k: Option<u64>,
     pub counters: PlantCounters,
@@ -83,6 +87,7 @@ impl PlantCore {
             dt: config.dt(),
             incarnation,
             schedule: None,
+            deadline_ns: config.deadline_ns(),
             held,
             applied: held,
             held_arrived: 0,
@@ -91,6 +96,7 @@ impl PlantCore {
             on_stale: supervision.on_stale,
             queued: VecDeque::new(),
             in_time_k: None,
+            arrived_k: None,
             published_k: None,
             counters: PlantCounters::default(),
             report: PlantReport::default(),
@@ -128,13 +134,14 @@ impl PlantCore {
     }
 
     /// Takes one command that arrived at `arrived`: queues it if valid, and returns the loop
-    /// record. The command of loop k is in time if it arrives before tick k+1 is due.
+    /// record. The command of loop k is in time if it arrives by tick k's due time + the
+    /// deadline (by default one period: before tick k+1 is due).
     pub fn accept(&mut self, command: &Command, arrived: u64) -> LoopRecord {
         let k = command.header.k;
         let m = self.limits.len();
         let lost = command.header.lost != 0;
         let valid = command.u[..m].iter().zip(&self.limits).all(|(u, (lo, hi))| u.is_finite() && lo <= u && u <= hi);
-        let in_time = self.due(k + 1).is_none_or(|due| arrived <= due);
+        let in_time = self.due(k).is_none_or(|due| arrived <= due + self.deadline_ns);
         if lost {
             self.counters.lost_commands += 1;
         } else if valid {
@@ -145,6 +152,7 @@ impl PlantCore {
         if in_time {
             self.in_time_k = self.in_time_k.max(Some(k));
         }
+        self.arrived_k = self.arrived_k.max(Some(k));
         self.arrivals.observe(k, command.header.trace.get(Stamp::PlantPublish), arrived);
         self.report.commands += 1;
         let mut record = LoopRecord {
@@ -161,8 +169,8 @@ impl PlantCore {
 
     /// Integrates one period, tick k → k+1, with the newest valid command that had arrived
     /// when tick k+1 was due (zero-order hold), or `on_stale` once that command is older than
-    /// the timeout. If tick k's state went out and command k was not in by then, loop k missed
-    /// its deadline.
+    /// the timeout. If tick k's state went out and command k was not in by its deadline (at most
+    /// one period, so by now), loop k missed it.
     pub fn advance(&mut self) {
         let due = self.due(self.k + 1);
         while let Some(&(arrived, u)) = self.queued.front() {
@@ -262,6 +270,7 @@ impl PlantCore {
         self.held_arrived = s.held_arrived;
         self.schedule = (s.schedule[1] > 0).then_some((s.schedule[0], s.schedule[1]));
         self.in_time_k = u64::try_from(s.in_time_k).ok();
+        self.arrived_k = self.in_time_k;
         self.published_k = u64::try_from(s.published_k).ok();
         self.counters = s.counters;
         self.report.published = s.published;
@@ -421,7 +430,8 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
             while p.k < loops && !context.stop.requested() {
                 // Next: command k, if its state went out and it is not in yet, else the tick.
                 let next_tick = start_ns + (p.k + 1) * period_ns;
-                let awaiting_command = p.published_k == Some(p.k) && p.in_time_k != Some(p.k);
+                // A command that came after its deadline is not awaited any more either.
+                let awaiting_command = p.published_k == Some(p.k) && p.arrived_k.is_none_or(|k| k < p.k);
                 let command_due = p.arrivals.due(p.k).filter(|due| awaiting_command && *due < next_tick);
                 waiter.wait(
                     Some(command_due.unwrap_or(next_tick)),

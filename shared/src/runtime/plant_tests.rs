@@ -83,6 +83,29 @@ fn a_command_after_its_deadline_is_a_miss_and_takes_effect_one_period_later() {
 }
 
 #[test]
+fn a_deadline_shorter_than_a_period_ends_at_the_tick_plus_the_deadline() {
+    // 300 µs: command k is in time up to 300 µs after tick k is due, and no later.
+    let mut core = realtime_with(&["deadline_us=300"]);
+    // (loop, arrival after its tick, flagged a miss, misses counted so far)
+    for (k, late_by, miss, misses) in
+        [(0, 300_000, 0, 0), (1, 300_001, 1, 1), (2, 100_000, 0, 1), (3, PERIOD - 1, 1, 2)]
+    {
+        publish(&mut core);
+        let record = core.accept(&command(k, 1.0), due(k) + late_by);
+        assert_eq!(record.deadline_miss, miss, "loop {k}, {late_by} ns after its tick");
+        core.advance();
+        assert_eq!(core.counters.deadline_misses, misses, "after loop {k}");
+    }
+    // A late command still takes effect at the next tick: the deadline only judges it.
+    assert_eq!(applied(&mut core), 1.0);
+    // The default is one period: 999 999 ns after the tick is in time, as before.
+    let mut default = realtime();
+    publish(&mut default);
+    assert_eq!(default.accept(&command(0, 1.0), due(0) + PERIOD).deadline_miss, 0);
+    assert_eq!(default.accept(&command(0, 1.0), due(0) + PERIOD + 1).deadline_miss, 1);
+}
+
+#[test]
 fn the_newest_command_in_by_the_tick_wins() {
     let mut core = realtime();
     publish(&mut core);

@@ -136,11 +136,20 @@ fn panels(runs: &[Run]) -> Vec<Panel> {
             .collect()
     };
     let end_to_end = runs[0].latencies.len() - 1;
-    let first = Panel { title: "end-to-end loop latency".into(), series: series(end_to_end, true) };
-    let hops = runs[0].latencies[..end_to_end]
-        .iter()
-        .enumerate()
-        .map(|(h, (hop, _))| Panel { title: format!("hop {hop}"), series: series(h, false) });
+    // Each run's deadline, once.
+    let mut deadlines: Vec<u64> = runs.iter().filter_map(|r| latency::deadline_ns(&r.summary)).collect();
+    deadlines.sort_unstable();
+    deadlines.dedup();
+    let first = Panel {
+        title: "end-to-end loop latency".into(),
+        series: series(end_to_end, true),
+        deadlines_ns: deadlines.clone(),
+    };
+    let hops = runs[0].latencies[..end_to_end].iter().enumerate().map(|(h, (hop, _))| Panel {
+        title: format!("hop {hop}"),
+        series: series(h, false),
+        deadlines_ns: deadlines.clone(),
+    });
     std::iter::once(first).chain(hops).collect()
 }
 
@@ -181,7 +190,12 @@ pub fn metric_text(value: f64) -> String {
 
 /// A latency in the table: µs with one decimal, as the run's report prints it.
 fn micros_text(ns: Option<u64>) -> String {
-    ns.map_or("-".into(), |ns| format!("{:.1}", ns as f64 / 1e3))
+    match ns {
+        None => "-".into(),
+        // Among the loops whose command never came.
+        Some(latency::MISSED) => "missed".into(),
+        Some(ns) => format!("{:.1}", ns as f64 / 1e3),
+    }
 }
 
 /// A line of the table below its header.

@@ -20,6 +20,19 @@ pub(super) fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
     if c.rate_hz > MAX_RATE_HZ {
         return Err(c.error("rate_hz", format!("must be at most {MAX_RATE_HZ} Hz, got {}", c.rate_hz)));
     }
+    if let Some(deadline_us) = c.deadline_us {
+        // Longer than a period would need the plant to keep several loops open at once.
+        let period_us = 1e6 / c.rate_hz;
+        if !(deadline_us >= 1.0 && deadline_us <= period_us) {
+            return Err(c.error(
+                "deadline_us",
+                format!(
+                    "must be from 1 µs to one loop period ({period_us} µs at rate_hz = {}), got {deadline_us}",
+                    c.rate_hz
+                ),
+            ));
+        }
+    }
     if !(c.duration_s.is_finite() && c.duration_s > 0.0 && c.duration_s <= MAX_DURATION_S) {
         return Err(c.error(
             "duration_s",

@@ -26,6 +26,9 @@ struct CommonKeys {
     scenario: String,
     mode: Mode,
     rate_hz: f64,
+    /// None: one loop period.
+    #[serde(default)]
+    deadline_us: Option<f64>,
     duration_s: f64,
     seed: u64,
     #[serde(default)]
@@ -208,6 +211,7 @@ fn from_document(
         scenario: common.scenario,
         mode: common.mode,
         rate_hz: common.rate_hz,
+        deadline_us: common.deadline_us,
         duration_s: common.duration_s,
         seed: common.seed,
         sensors: common.sensors.into_iter().filter(|(_, s)| s.enabled).collect(),

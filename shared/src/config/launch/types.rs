@@ -100,6 +100,10 @@ pub struct LaunchConfig {
     pub scenario: String,
     pub mode: Mode,
     pub rate_hz: f64,
+    /// Real time: how long after its tick is due loop k's command may reach the plant before
+    /// the loop counts as a deadline miss, µs. None: one loop period (the command is in before
+    /// the next tick is due).
+    pub deadline_us: Option<f64>,
     pub duration_s: f64,
     pub seed: u64,
     /// Sorted by name: this order is the order of readings in every `Measurements` message.
@@ -150,6 +154,21 @@ impl LaunchConfig {
     /// Loop period in seconds.
     pub fn dt(&self) -> f64 {
         1.0 / self.rate_hz
+    }
+
+    /// The deadline in ns: `deadline_us`, or one loop period, the plant's own (so that the
+    /// default is exactly "before tick k+1 is due").
+    pub fn deadline_ns(&self) -> u64 {
+        match self.deadline_us {
+            // At most one period (checked at load), so well within u64 nanoseconds.
+            Some(us) => (us * 1e3).round() as u64,
+            None => self.period_ns(),
+        }
+    }
+
+    /// The loop period in ns, as the plant's schedule has it.
+    pub fn period_ns(&self) -> u64 {
+        (self.dt() * 1e9).round() as u64
     }
 
     /// Number of loops the run has: duration × rate, rounded to the nearest tick.

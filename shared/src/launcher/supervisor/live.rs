@@ -61,8 +61,14 @@ impl Live {
     /// The monitor's latest status.
     pub(super) fn status(&self, status: Box<MonitorStatus>) {
         self.progress.set_position(status.loops_recorded);
-        let p99 = status.end_to_end_p99_ns.map_or("-".into(), |ns| format!("{:.0} µs", ns as f64 / 1000.0));
-        self.progress.set_message(format!("end-to-end p99 {p99} · deadline misses {}", status.deadline_misses));
+        // The p99 is of the loops that got a command: over 1 % without one, it is among them.
+        let p99 = match status.end_to_end_p99_ns {
+            _ if status.deadline_misses * 100 > status.loops_written => "missed".into(),
+            Some(ns) => format!("{:.0} µs", ns as f64 / 1000.0),
+            None => "-".into(),
+        };
+        let misses = crate::contract::protocol::misses_text(&status);
+        self.progress.set_message(format!("end-to-end p99 {p99} · deadline misses {misses}"));
         if let Some(dashboard) = &self.dashboard {
             dashboard.send(Update::Status(status));
         }

@@ -1,5 +1,7 @@
 //! `loops.csv`: one row per loop with every CLOCK_MONOTONIC stamp of its trace, the end-to-end
-//! latency, the deadline-miss and rejected flags and the plant's tick timing.
+//! latency, the deadline-miss and rejected flags and the plant's tick timing. A real-time loop
+//! whose state went out but whose command never came has a row too: no stamps, no end to end,
+//! flagged a deadline miss, as the plant counts it.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -7,6 +9,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::config::launch::Mode;
 use crate::contract::msg::LoopTrace;
 use crate::monitor::layout::column_name;
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
@@ -14,6 +17,8 @@ use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 pub struct LoopsCsv {
     file: BufWriter<File>,
     run_dir: PathBuf,
+    /// Real time: a loop without a command missed its deadline.
+    wall_clock: bool,
 }
 
 impl LoopsCsv {
@@ -22,7 +27,8 @@ impl LoopsCsv {
         if new {
             writeln!(file, "{}", columns().join(","))?;
         }
-        Ok(Self { file, run_dir: setup.run_dir.to_path_buf() })
+        let wall_clock = setup.config.mode == Mode::Realtime;
+        Ok(Self { file, run_dir: setup.run_dir.to_path_buf(), wall_clock })
     }
 }
 
@@ -59,7 +65,15 @@ impl RunSink for LoopsCsv {
                 }
                 row.push_str(&format!(",{e2e},{},{}", r.deadline_miss, r.rejected));
             }
-            _ => row.push_str(&",".repeat(11)),
+            // No stamps and no end to end; the flags where the miss is known (a command that
+            // never came was not rejected either).
+            _ => {
+                row.push_str(&",".repeat(LoopTrace::STAMP_NAMES.len() + 1));
+                match joined.parts.deadline_missed(self.wall_clock) {
+                    Some(missed) => row.push_str(&format!(",{},0", u8::from(missed))),
+                    None => row.push_str(",,"),
+                }
+            }
         }
         match joined.tick_timing() {
             Some(tm) => row.push_str(&format!(",{},{},{}", tm.scheduled_ns, tm.wake_ns, tm.period_ns)),

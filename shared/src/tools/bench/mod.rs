@@ -620,10 +620,11 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
         // Four one-way hops, as a loop of them would take at best.
         curves.push(("floor: 4 × spin hop (median)".into(), vec![4 * sorted(spin.clone())[spin.len() / 2]]));
     }
-    plot::cdf(&out.join("latency-cdf.png"), "end-to-end loop latency, 1 kHz", &curves)?;
+    // At 1 kHz the default deadline is one period.
+    plot::cdf(&out.join("latency-cdf.png"), "end-to-end loop latency, 1 kHz", &curves, &[1_000_000])?;
     let floor_curves: Vec<(String, Vec<u64>)> =
         floor.into_iter().map(|(k, v)| (format!("iceoryx2 hop, {k}"), sorted(v))).collect();
-    plot::cdf(&out.join("floor-cdf.png"), "one-way iceoryx2 hop, loop message size, 1 kHz", &floor_curves)?;
+    plot::cdf(&out.join("floor-cdf.png"), "one-way iceoryx2 hop, loop message size, 1 kHz", &floor_curves, &[])?;
     plot::payload(
         &out.join("payload.png"),
         &[

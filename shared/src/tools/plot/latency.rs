@@ -8,14 +8,21 @@ use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::coord::combinators::{BindKeyPoints, LogCoord, WithKeyPoints};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::contract::report::HOPS;
+use crate::launcher::summary::Summary;
 use crate::tools::ToolError;
 use crate::tools::plot::{FONT, colour, legend_mark, plot_error, png};
 use crate::tools::run_folder::{RunFolder, Table};
 
 /// A series: its name and its samples in ns, sorted.
 pub type Series = (String, Vec<u64>);
+
+/// The sample of a loop whose command never reached the plant: +∞. It sorts after every
+/// latency, so an end-to-end curve plateaus at the share of such loops and a percentile that
+/// falls among them reads "missed".
+pub const MISSED: u64 = u64::MAX;
 
 /// The name of the end-to-end series.
 pub const END_TO_END: &str = "end to end";
@@ -33,7 +40,8 @@ fn transport_hops() -> impl Iterator<Item = (String, usize, usize)> {
 
 /// A run's latencies from its loops.csv, sorted, in ns: one series per hop from one process to
 /// the next (receive − the previous process's publish), then end to end. Every loop with a loop
-/// record counts, as in summary.json.
+/// record counts, as in summary.json; a loop flagged a deadline miss without one (its command
+/// never came) counts in end to end as [`MISSED`].
 ///
 /// loops.csv rather than latency.hlog: it has every loop's exact value, so the chart reaches
 /// down to the single slowest loop and its percentiles are those of the samples drawn; the
@@ -47,10 +55,16 @@ pub fn latencies_from_loops(loops: &Table) -> Result<Vec<Series>, ToolError> {
     let hops: Vec<(String, usize, usize)> = transport_hops().collect();
     let stamps = loops.stamps()?;
     let end_to_end = loops.column::<u64>("end_to_end_ns")?;
+    let missed = loops.column::<u64>("deadline_miss")?;
     let mut samples: Vec<Vec<u64>> = vec![Vec::new(); hops.len() + 1];
     // A loop without a record has empty cells.
     for (row, end_to_end) in end_to_end.iter().enumerate() {
-        let Some(end_to_end) = *end_to_end else { continue };
+        let Some(end_to_end) = *end_to_end else {
+            if missed[row] == Some(1) {
+                samples[hops.len()].push(MISSED);
+            }
+            continue;
+        };
         for (series, (_, from, to)) in samples.iter_mut().zip(&hops) {
             let (Some(sent), Some(received)) = (stamps[*from][row], stamps[*to][row]) else {
                 return Err(loops.error_at(row, "a loop with an end-to-end latency but not every stamp"));
@@ -77,14 +91,37 @@ pub fn nearest_rank(sorted: &[u64], per_mille: u64) -> Option<u64> {
     sorted.get(rank as usize - 1).copied()
 }
 
+/// The loops at +∞ among sorted samples.
+pub fn missed_count(sorted: &[u64]) -> usize {
+    sorted.len() - sorted.partition_point(|v| *v != MISSED)
+}
+
+/// The run's deadline in ns (real time), from its summary.
+pub fn deadline_ns(summary: &Summary) -> Option<u64> {
+    summary.deadline_us.map(|us| (us * 1e3).round() as u64)
+}
+
+/// A run's latency chart as data: its title and series. An in-process run's hops are calls in
+/// one thread, not IPC: only end to end is drawn, and the title says why.
+pub fn run_latency_chart(loops: &Table, summary: &Summary, name: &str) -> Result<Panel, ToolError> {
+    let mut series = latencies_from_loops(loops)?;
+    let title = if summary.ran_in_process() {
+        series.retain(|(name, _)| name == END_TO_END);
+        format!("loop latency end to end · {name} · in one process: hops n/a (not IPC)")
+    } else {
+        format!("loop latency per hop and end to end · {name}")
+    };
+    Ok(Panel { title, series, deadlines_ns: deadline_ns(summary).into_iter().collect() })
+}
+
 /// Writes the run's latency figure, `latency-cdf.png` in the run folder: per hop and end to end,
-/// from loops.csv. Returns its path.
-pub fn run_latency_figure(run_dir: &Path) -> Result<PathBuf, ToolError> {
-    let series = read_run_latencies(run_dir)?;
+/// from loops.csv, with the deadline. Returns its path.
+pub fn run_latency_figure(run_dir: &Path, summary: &Summary) -> Result<PathBuf, ToolError> {
+    let loops = RunFolder::open(run_dir, &["loops.csv"])?.table("loops.csv")?;
     let path = run_dir.join(RUN_FIGURE);
     let name = run_dir.canonicalize().ok().and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()));
-    let title = format!("loop latency per hop and end to end · {}", name.as_deref().unwrap_or("run"));
-    cdf(&path, &title, &series)?;
+    let chart = run_latency_chart(&loops, summary, name.as_deref().unwrap_or("run"))?;
+    cdf(&path, &chart.title, &chart.series, &chart.deadlines_ns)?;
     Ok(path)
 }
 
@@ -166,19 +203,22 @@ fn legend_height(n: usize, sizes: Sizes) -> u32 {
     n as u32 * (sizes.text + 9) + 14
 }
 
-/// One chart of a figure of several: a title and its series.
+/// One chart of a figure of several: a title, its series and the deadlines to mark (ns).
 pub struct Panel {
     pub title: String,
     pub series: Vec<Series>,
+    pub deadlines_ns: Vec<u64>,
 }
 
 /// Latency distributions on log-log axes: for each series, the share of samples at or above each
 /// latency, down to the single slowest (1/N). The tail reads downwards (1 %, 0.1 %, ...) instead
 /// of being squeezed into the top of a linear CDF. A series of one value is a vertical line (a
-/// floor). Below the chart, a legend with each series' p50, p99 and max.
-pub fn cdf(path: &Path, title: &str, series: &[Series]) -> Result<()> {
+/// floor). A series with loops at +∞ ([`MISSED`]) plateaus at their share up to the chart's
+/// right edge. Each deadline is a dashed vertical line. Below the chart, a legend with each
+/// series' p50, p99 and max.
+pub fn cdf(path: &Path, title: &str, series: &[Series], deadlines_ns: &[u64]) -> Result<()> {
     let root = png(path, (900, 520 + legend_height(series.len(), LARGE)))?;
-    draw_cdf(&root, title, series, LARGE)?;
+    draw_cdf(&root, title, series, deadlines_ns, LARGE)?;
     root.present().map_err(plot_error)
 }
 
@@ -194,12 +234,12 @@ pub fn cdf_panels(path: &Path, panels: &[Panel]) -> Result<()> {
         .collect();
     let root = png(path, (width, first_height + rows.iter().map(|(_, h)| h).sum::<u32>()))?;
     let (top, mut rest) = root.split_vertically(first_height);
-    draw_cdf(&top, &first.title, &first.series, LARGE)?;
+    draw_cdf(&top, &first.title, &first.series, &first.deadlines_ns, LARGE)?;
     for (row, height) in rows {
         let (this_row, below) = rest.split_vertically(height);
         let (left, right) = this_row.split_horizontally(half);
         for (panel, area) in row.iter().zip([left, right]) {
-            draw_cdf(&area, &panel.title, &panel.series, SMALL)?;
+            draw_cdf(&area, &panel.title, &panel.series, &panel.deadlines_ns, SMALL)?;
         }
         rest = below;
     }
@@ -208,12 +248,44 @@ pub fn cdf_panels(path: &Path, panels: &[Panel]) -> Result<()> {
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
-fn draw_cdf(area: &Area, title: &str, series: &[Series], sizes: Sizes) -> Result<()> {
+/// A series' points on the chart, (µs, share at or above), as steps: at most 2000 points, and
+/// every point of the last 1 % (the tail). Loops at +∞ hold the curve at their share from the
+/// slowest finite sample to `x_end`.
+pub fn cdf_points(samples: &[u64], floor_share: f64, x_end: f64) -> Vec<(f64, f64)> {
+    let us = |ns: u64| (ns as f64 / 1e3).max(0.01);
+    let n = samples.len();
+    let finite = n - missed_count(samples);
+    let share = |j: usize| (n - j) as f64 / n as f64;
+    let mut points: Vec<(f64, f64)> = match finite {
+        0 => vec![],
+        1 if n == 1 => vec![(us(samples[0]), floor_share), (us(samples[0]), 1.0)],
+        _ => {
+            let step = finite.div_ceil(2000).max(1);
+            let tail = finite.saturating_sub(n.div_ceil(100));
+            let kept: Vec<usize> = (0..tail).step_by(step).chain(tail..finite).collect();
+            let steps =
+                kept.windows(2).flat_map(|w| [(us(samples[w[1]]), share(w[0])), (us(samples[w[1]]), share(w[1]))]);
+            std::iter::once((us(samples[0]), 1.0)).chain(steps).collect()
+        }
+    };
+    if finite < n {
+        // Past the slowest loop that got its command, the share of those that never did.
+        let plateau = share(finite);
+        let from = points.last().map_or(0.01, |p| p.0);
+        points.extend([(from, plateau), (x_end, plateau)]);
+    }
+    points
+}
+
+fn draw_cdf(area: &Area, title: &str, series: &[Series], deadlines_ns: &[u64], sizes: Sizes) -> Result<()> {
     let (_, height) = area.dim_in_pixel();
     let (plot, legend) = area.split_vertically(height - legend_height(series.len(), sizes));
     let us = |ns: u64| (ns as f64 / 1e3).max(0.01);
-    let lo = series.iter().filter_map(|(_, s)| s.first()).map(|v| us(*v)).fold(f64::MAX, f64::min);
-    let hi = series.iter().filter_map(|(_, s)| s.last()).map(|v| us(*v)).fold(0.0, f64::max);
+    let finite = |s: &[u64]| s.len() - missed_count(s);
+    let lo = series.iter().filter_map(|(_, s)| s.first().filter(|v| **v != MISSED)).map(|v| us(*v));
+    let lo = lo.chain(deadlines_ns.iter().map(|d| us(*d))).fold(f64::MAX, f64::min);
+    let hi = series.iter().filter_map(|(_, s)| s[..finite(s)].last()).map(|v| us(*v));
+    let hi = hi.chain(deadlines_ns.iter().map(|d| us(*d))).fold(0.0, f64::max);
     // No samples at all: an empty chart over 1 to 10 µs.
     let (lo, hi) = if lo <= hi { (lo, hi) } else { (1.0, 10.0) };
     let most = series.iter().map(|(_, s)| s.len()).max().unwrap_or(1).max(10) as f64;
@@ -236,40 +308,48 @@ fn draw_cdf(area: &Area, title: &str, series: &[Series], sizes: Sizes) -> Result
         .draw()
         .map_err(plot_error)?;
     for (i, (_, samples)) in series.iter().enumerate() {
-        let n = samples.len();
-        let points: Vec<(f64, f64)> = match n {
-            0 => continue,
-            1 => vec![(us(samples[0]), floor_share), (us(samples[0]), 1.0)],
-            // At most 2000 points per curve, and every point of the last 1 % (the tail), drawn
-            // as steps: the share holds until the next sample, where it drops.
-            _ => {
-                let step = n.div_ceil(2000).max(1);
-                let tail = n - n.div_ceil(100);
-                let share = |j: usize| (n - j) as f64 / n as f64;
-                let kept: Vec<usize> = (0..tail).step_by(step).chain(tail..n).collect();
-                let steps =
-                    kept.windows(2).flat_map(|w| [(us(samples[w[1]]), share(w[0])), (us(samples[w[1]]), share(w[1]))]);
-                std::iter::once((us(samples[0]), 1.0)).chain(steps).collect()
-            }
-        };
+        let points = cdf_points(samples, floor_share, hi * 1.25);
         chart.draw_series(LineSeries::new(points, colour(i).stroke_width(2))).map_err(plot_error)?;
+    }
+    // Left of its line, which may be at the chart's right edge.
+    let label_style = (FONT, sizes.text - 1).into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Top));
+    for deadline in deadlines_ns {
+        let x = us(*deadline);
+        chart
+            .draw_series(DashedLineSeries::new([(x, floor_share), (x, 1.0)], 6, 4, BLACK.stroke_width(1)))
+            .map_err(plot_error)?;
+        let text = format!("deadline {}", duration_label(*deadline));
+        let label = EmptyElement::at((x, 1.0)) + Text::new(text, (-4, 3), label_style.clone());
+        chart.draw_series(std::iter::once(label)).map_err(plot_error)?;
     }
     let left = plot.get_base_pixel().0 + (sizes.text * 4 + 5) as i32 + 12 - area.get_base_pixel().0;
     draw_legend(&legend, left, series, sizes)
 }
 
-/// What the legend says of a series after its name.
-fn legend_stats(samples: &[u64]) -> Vec<String> {
-    match samples {
+/// A percentile's value as the legend says it: a latency, or "missed" where it falls among the
+/// loops whose command never came.
+pub fn latency_or_missed(ns: u64) -> String {
+    if ns == MISSED { "missed".into() } else { duration_label(ns) }
+}
+
+/// What the legend says of a series after its name: p50, p99, max, and the loops at +∞ (no
+/// command came) where there are any, as a share of the series' loops.
+pub fn legend_stats(samples: &[u64]) -> Vec<String> {
+    let mut stats: Vec<String> = match samples {
         [] => vec!["no samples".into()],
-        [one] => vec![duration_label(*one)],
+        [one] => vec![latency_or_missed(*one)],
         _ => [("p50", 500), ("p99", 990), ("max", 1000)]
             .iter()
             .filter_map(|(name, per_mille)| {
-                nearest_rank(samples, *per_mille).map(|v| format!("{name} {}", duration_label(v)))
+                nearest_rank(samples, *per_mille).map(|v| format!("{name} {}", latency_or_missed(v)))
             })
             .collect(),
+    };
+    let missed = missed_count(samples);
+    if missed > 0 {
+        stats.push(format!("{missed} without a command ({:.1} %)", missed as f64 * 100.0 / samples.len() as f64));
     }
+    stats
 }
 
 /// The legend below a chart, in columns: a line in the series' colour, its name, p50, p99, max.
@@ -390,6 +470,21 @@ mod tests {
         assert_eq!(duration_label(8_513_516), "8.51 ms");
         assert_eq!(duration_label(12_345_678), "12.3 ms");
         assert_eq!(duration_label(1_234_567_890), "1235 ms");
+    }
+
+    #[test]
+    fn loops_without_a_command_are_at_infinity_and_the_curve_plateaus_at_their_share() {
+        // 8 loops got a command (1 to 8 µs), 2 never did.
+        let mut samples: Vec<u64> = (1..=8).map(|us| us * 1000).collect();
+        samples.extend([MISSED, MISSED]);
+        assert_eq!(missed_count(&samples), 2);
+        let points = cdf_points(&samples, 0.01, 500.0);
+        assert_eq!(points.first(), Some(&(1.0, 1.0)));
+        // The slowest finite loop, then the plateau at 2 of 10 out to the chart's edge.
+        assert_eq!(points[points.len() - 3..], [(8.0, 0.3), (8.0, 0.2), (500.0, 0.2)]);
+        assert_eq!(legend_stats(&samples), ["p50 5.00 µs", "p99 missed", "max missed", "2 without a command (20.0 %)"]);
+        // Every loop missed: a flat line at 100 %.
+        assert_eq!(cdf_points(&[MISSED], 0.01, 500.0), [(0.01, 1.0), (500.0, 1.0)]);
     }
 
     #[test]

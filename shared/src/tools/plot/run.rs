@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::config::schema::Component;
+use crate::launcher::summary::Summary;
 use crate::model::catalog::Catalog;
 use crate::model::figure::RunColumns;
 use crate::model::scenario::Scenario;
@@ -51,7 +52,7 @@ pub struct Ticks {
     pub t: Vec<f64>,
     /// Time since the previous wake-up, ns (0 on the first tick).
     pub period_ns: Vec<f64>,
-    /// 1 where the loop missed its deadline.
+    /// 1 where the loop missed its deadline (its command came late or never).
     pub deadline_miss: Vec<f64>,
 }
 
@@ -65,6 +66,7 @@ pub struct RunData {
     pub trajectory: Vec<Vec<f64>>,
     pub ticks: Ticks,
     pub faults: Vec<FaultMark>,
+    pub summary: Summary,
 }
 
 impl RunData {
@@ -87,7 +89,7 @@ impl RunData {
             .iter()
             .map(|f| FaultMark { t: f.at_s, label: format!("{} {}", <&str>::from(f.kind), f.process) })
             .collect();
-        Ok(RunData { config, scenario, layout, columns, trajectory, ticks, faults })
+        Ok(RunData { config, scenario, layout, columns, trajectory, ticks, faults, summary })
     }
 
     /// A figure of this run over simulation time `x`, titled "<scenario>: <what>", with its faults
@@ -293,8 +295,28 @@ fn seconds(s: f64) -> String {
     if s < 1.0 { format!("{} ms", tick_label(&(s * 1e3))) } else { format!("{} s", tick_label(&s)) }
 }
 
-/// The tick period error over time, deadline misses marked; None in lockstep (no schedule).
-fn tick_period_figure(data: &RunData) -> Option<Figure> {
+/// The deadline misses loops.csv flags, as the tick-period figure counts them: the times of the
+/// misses, and how many loops that ran have no row at all (no monitor was up to record them:
+/// their misses are in summary.json's count but not here).
+pub fn tick_misses(ticks: &Ticks, summary: &Summary) -> (Vec<f64>, u64) {
+    let misses = ticks.t.iter().zip(&ticks.deadline_miss).filter(|(_, miss)| **miss > 0.0).map(|(t, _)| *t).collect();
+    (misses, summary.loops.saturating_sub(ticks.t.len() as u64))
+}
+
+/// The tick-period panel's title: the misses as the report counts them.
+pub fn tick_period_title(nominal_s: f64, misses: usize, loops: u64, unrecorded: u64) -> String {
+    let share = misses as f64 * 100.0 / loops.max(1) as f64;
+    let mut title =
+        format!("period − nominal {} · {misses} deadline misses of {loops} loops ({share:.1} %)", seconds(nominal_s));
+    if unrecorded > 0 {
+        title.push_str(&format!(" · {unrecorded} loops unrecorded (no monitor)"));
+    }
+    title
+}
+
+/// The tick period error over time, deadline misses marked along the top of the panel, where
+/// they show whatever the period did; None in lockstep (no schedule).
+pub fn tick_period_figure(data: &RunData) -> Option<Figure> {
     if data.config.mode == Mode::Lockstep {
         return None;
     }
@@ -307,19 +329,16 @@ fn tick_period_figure(data: &RunData) -> Option<Figure> {
         .filter(|(_, p)| p.is_finite() && **p > 0.0)
         .map(|(t, p)| (*t, (p - nominal_ns) / 1e3))
         .collect();
-    let misses: Vec<(f64, f64)> = t
-        .iter()
-        .zip(&data.ticks.deadline_miss)
-        .zip(period)
-        .filter(|((_, miss), _)| **miss > 0.0)
-        .map(|((t, _), p)| (*t, if p.is_finite() && *p > 0.0 { (p - nominal_ns) / 1e3 } else { 0.0 }))
-        .collect();
+    let (misses, unrecorded) = tick_misses(&data.ticks, &data.summary);
+    // A rug above the highest error: a miss is seen whatever the period did at it.
+    let (lo, hi) = error.iter().fold((0.0f64, 0.0f64), |(lo, hi), (_, e)| (lo.min(*e), hi.max(*e)));
+    let top = hi + ((hi - lo) * 0.06).max(1.0);
     let mut panel = Panel::new(
-        format!("period − nominal {}, {} deadline misses", seconds(nominal_ns / 1e9), misses.len()),
+        tick_period_title(nominal_ns / 1e9, misses.len(), data.summary.loops, unrecorded),
         "tick period error, µs",
         vec![Curve::new("tick period error", error, Colour::Series(0), Line::Solid(1))],
     );
-    panel.marks = misses;
+    panel.marks = misses.into_iter().map(|t| (t, top)).collect();
     Some(data.figure_over_time("the plant's tick period error (real time)", vec![panel], data.span()))
 }
 
@@ -344,7 +363,7 @@ pub fn plot_run(run_dir: &Path, catalog: &Catalog) -> Result<Vec<PathBuf>, ToolE
         figure.draw(&path)?;
         written.push(path);
     }
-    written.push(latency::run_latency_figure(run_dir)?);
+    written.push(latency::run_latency_figure(run_dir, &data.summary)?);
     Ok(written)
 }
 

@@ -1,0 +1,116 @@
+//! The deadline, counted the same everywhere: real-time runs whose controller is stopped or
+//! killed, where summary.json's `deadline_misses` is the count that loops.csv flags, that the
+//! tick-period figure's title gives, and that the latency CDF's end to end reaches (its loops
+//! without a command at +∞, its percentiles "missed" among them); `deadline_us` is checked at
+//! load with one line naming the key and the allowed range. The counts are compared with each
+//! other, never with a wall-clock threshold.
+
+mod common;
+mod figure_check;
+
+use common::{Mode, fresh_dir, looplab, run};
+use figure_check::assert_figure;
+use looplab_shared::tools::plot::latency::{self, END_TO_END, MISSED, cdf_points, legend_stats, missed_count};
+use looplab_shared::tools::plot::run::{RunData, tick_period_figure};
+use looplab_shared::tools::run_folder::RunFolder;
+
+/// A real-time pendulum run with `fault`, its figures drawn; checks that every count of its
+/// deadline misses is summary.json's and returns that count and the loops at +∞.
+fn misses_agree(name: &str, fault: &str) -> (u64, usize) {
+    let r = run(name, &["pendulum", "--duration", "1.5", "--fault", fault, "--plot"]);
+    let s = r.summary();
+    assert_eq!(s.mode, Mode::Realtime);
+    assert_eq!(s.deadline_us, Some(1000.0), "the default is one period");
+    let misses = s.deadline_misses;
+    assert!(misses > 0, "a controller that stops answering misses loops");
+    assert_eq!(s.deadline_miss_share, Some(misses as f64 / s.loops as f64));
+
+    // loops.csv: one row per loop, the loops without a command flagged with no end to end.
+    let loops = RunFolder::open(&r.dir, &["loops.csv"]).unwrap().table("loops.csv").unwrap();
+    let flags = loops.column::<u64>("deadline_miss").unwrap();
+    let end_to_end = loops.column::<u64>("end_to_end_ns").unwrap();
+    assert_eq!(flags.len() as u64, s.loops, "no monitor restart: every loop that ran has a row");
+    assert_eq!(flags.iter().filter(|f| **f == Some(1)).count() as u64, misses, "loops.csv's flags");
+    let without_command = flags.iter().zip(&end_to_end).filter(|(f, e)| **f == Some(1) && e.is_none()).count();
+    assert!(without_command > 0, "some loops got no command at all");
+
+    // The tick-period figure's title, from the data it is drawn from; its marks above the curve.
+    let data = RunData::read(&r.dir, &looplab_shared::scenarios::builtin()).unwrap();
+    let figure = tick_period_figure(&data).expect("a real-time run has a tick period");
+    let panel = &figure.panels[0];
+    let share = misses as f64 * 100.0 / s.loops as f64;
+    let counted = format!(" · {misses} deadline misses of {} loops ({share:.1} %)", s.loops);
+    assert!(panel.title.ends_with(&counted), "{} does not end with {counted}", panel.title);
+    assert_eq!(panel.marks.len() as u64, misses);
+    let highest = panel.curves[0].points.iter().map(|p| p.1).fold(f64::MIN, f64::max);
+    assert!(panel.marks.iter().all(|m| m.1 > highest), "the misses are drawn above the period's curve");
+
+    // The CDF: the loops without a command at +∞, so the end-to-end curve ends on a plateau
+    // at their share; late commands are the rest of the misses, at their latency.
+    let chart = latency::run_latency_chart(&loops, s, "run").unwrap();
+    assert_eq!(chart.deadlines_ns, [1_000_000], "the deadline is marked");
+    let (name, samples) = chart.series.last().unwrap();
+    assert_eq!(name, END_TO_END);
+    assert_eq!(missed_count(samples), without_command);
+    assert_eq!(samples.len(), s.monitor.records as usize + without_command);
+    let plateau = cdf_points(samples, 1e-6, 1e9).last().copied().unwrap();
+    assert_eq!(plateau, (1e9, without_command as f64 / samples.len() as f64));
+    let stats = legend_stats(samples);
+    let missed_share = without_command as f64 / samples.len() as f64;
+    if missed_share > 0.01 {
+        assert!(stats.contains(&"p99 missed".to_string()), "{stats:?}");
+    }
+    assert_eq!(stats.iter().filter(|l| **l == "max missed").count(), 1, "{stats:?}");
+    assert!(samples.iter().filter(|v| **v != MISSED).count() as u64 == s.monitor.records);
+
+    // The figures are written, each with data in its panels.
+    assert_figure(&r.dir.join("tick-period.png"), 1, false);
+    assert!(r.dir.join("latency-cdf.png").is_file());
+    // The report says the share and the deadline.
+    let report = r.stdout();
+    assert!(report.contains(&format!("deadline misses {misses} of {} ({share:.1} %), deadline 1.000 ms", s.loops)));
+    (misses, without_command)
+}
+
+#[test]
+fn a_stopped_controller_misses_the_same_loops_in_every_count() {
+    let (misses, without_command) = misses_agree("deadline-stop", "stop controller at 0.3s for 0.8s");
+    // Most of the stop's loops never got a command (those at its end may come late).
+    assert!(without_command as u64 * 2 > misses, "{without_command} of {misses}");
+}
+
+#[test]
+fn a_killed_controller_misses_the_same_loops_in_every_count() {
+    misses_agree("deadline-kill", "kill controller at 0.5s");
+}
+
+#[test]
+fn a_bad_deadline_is_one_line_naming_the_key_and_the_range() {
+    for (value, origin) in [("0", "--set deadline_us=0"), ("1500", "--set deadline_us=1500")] {
+        let output = looplab().args(["run", "pendulum", "--set", &format!("deadline_us={value}")]).output().unwrap();
+        assert_eq!(output.status.code(), Some(2));
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(
+            stderr,
+            format!(
+                "error: {origin}: key `deadline_us`: must be from 1 µs to one loop period (1000 µs at rate_hz = 1000), \
+                 got {value}\n"
+            )
+        );
+    }
+    // In a launch file, the error names the file.
+    let dir = fresh_dir("deadline-file");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("short.toml");
+    std::fs::write(&file, "scenario = \"pendulum\"\nrate_hz = 500.0\ndeadline_us = 2500.0\n").unwrap();
+    let output = looplab().arg("run").arg(&file).output().unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&output.stderr),
+        format!(
+            "error: {}: key `deadline_us`: must be from 1 µs to one loop period (2000 µs at rate_hz = 500), got 2500\n",
+            file.display()
+        )
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
