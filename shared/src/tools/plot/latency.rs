@@ -206,7 +206,7 @@ pub fn cdf_panels(path: &Path, panels: &[Panel]) -> Result<()> {
     root.present().map_err(plot_error)
 }
 
-type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+type Area<'a> = DrawingArea<crate::tools::plot::PngBackend<'a>, Shift>;
 
 fn draw_cdf(area: &Area, title: &str, series: &[Series], sizes: Sizes) -> Result<()> {
     let (_, height) = area.dim_in_pixel();

@@ -12,6 +12,7 @@ use crate::config::launch::{LaunchConfig, Mode};
 use crate::config::schema::Component;
 use crate::model::catalog::Catalog;
 use crate::model::figure::RunColumns;
+use crate::model::figure::runs;
 use crate::model::scenario::Scenario;
 use crate::monitor::layout::Layout;
 use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel, series, steps, tick_label};
@@ -20,7 +21,7 @@ use crate::tools::run_folder::RunFolder;
 use crate::tools::{RUN_FILES, ToolError};
 
 /// Where each vector lies among trajectory.csv's columns, in the layout's order (the order the
-/// monitor writes them: k, t, state, each sensor's components, estimate, command).
+/// monitor writes them: k, t, state, each sensor's components, estimate, command, applied input).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Columns {
     pub state: Range<usize>,
@@ -28,6 +29,8 @@ pub struct Columns {
     pub sensors: Vec<Range<usize>>,
     pub estimate: Range<usize>,
     pub command: Range<usize>,
+    /// What the actuator applied over the period that ended at each row's tick.
+    pub applied: Range<usize>,
     pub count: usize,
 }
 
@@ -42,7 +45,8 @@ impl Columns {
         let sensors = layout.sensor_dims().into_iter().map(&mut take).collect();
         let estimate = take(layout.estimate.len());
         let command = take(layout.input.len());
-        Columns { state, sensors, estimate, command, count: next }
+        let applied = take(layout.input.len());
+        Columns { state, sensors, estimate, command, applied, count: next }
     }
 }
 
@@ -201,10 +205,13 @@ fn estimate_figure(data: &RunData) -> Figure {
     data.figure_over_time("truth against estimate", panels, span)
 }
 
-/// Each command component over time, with the actuator's limits where the command reaches them.
-fn commands_figure(data: &RunData) -> Figure {
+/// Each input component over time: the commands as they came, with a gap wherever none came
+/// (a stopped or dead controller, a lost command), and what the actuator applied (held, or
+/// `on_stale`'s value) as steps beside them; the actuator's limits where they are reached.
+pub fn commands_figure(data: &RunData) -> Figure {
     let t = data.t();
     let span = data.span();
+    let dt = data.config.dt();
     let limits = data.scenario.input_limits();
     let panels = data
         .scenario
@@ -213,12 +220,17 @@ fn commands_figure(data: &RunData) -> Figure {
         .iter()
         .enumerate()
         .map(|(i, component)| {
-            let command = series(t, &data.trajectory[data.columns.command.start + i]);
-            let mut panel = Panel::new(
-                component.name,
-                unit_desc(component),
-                vec![Curve::new("command", command, Colour::Series(0), Line::Solid(2))],
+            // Row k's applied value held over t(k−1)..t(k): drawn from the period's start. Row 0's
+            // (the period before the run) is left out.
+            let applied = &data.trajectory[data.columns.applied.start + i];
+            let held: Vec<(f64, f64)> =
+                t.iter().zip(applied).skip(1).filter(|(_, u)| u.is_finite()).map(|(t, u)| (t - dt, *u)).collect();
+            let mut curves = vec![Curve::new(APPLIED_LABEL, steps(&held), Colour::Series(1), Line::Solid(3))];
+            let commands = runs(t, &data.trajectory[data.columns.command.start + i], dt);
+            curves.extend(
+                commands.into_iter().map(|run| Curve::new(COMMAND_LABEL, run, Colour::Series(0), Line::Solid(1))),
             );
+            let mut panel = Panel::new(component.name, unit_desc(component), curves);
             if let Some((lo, hi)) = limits.get(i) {
                 panel.bounds = vec![
                     Curve::level("limit", *lo, &span, Colour::Limit),
@@ -228,8 +240,12 @@ fn commands_figure(data: &RunData) -> Figure {
             panel
         })
         .collect();
-    data.figure_over_time("commands", panels, span)
+    data.figure_over_time("commands and the applied input", panels, span)
 }
+
+/// The legend's names of the commands chart's curves: every run of commands has the first.
+pub const COMMAND_LABEL: &str = "command (gaps: none came)";
+pub const APPLIED_LABEL: &str = "applied by the actuator";
 
 /// The time window of the sensors' figure: 25 samples of the slowest sensor (at least 50 ticks),
 /// from the start, so that each hold's steps are wide enough to see.
@@ -244,19 +260,18 @@ fn sensors_figure(data: &RunData) -> Figure {
     let t = data.t();
     let vectors = data.scenario.vectors();
     let state = |row: usize| -> Vec<f64> { data.columns.state.clone().map(|c| data.trajectory[c][row]).collect() };
-    let command = |row: usize| -> Vec<f64> { data.columns.command.clone().map(|c| data.trajectory[c][row]).collect() };
+    let applied = |row: usize| -> Vec<f64> { data.columns.applied.clone().map(|c| data.trajectory[c][row]).collect() };
     let window = sensor_window(&data.config);
     let rows = t.iter().take_while(|t| **t <= window.end).count();
     let mut panels = Vec::new();
     for ((name, _), columns) in data.layout.sensors.iter().zip(&data.columns.sensors) {
         let signal = vectors.signal(&data.config.sensors[name].signal).expect("sensor signals are checked at load");
         // The truth as the signal reads it: the true state and the input applied over the last
-        // interval (the previous tick's command).
+        // interval, as the sensors' process read it.
         let mut truth = vec![Vec::new(); columns.len()];
         let mut out = vec![0.0; columns.len()];
         for (row, &at) in t.iter().enumerate().take(rows) {
-            let applied = if row == 0 { vec![0.0; data.columns.command.len()] } else { command(row - 1) };
-            let applied: Vec<f64> = applied.into_iter().map(|u| if u.is_finite() { u } else { 0.0 }).collect();
+            let applied: Vec<f64> = applied(row).into_iter().map(|u| if u.is_finite() { u } else { 0.0 }).collect();
             let x = state(row);
             if x.iter().all(|v| v.is_finite()) {
                 (signal.read)(at, &x, &applied, &mut out);
@@ -355,10 +370,17 @@ mod tests {
     #[test]
     fn columns_lie_in_the_monitors_order() {
         let columns = Columns::of(&Layout::example());
-        // k, t, theta, omega, encoder's angle, imu's x and y, theta's estimate, u.
+        // k, t, theta, omega, encoder's angle, imu's x and y, theta's estimate, u, applied u.
         assert_eq!(
             columns,
-            Columns { state: 2..4, sensors: vec![4..5, 5..7], estimate: 7..8, command: 8..9, count: 9 }
+            Columns {
+                state: 2..4,
+                sensors: vec![4..5, 5..7],
+                estimate: 7..8,
+                command: 8..9,
+                applied: 9..10,
+                count: 10
+            }
         );
     }
 
