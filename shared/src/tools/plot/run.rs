@@ -220,15 +220,17 @@ pub fn commands_figure(data: &RunData) -> Figure {
         .iter()
         .enumerate()
         .map(|(i, component)| {
-            // Row k's applied value held over t(k−1)..t(k): drawn from the period's start. Row 0's
-            // (the period before the run) is left out.
-            let applied = &data.trajectory[data.columns.applied.start + i];
-            let held: Vec<(f64, f64)> =
-                t.iter().zip(applied).skip(1).filter(|(_, u)| u.is_finite()).map(|(t, u)| (t - dt, *u)).collect();
-            let mut curves = vec![Curve::new(APPLIED_LABEL, steps(&held), Colour::Series(1), Line::Solid(3))];
+            // The commands thick, the applied steps thin over them: both stay visible where they
+            // agree.
             let commands = runs(t, &data.trajectory[data.columns.command.start + i], dt);
+            let mut curves: Vec<Curve> = commands
+                .into_iter()
+                .map(|run| Curve::new(COMMAND_LABEL, run, Colour::Series(0), Line::Solid(2)))
+                .collect();
             curves.extend(
-                commands.into_iter().map(|run| Curve::new(COMMAND_LABEL, run, Colour::Series(0), Line::Solid(1))),
+                applied_steps(data, i)
+                    .into_iter()
+                    .map(|run| Curve::new(APPLIED_LABEL, run, Colour::Series(1), Line::Solid(1))),
             );
             let mut panel = Panel::new(component.name, unit_desc(component), curves);
             if let Some((lo, hi)) = limits.get(i) {
@@ -241,6 +243,24 @@ pub fn commands_figure(data: &RunData) -> Figure {
         })
         .collect();
     data.figure_over_time("commands and the applied input", panels, span)
+}
+
+/// Input component `i` as the actuator applied it, as steps, one run per stretch of rows that
+/// have it (a row without the plant's state has none). Row k's value was applied over t(k−1) to
+/// t(k), so it is drawn over that period; row 0's (the period before the run) is left out.
+fn applied_steps(data: &RunData, i: usize) -> Vec<Vec<(f64, f64)>> {
+    let dt = data.config.dt();
+    let start: Vec<f64> = data.t().iter().skip(1).map(|t| t - dt).collect();
+    let applied = data.trajectory[data.columns.applied.start + i].get(1..).unwrap_or(&[]);
+    runs(&start, applied, 0.0)
+        .into_iter()
+        .map(|run| {
+            let mut run = steps(&run);
+            let &(end, value) = run.last().expect("a run has a value");
+            run.push((end + dt, value));
+            run
+        })
+        .collect()
 }
 
 /// The legend's names of the commands chart's curves: every run of commands has the first.
