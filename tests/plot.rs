@@ -8,7 +8,9 @@ mod figure_check;
 
 use common::{fresh_dir, looplab, run};
 use figure_check::{Image, assert_charts, assert_figure, check, data_pixels};
+use looplab_shared::model::figure::RunColumns;
 use looplab_shared::tools::plot::figure::{Cell, Colour, Curve, FaultMark, Figure, Line, Panel};
+use looplab_shared::tools::plot::run::{APPLIED_LABEL, COMMAND_LABEL, RunData, commands_figure};
 
 #[test]
 fn a_real_time_run_with_a_kill_plots_its_figures() {
@@ -26,6 +28,72 @@ fn a_real_time_run_with_a_kill_plots_its_figures() {
     assert_eq!((image.width, image.height), (900, 654));
     // The chart above its legend.
     assert_charts(&path, &[Cell { x: 0..900, y: 0..520 }]);
+}
+
+/// A real-time run whose controller is stopped for a second (`on_stale = "hold"`, the pendulum's
+/// default): trajectory.csv has no command across the stop and the applied input held at one
+/// value; the commands chart's series have a gap there (no segment crosses it, where the old
+/// chart drew a ramp), the applied input's steps run on across it, and commands.png is written.
+#[test]
+fn a_stopped_controller_leaves_a_gap_in_the_commands_and_the_held_input_beside_it() {
+    let r = run("plot-stop", &["pendulum", "--duration", "3", "--fault", "stop controller at 1s for 1s", "--plot"]);
+    let data = RunData::read(&r.dir, &looplab_shared::scenarios::builtin()).unwrap();
+    let t = data.t().to_vec();
+    let command = data.command("current").unwrap().to_vec();
+    let applied = data.trajectory[data.columns.applied.start].clone();
+    assert_eq!(r.trajectory().columns.get("applied.current_A"), Some(&(data.columns.applied.start)));
+
+    // The longest stretch of rows without a command: the stop (a second of a 1 kHz loop).
+    let mut gap = 0..0;
+    let mut start = None;
+    for (row, u) in command.iter().chain([&0.0]).enumerate() {
+        match (u.is_nan(), start) {
+            (true, None) => start = Some(row),
+            (false, Some(s)) => {
+                if row - s > gap.len() {
+                    gap = s..row;
+                }
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    assert!(gap.len() >= 500 && t[gap.start] >= 1.0, "no stretch without commands at the stop: {gap:?}");
+    // Across the stop the applied input is one value in every row that has the plant's state (a
+    // tick the plant skipped on a loaded machine has neither): from gap.start + 1 on, since the
+    // last command may take effect a tick after it came. That value is one of the last two
+    // commands before the stop.
+    let stop = &applied[gap.start + 1..gap.end];
+    let held = *stop.iter().find(|u| u.is_finite()).expect("the stop has rows with the plant's state");
+    assert!(stop.iter().filter(|u| u.is_finite()).all(|u| *u == held), "the applied input changed during the stop");
+    let last_commands: Vec<f64> =
+        command[..gap.start].iter().rev().filter(|u| u.is_finite()).take(2).copied().collect();
+    assert!(last_commands.contains(&held), "held {held}, not one of the last commands {last_commands:?}");
+
+    let figure = commands_figure(&data);
+    let (gap_t0, gap_t1) = (t[gap.start], t[gap.end - 1]);
+    let commands: Vec<&Curve> = figure.panels[0].curves.iter().filter(|c| c.label == COMMAND_LABEL).collect();
+    assert!(commands.len() >= 2, "the commands before and after the stop are separate runs");
+    for curve in &commands {
+        for pair in curve.points.windows(2) {
+            assert!(
+                pair[1].0 <= gap_t0 || pair[0].0 >= gap_t1,
+                "a command segment {:?} → {:?} crosses the stop {gap_t0}..{gap_t1}",
+                pair[0],
+                pair[1]
+            );
+        }
+    }
+    // The applied input's steps cover the stop at the held value.
+    let applied_points: Vec<(f64, f64)> = figure.panels[0]
+        .curves
+        .iter()
+        .filter(|c| c.label == APPLIED_LABEL)
+        .flat_map(|c| c.points.iter().copied())
+        .filter(|(at, _)| (t[gap.start + 1]..gap_t1).contains(at))
+        .collect();
+    assert!(!applied_points.is_empty() && applied_points.iter().all(|(_, u)| *u == held), "{applied_points:?}");
+    assert_figure(&r.dir.join("commands.png"), 1, false);
 }
 
 /// A figure of two panels over 0 to 1 s, the second with `second` as its curves, and a fault

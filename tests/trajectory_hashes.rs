@@ -7,6 +7,8 @@
 //! checked. They must never change in a refactor: a refactor that changes one of them has
 //! changed what the loop computes (or how it writes it). Only a deliberate model or format
 //! change may re-record them, and its commit says which rows changed and why.
+//! Re-recorded with issue 30, which added the applied input's columns (`applied.*`) after the
+//! command's: every file with those columns cut off has the bytes of the hash before.
 //! On a mismatch the test prints every row that differs with the hash it got, so a deliberate
 //! change can copy them all at once.
 //!
@@ -34,155 +36,155 @@ const CASES: &[(&str, &[&str], &str)] = &[
     (
         "launch/pendulum.toml",
         &["launch/pendulum.toml"],
-        "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d",
+        "02185331ac0bbefa0c73e42086e7090f8f51a6a97b6eea57d5533158ba18c5af",
     ),
     // By name, the scenario's own launch file: the same bytes as the file.
-    ("pendulum (by name)", &["pendulum"], "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d"),
+    ("pendulum (by name)", &["pendulum"], "02185331ac0bbefa0c73e42086e7090f8f51a6a97b6eea57d5533158ba18c5af"),
     (
         "launch/quadcopter.toml",
         &["launch/quadcopter.toml"],
-        "d24bdf7ea684518c6374697a9b27a203df081477870e6aae54301ab01ec5649a",
+        "c958073500839e3e7ce74b6d1da89740c05aeb639e616f47feb4a11d09b9b3cc",
     ),
-    ("quadcopter (by name)", &["quadcopter"], "d24bdf7ea684518c6374697a9b27a203df081477870e6aae54301ab01ec5649a"),
+    ("quadcopter (by name)", &["quadcopter"], "c958073500839e3e7ce74b6d1da89740c05aeb639e616f47feb4a11d09b9b3cc"),
     (
         "launch/quadcopter/1-analytic.toml",
         &["launch/quadcopter/1-analytic.toml"],
-        "bf0dfee8a94e5b43ac5c9a55f1dd6fe14e9f006d7b962f576f53efe3672284ee",
+        "fb5fa29cce1c6eec3e68d2540a250336e872670d97879b5a0b7c45ec6a8c0829",
     ),
     (
         "launch/quadcopter/2-not-rich.toml",
         &["launch/quadcopter/2-not-rich.toml"],
-        "1a96b000062ad01b655a1ddd7a0d9b5d044a4db96022ed2fd30f52c6e8fc4e8e",
+        "1c96e8a7582813dfe53d460a4f9ec3fceb1c0d3b90d8c24e037717c730669885",
     ),
     (
         "launch/quadcopter/3-rich.toml",
         &["launch/quadcopter/3-rich.toml"],
-        "78437070485cdfb380034bdffadd90d108af0c9d78cab183fdeeb2f0b14c7e78",
+        "f6e2f228a3e33d24e9a86203fdb77575adb579535ba0d4464fffc9a4885cea75",
     ),
     (
         "launch/quadcopter/4-closed-loop.toml",
         &["launch/quadcopter/4-closed-loop.toml"],
-        "181ede7bae5e92a7eac99ed4c88a8dd3e9058ed384787df632569d200743a68f",
+        "df74025beb8d7d355ca8f4fc8e26322d65ced95170931890eb5e0c24fad8e5b6",
     ),
     (
         "launch/quadcopter/5-stochastic-snr.toml",
         &["launch/quadcopter/5-stochastic-snr.toml"],
-        "dff828ec5d8b9d0d18cf0c3c088f471e502711e71ade6179c1678f85f971f62e",
+        "481f9d88d3c3da0ab476c93c4bd300c51794451368e60820893a13305c08bdd4",
     ),
     // Sets only mode and duration: the same bytes as launch/quadcopter.toml.
     (
         "launch/quadcopter/6-lemniscate.toml",
         &["launch/quadcopter/6-lemniscate.toml"],
-        "d24bdf7ea684518c6374697a9b27a203df081477870e6aae54301ab01ec5649a",
+        "c958073500839e3e7ce74b6d1da89740c05aeb639e616f47feb4a11d09b9b3cc",
     ),
     // 1200 Hz, rate loop, held commands; its mass step (35.2 s) is past these 2 s ...
     (
         "launch/quadcopter/7-hover-mass-step.toml",
         &["launch/quadcopter/7-hover-mass-step.toml"],
-        "13b4c8c5fe6b49c23d0ae3a3c66706155de943b637572323837f4c6c748455be",
+        "2e6e41b94e59ea5fcb8085b7f4c1630bed521b95141d4918bd998054dd181e1d",
     ),
     // ... so this row moves it to 1 s.
     (
         "launch/quadcopter/7-hover-mass-step.toml, mass step at 1 s",
         &["launch/quadcopter/7-hover-mass-step.toml", "--set", "plant.mass_step_at_s=1.0"],
-        "edabe9152269dfabc3e2d8dd0b041649e89fe0558943be466c17f41fff746cec",
+        "4d91824ca75780cb55a902893135ac4dfb95ae9dbfc6482da8571578387e8b35",
     ),
     // Added with the tilt-rotor (issue 12), recorded on its commit: 200 loops at 100 Hz.
     (
         "launch/tiltrotor.toml",
         &["launch/tiltrotor.toml"],
-        "a3f834ec63be502d51ed43d6aaab5c75b72818327e968d8bb89bfee86225ef17",
+        "356866c7eceac063d13fcd298052a5185251400594fd71eead575a6ef5134351",
     ),
-    ("tiltrotor (by name)", &["tiltrotor"], "a3f834ec63be502d51ed43d6aaab5c75b72818327e968d8bb89bfee86225ef17"),
+    ("tiltrotor (by name)", &["tiltrotor"], "356866c7eceac063d13fcd298052a5185251400594fd71eead575a6ef5134351"),
     // Sets only mode and the kind it already has: the same bytes as launch/tiltrotor.toml.
     (
         "launch/tiltrotor/1-nlls-2l.toml",
         &["launch/tiltrotor/1-nlls-2l.toml"],
-        "a3f834ec63be502d51ed43d6aaab5c75b72818327e968d8bb89bfee86225ef17",
+        "356866c7eceac063d13fcd298052a5185251400594fd71eead575a6ef5134351",
     ),
     (
         "launch/tiltrotor/2-nlpt-2l.toml",
         &["launch/tiltrotor/2-nlpt-2l.toml"],
-        "3e80c10dde26ce66c1767cc9c12af40fefaed1a60bca5feb6879de4fe90b1586",
+        "824930b454b727c738f8b17e5659f8da3c95fb93bcbb6ae6abfe93d7d8d4f863",
     ),
     // Added with the flying inverted pendulum (issue 14), recorded on its commit: 2000 loops at 1 kHz.
     // The default is case (ii); cases 1 and 2 differ only in duration, overridden here.
-    ("launch/fip.toml", &["launch/fip.toml"], "4161872281e8fbe2a8ad84e6cf22bfc3f6b330cc6dd0c8f004a38120a419748e"),
-    ("fip (by name)", &["fip"], "4161872281e8fbe2a8ad84e6cf22bfc3f6b330cc6dd0c8f004a38120a419748e"),
+    ("launch/fip.toml", &["launch/fip.toml"], "410dfc7e8804227e869c29df2f245bd339a6ffbc4597c20e623ff0d9a8094b87"),
+    ("fip (by name)", &["fip"], "410dfc7e8804227e869c29df2f245bd339a6ffbc4597c20e623ff0d9a8094b87"),
     (
         "launch/fip/1-reference.toml",
         &["launch/fip/1-reference.toml"],
-        "9f285bbbb0295d6922a298ce1f992d0b33c8adfef44186040519a82c28192382",
+        "f731d0b4f7273dd5cf22908b1e4bcec06cb7d953289359280c3d686018439020",
     ),
     (
         "launch/fip/2-no-disturbance.toml",
         &["launch/fip/2-no-disturbance.toml"],
-        "9f285bbbb0295d6922a298ce1f992d0b33c8adfef44186040519a82c28192382",
+        "f731d0b4f7273dd5cf22908b1e4bcec06cb7d953289359280c3d686018439020",
     ),
     (
         "launch/fip/3-constant-disturbance.toml",
         &["launch/fip/3-constant-disturbance.toml"],
-        "4161872281e8fbe2a8ad84e6cf22bfc3f6b330cc6dd0c8f004a38120a419748e",
+        "410dfc7e8804227e869c29df2f245bd339a6ffbc4597c20e623ff0d9a8094b87",
     ),
     (
         "launch/fip/4-stochastic-disturbance.toml",
         &["launch/fip/4-stochastic-disturbance.toml"],
-        "ee0f081f7fb12f120b5defc650f40a2fd9ef8b9086c9e3716bc73fc970862849",
+        "5533372f4b13e83e323946db8a3814b06e6a18315f87fd2382a52eceda1dc7c9",
     ),
     (
         "launch/fip/5-experiment.toml",
         &["launch/fip/5-experiment.toml"],
-        "576e847128c887cb15695b058f632bc0736b06134dcaa4c8a627172edc6e7453",
+        "dff641549612c57fffecc657cc775d76e71098900144a47787048bab53cda679",
     ),
     // Added with the tethered aerial robot (issue 15), recorded on its commit: 2000 loops at 1 kHz.
     // Cases 1 and 2 differ from the default only after phase 1 (3 s or more).
     (
         "launch/tethered.toml",
         &["launch/tethered.toml"],
-        "bb5cef38d0800ecb3dd97476448ee2649c111529bb23da0a760f5132f0b5396e",
+        "7c56622b9593852f814a25a6c18a1167bef90a743f1cb3ef204ae191c00eaa3a",
     ),
-    ("tethered (by name)", &["tethered"], "bb5cef38d0800ecb3dd97476448ee2649c111529bb23da0a760f5132f0b5396e"),
+    ("tethered (by name)", &["tethered"], "7c56622b9593852f814a25a6c18a1167bef90a743f1cb3ef204ae191c00eaa3a"),
     (
         "launch/tethered/1-nominal.toml",
         &["launch/tethered/1-nominal.toml"],
-        "bb5cef38d0800ecb3dd97476448ee2649c111529bb23da0a760f5132f0b5396e",
+        "7c56622b9593852f814a25a6c18a1167bef90a743f1cb3ef204ae191c00eaa3a",
     ),
     (
         "launch/tethered/2-durations.toml",
         &["launch/tethered/2-durations.toml"],
-        "bb5cef38d0800ecb3dd97476448ee2649c111529bb23da0a760f5132f0b5396e",
+        "7c56622b9593852f814a25a6c18a1167bef90a743f1cb3ef204ae191c00eaa3a",
     ),
     (
         "launch/tethered/3-mass-deviation.toml",
         &["launch/tethered/3-mass-deviation.toml"],
-        "52a7906709c529944545cf88de9ca8ac3522a707807a4660aa80907c9bef15f4",
+        "9c8edbeb495ef199aa0c6775b79dbaa9d8b6b5a32dc0ab22b8b63cdc560efc75",
     ),
     (
         "launch/tethered/4-general-model.toml",
         &["launch/tethered/4-general-model.toml"],
-        "9f397703515ab4d8c1ad059a685a0c37d559d537b85d07cd277c4bbc55d79b4a",
+        "480280c5a0314f81ee1fa9360dfde0ed4af251b6ad038fae3f1c3458abb2ac2c",
     ),
     (
         "launch/tethered/5-motor-lag.toml",
         &["launch/tethered/5-motor-lag.toml"],
-        "5764076b4aeb1b9732cab6038da83b77562422e304ad0bcd4f53e59fff93c57f",
+        "17cee181d84b419238d7376ecd6b1d42e94ca28c2837cb2adf736fe35f0fb2c2",
     ),
     (
         "launch/tethered/6-noise.toml",
         &["launch/tethered/6-noise.toml"],
-        "7078068ca4d8bb0ca2332797ec7441f33b7ab2e2ae5a81598a33703db9d7d9b2",
+        "79367b4c9c6d23ea7833f028769eec403dc7ca26ac07d24103d26d0574030aa7",
     ),
     // Lockstep polls or blocks (`wait.lockstep`, auto picks by the CPUs): how a process waits
     // never changes what the loop computes.
     (
         "pendulum, lockstep polling",
         &["pendulum", "--set", "wait.lockstep=poll"],
-        "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d",
+        "02185331ac0bbefa0c73e42086e7090f8f51a6a97b6eea57d5533158ba18c5af",
     ),
     (
         "pendulum, lockstep blocking",
         &["pendulum", "--set", "wait.lockstep=block"],
-        "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d",
+        "02185331ac0bbefa0c73e42086e7090f8f51a6a97b6eea57d5533158ba18c5af",
     ),
     (
         "pendulum, lockstep polling, faults: delay controller, drop sensors, corrupt nan",
@@ -197,7 +199,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "--fault",
             "corrupt controller nan at 1.2s for 50ms",
         ],
-        "c3f26b40252948db8fa59e00da87a0138d2ef8abdb866590c039b3927494a82e",
+        "810a77ab03c3a12f185b280ebae083c690dff693168db63aa91b7c5d32937ad0",
     ),
     // In-loop faults in lockstep: applied by the processes by loop index, hence deterministic.
     (
@@ -211,7 +213,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "--fault",
             "corrupt controller nan at 1.2s for 50ms",
         ],
-        "c3f26b40252948db8fa59e00da87a0138d2ef8abdb866590c039b3927494a82e",
+        "810a77ab03c3a12f185b280ebae083c690dff693168db63aa91b7c5d32937ad0",
     ),
     (
         "pendulum, faults: delay sensors and estimator, drop estimator and controller, corrupt inf and out-of-range",
@@ -230,7 +232,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "--fault",
             "corrupt controller out-of-range at 1.5s for 100ms",
         ],
-        "2dc0d1d0b2e4143ed878a80d976199c17f8bde300df4d4ab361d50291907c190",
+        "08d279f88b8704f54c053711abb20e534622066d0b36ccfa798a893058edee2d",
     ),
 ];
 
@@ -302,7 +304,7 @@ fn check(scenario: &str, in_process: bool) {
     }
     assert!(
         failures.is_empty(),
-        "{} of {} trajectory.csv hashes ({scenario}, {}) differ from those recorded (with issue 13):\n{}",
+        "{} of {} trajectory.csv hashes ({scenario}, {}) differ from those recorded (with issue 30):\n{}",
         failures.len(),
         cases.len(),
         if in_process { "in-process" } else { "five processes" },

@@ -91,6 +91,28 @@ pub fn series(t: &[f64], values: &[f64]) -> Vec<(f64, f64)> {
     t.iter().zip(values).filter(|(_, v)| v.is_finite()).map(|(t, v)| (*t, *v)).collect()
 }
 
+/// (t, value) pairs split where a value is not there (NaN: the part did not arrive), one run per
+/// stretch of values: a line drawn through each run leaves a gap where none came, not a ramp
+/// across it. A lone value becomes a level `hold` long (a command holds for one period), so it
+/// stays visible.
+pub fn runs(t: &[f64], values: &[f64], hold: f64) -> Vec<Vec<(f64, f64)>> {
+    let mut out: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut run: Vec<(f64, f64)> = Vec::new();
+    for (&t, &v) in t.iter().zip(values).chain([(&f64::NAN, &f64::NAN)]) {
+        if v.is_finite() {
+            run.push((t, v));
+            continue;
+        }
+        match run[..] {
+            [] => {}
+            [(t, v)] => out.push(vec![(t, v), (t + hold, v)]),
+            _ => out.push(std::mem::take(&mut run)),
+        }
+        run.clear();
+    }
+    out
+}
+
 /// A held value drawn as steps: it keeps its value until the tick at which it changes, then
 /// jumps there, so a zero-order hold reads as stairs and not as a ramp between samples.
 pub fn steps(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
@@ -165,5 +187,16 @@ mod tests {
         let held = [(0.0, 1.0), (0.1, 1.0), (0.2, 2.0), (0.3, 2.0), (0.4, 3.0)];
         assert_eq!(steps(&held), [(0.0, 1.0), (0.1, 1.0), (0.2, 1.0), (0.2, 2.0), (0.3, 2.0), (0.4, 2.0), (0.4, 3.0)]);
         assert_eq!(series(&[0.0, 0.1, 0.2], &[1.0, f64::NAN, 2.0]), [(0.0, 1.0), (0.2, 2.0)]);
+    }
+
+    #[test]
+    fn values_that_did_not_come_split_a_line_into_runs() {
+        let nan = f64::NAN;
+        let t = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+        assert_eq!(
+            runs(&t, &[1.0, 2.0, nan, nan, 3.0, nan, 4.0, 5.0], 0.5),
+            [vec![(0.0, 1.0), (1.0, 2.0)], vec![(4.0, 3.0), (4.5, 3.0)], vec![(6.0, 4.0), (7.0, 5.0)]]
+        );
+        assert!(runs(&t[..2], &[nan, nan], 0.5).is_empty());
     }
 }

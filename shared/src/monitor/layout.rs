@@ -1,5 +1,5 @@
 //! The run's vectors as the recorder reads them: names, units and sizes of the state, each
-//! sensor's reading, the estimate and the command, taken once from the launch file and the
+//! sensor's reading, the estimate and the input, taken once from the launch file and the
 //! scenario; and the column names of `trajectory.csv` made from them.
 
 use crate::config::launch::LaunchConfig;
@@ -54,7 +54,8 @@ impl Layout {
 
     /// The header of `trajectory.csv`: `k`, `t_s`, the state, each sensor's reading (`meas.` and
     /// the sensor's name, then `.` and the component's name when it has more than one), the
-    /// estimate (`est.`) and the command (`cmd.`), each with its unit.
+    /// estimate (`est.`), the command (`cmd.`) and the input the actuator applied (`applied.`),
+    /// each with its unit.
     pub fn trajectory_columns(&self) -> Vec<String> {
         let mut columns = vec!["k".to_string(), column_name("t", "s")];
         columns.extend(self.state.iter().map(|c| column_name(c.name, c.unit)));
@@ -68,6 +69,7 @@ impl Layout {
         }
         columns.extend(self.estimate.iter().map(|c| column_name(&format!("est.{}", c.name), c.unit)));
         columns.extend(self.input.iter().map(|c| column_name(&format!("cmd.{}", c.name), c.unit)));
+        columns.extend(self.input.iter().map(|c| column_name(&format!("applied.{}", c.name), c.unit)));
         columns
     }
 }
@@ -139,7 +141,8 @@ mod tests {
                 "meas.imu.x_m_per_s2",
                 "meas.imu.y",
                 "est.theta_rad",
-                "cmd.u_N_m"
+                "cmd.u_N_m",
+                "applied.u_N_m"
             ]
         );
     }

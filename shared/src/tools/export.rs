@@ -100,7 +100,7 @@ fn k_and_t(table: &Table, k: &[Option<u64>], t: &[Option<f64>], row: usize) -> R
 }
 
 /// trajectory.csv by the names a run of the launch file writes: k, t, the state, each sensor's
-/// reading, the estimate and the command.
+/// reading, the estimate, the command and the applied input.
 struct Trajectory {
     table: Table,
     k: Vec<Option<u64>>,
@@ -110,6 +110,8 @@ struct Trajectory {
     sensors: Vec<Cells<f64>>,
     estimate: Cells<f64>,
     command: Cells<f64>,
+    /// The plant's `u_applied`, part of its state message.
+    applied: Cells<f64>,
 }
 
 impl Trajectory {
@@ -124,8 +126,9 @@ impl Trajectory {
             .map(|dim| columns(&table, names.by_ref().take(dim)))
             .collect::<Result<_, _>>()?;
         let estimate = columns(&table, names.by_ref().take(layout.estimate.len()))?;
-        let command = columns(&table, names)?;
-        Ok(Trajectory { table, k, t, state, sensors, estimate, command })
+        let command = columns(&table, names.by_ref().take(layout.input.len()))?;
+        let applied = columns(&table, names)?;
+        Ok(Trajectory { table, k, t, state, sensors, estimate, command, applied })
     }
 
     /// A row as the parts of its loop, with its k and t.
@@ -136,6 +139,9 @@ impl Trajectory {
         if let Some(x) = values(table, &self.state, row, "the state")? {
             let mut state = PlantState::default();
             state.x[..x.len()].copy_from_slice(&x);
+            if let Some(u) = values(table, &self.applied, row, "the applied input")? {
+                state.u_applied[..u.len()].copy_from_slice(&u);
+            }
             parts.state = Some(state);
         }
         let mut measurements = Measurements::default();

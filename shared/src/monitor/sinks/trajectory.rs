@@ -1,6 +1,13 @@
 //! `trajectory.csv`: one row per tick in simulation time only: the true state, each sensor's
-//! held value, the estimate and the command. Byte for byte the same for a lockstep run of the
-//! same launch file and seed.
+//! held value, the estimate, the command and the input the actuator applied. Byte for byte the
+//! same for a lockstep run of the same launch file and seed.
+//!
+//! Row k's `cmd.*` is command k, computed from tick k's data (empty where none came); its
+//! `applied.*` is the plant's state message k's `u_applied`: what the actuator applied over the
+//! period that ended at tick k, t(k−1) to t(k) (the command held then, `on_stale`'s value once
+//! it was stale, or what the scenario's actuator made of it; at k = 0, the plant's initial
+//! input). So in time, command k shows up as applied in row k+1, and across a silent
+//! controller `cmd.*` is empty while `applied.*` shows what the plant held.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -52,6 +59,7 @@ impl RunSink for TrajectoryCsv {
         }
         push(part.estimate.as_ref().map(|e| &e.x[..]), self.n_estimate);
         push(part.command.as_ref().map(|c| &c.u[..]), self.n_input);
+        push(part.state.as_ref().map(|s| &s.u_applied[..]), self.n_input);
         writeln!(self.file, "{row}")?;
         Ok(())
     }
@@ -76,6 +84,7 @@ mod tests {
     fn whole_loop() -> LoopParts {
         let mut state = PlantState::default();
         state.x[..2].copy_from_slice(&[0.5, -1.25]);
+        state.u_applied[0] = -0.5;
         let mut measurements = Measurements::default();
         measurements.readings[0].value[0] = 0.1;
         measurements.readings[1].value[..2].copy_from_slice(&[2.0, 3.0]);
@@ -105,6 +114,9 @@ mod tests {
         sink.loop_joined(&JoinedLoop { k: 0, t: 0.0, parts: &whole }).unwrap();
         let partial = LoopParts { measurements: None, estimate: None, ..whole_loop() };
         sink.loop_joined(&JoinedLoop { k: 1, t: 0.001, parts: &partial }).unwrap();
+        // No command: the applied input is still there.
+        let silent = LoopParts { command: None, ..whole_loop() };
+        sink.loop_joined(&JoinedLoop { k: 2, t: 0.002, parts: &silent }).unwrap();
         sink.finish(&MonitorReport::default()).unwrap();
         drop(sink);
         // A restarted monitor appends, without a second header.
@@ -116,10 +128,12 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
         assert_eq!(
             text,
-            "k,t_s,theta_rad,omega_rad_per_s,meas.encoder_rad,meas.imu.x_m_per_s2,meas.imu.y,est.theta_rad,cmd.u_N_m\n\
-             0,0,0.5,-1.25,0.1,2,3,0.25,-0.75\n\
-             1,0.001,0.5,-1.25,,,,,-0.75\n\
-             5,0.005,,,,,,,\n"
+            "k,t_s,theta_rad,omega_rad_per_s,meas.encoder_rad,meas.imu.x_m_per_s2,meas.imu.y,est.theta_rad,cmd.u_N_m,\
+             applied.u_N_m\n\
+             0,0,0.5,-1.25,0.1,2,3,0.25,-0.75,-0.5\n\
+             1,0.001,0.5,-1.25,,,,,-0.75,-0.5\n\
+             2,0.002,0.5,-1.25,0.1,2,3,0.25,,-0.5\n\
+             5,0.005,,,,,,,,\n"
         );
     }
 }

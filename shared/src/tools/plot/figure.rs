@@ -10,7 +10,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 pub use crate::model::figure::{Colour, Curve, FaultMark, Figure, Line, Panel, series, steps};
-use crate::tools::plot::{FONT, colour, plot_error, png};
+use crate::tools::plot::{FONT, PngBackend, colour, plot_error, png};
 
 /// At most about `max` points that keep each bucket's lowest and highest value, so a spike
 /// stays visible when a long run is drawn at a figure's width.
@@ -134,7 +134,7 @@ impl Figure {
     }
 
     /// The title and one legend for every panel (each panel has the same curves).
-    fn draw_header(&self, area: &DrawingArea<BitMapBackend<'_>, Shift>) -> anyhow::Result<()> {
+    fn draw_header(&self, area: &DrawingArea<PngBackend<'_>, Shift>) -> anyhow::Result<()> {
         // The largest size at which the title fits the figure's width.
         let width = area.dim_in_pixel().0 as i32 - 32;
         let mut size = 22.0;
@@ -196,7 +196,7 @@ impl Figure {
         Ok(())
     }
 
-    fn draw_panel(&self, area: &DrawingArea<BitMapBackend<'_>, Shift>, panel: &Panel) -> anyhow::Result<()> {
+    fn draw_panel(&self, area: &DrawingArea<PngBackend<'_>, Shift>, panel: &Panel) -> anyhow::Result<()> {
         let y = panel.y_range();
         let mut chart = ChartBuilder::on(area)
             .caption(&panel.title, (FONT, 17))
@@ -265,7 +265,7 @@ impl Figure {
 /// A solid line `width` pixels wide, drawn as that many one-pixel lines side by side: plotters
 /// fills a wide line as one polygon, which leaves holes where a noisy curve crosses itself.
 fn thick_line(
-    area: &DrawingArea<BitMapBackend<'_>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    area: &DrawingArea<PngBackend<'_>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     points: &[(f64, f64)],
     colour: RGBColor,
     width: u32,

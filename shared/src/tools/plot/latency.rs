@@ -246,7 +246,7 @@ pub fn cdf_panels(path: &Path, panels: &[Panel]) -> Result<()> {
     root.present().map_err(plot_error)
 }
 
-type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+type Area<'a> = DrawingArea<crate::tools::plot::PngBackend<'a>, Shift>;
 
 /// A series' points on the chart, (µs, share at or above), as steps: at most 2000 points, and
 /// every point of the last 1 % (the tail). Loops at +∞ hold the curve at their share from the

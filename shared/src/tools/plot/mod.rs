@@ -8,6 +8,7 @@ pub mod figure;
 pub mod latency;
 pub mod paper;
 pub mod run;
+pub mod text;
 
 use std::path::Path;
 use std::sync::Once;
@@ -15,6 +16,8 @@ use std::sync::Once;
 use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+
+pub use text::PngBackend;
 
 /// A figure's font family; registered once per process from the embedded DejaVu Sans.
 pub const FONT: &str = "sans-serif";
@@ -35,7 +38,8 @@ pub fn colour(i: usize) -> RGBColor {
     COLOURS[i % COLOURS.len()]
 }
 
-fn register_fonts() {
+/// Registers the font with plotters, which measures text with it ([`PngBackend`] draws it).
+pub(crate) fn register_fonts() {
     static FONTS: Once = Once::new();
     FONTS.call_once(|| {
         for (style, bytes) in [(FontStyle::Normal, dejavu::sans::regular()), (FontStyle::Bold, dejavu::sans::bold())] {
@@ -45,12 +49,12 @@ fn register_fonts() {
 }
 
 /// A white PNG canvas of `size` pixels at `path`; `present()` it to write the file.
-pub fn png(path: &Path, size: (u32, u32)) -> Result<DrawingArea<BitMapBackend<'_>, Shift>> {
+pub fn png(path: &Path, size: (u32, u32)) -> Result<DrawingArea<PngBackend<'_>, Shift>> {
     register_fonts();
     // plotters opens the file itself, following links; a link where the figure goes is refused
     // here first (the folder is the user's own, so no one else can put one there in between).
     crate::runtime::run_file::open(path, crate::runtime::run_file::Existing::Replace)?;
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let root = PngBackend(BitMapBackend::new(path, size)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_error)?;
     Ok(root)
 }

@@ -13,6 +13,7 @@ use crate::config::schema::Component;
 use crate::launcher::summary::Summary;
 use crate::model::catalog::Catalog;
 use crate::model::figure::RunColumns;
+use crate::model::figure::runs;
 use crate::model::scenario::Scenario;
 use crate::monitor::layout::Layout;
 use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel, series, steps, tick_label};
@@ -21,7 +22,7 @@ use crate::tools::run_folder::RunFolder;
 use crate::tools::{RUN_FILES, ToolError};
 
 /// Where each vector lies among trajectory.csv's columns, in the layout's order (the order the
-/// monitor writes them: k, t, state, each sensor's components, estimate, command).
+/// monitor writes them: k, t, state, each sensor's components, estimate, command, applied input).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Columns {
     pub state: Range<usize>,
@@ -29,6 +30,8 @@ pub struct Columns {
     pub sensors: Vec<Range<usize>>,
     pub estimate: Range<usize>,
     pub command: Range<usize>,
+    /// What the actuator applied over the period that ended at each row's tick.
+    pub applied: Range<usize>,
     pub count: usize,
 }
 
@@ -43,7 +46,8 @@ impl Columns {
         let sensors = layout.sensor_dims().into_iter().map(&mut take).collect();
         let estimate = take(layout.estimate.len());
         let command = take(layout.input.len());
-        Columns { state, sensors, estimate, command, count: next }
+        let applied = take(layout.input.len());
+        Columns { state, sensors, estimate, command, applied, count: next }
     }
 }
 
@@ -203,10 +207,13 @@ fn estimate_figure(data: &RunData) -> Figure {
     data.figure_over_time("truth against estimate", panels, span)
 }
 
-/// Each command component over time, with the actuator's limits where the command reaches them.
-fn commands_figure(data: &RunData) -> Figure {
+/// Each input component over time: the commands as they came, with a gap wherever none came
+/// (a stopped or dead controller, a lost command), and what the actuator applied (held, or
+/// `on_stale`'s value) as steps beside them; the actuator's limits where they are reached.
+pub fn commands_figure(data: &RunData) -> Figure {
     let t = data.t();
     let span = data.span();
+    let dt = data.config.dt();
     let limits = data.scenario.input_limits();
     let panels = data
         .scenario
@@ -215,12 +222,19 @@ fn commands_figure(data: &RunData) -> Figure {
         .iter()
         .enumerate()
         .map(|(i, component)| {
-            let command = series(t, &data.trajectory[data.columns.command.start + i]);
-            let mut panel = Panel::new(
-                component.name,
-                unit_desc(component),
-                vec![Curve::new("command", command, Colour::Series(0), Line::Solid(2))],
+            // The commands thick, the applied steps thin over them: both stay visible where they
+            // agree.
+            let commands = runs(t, &data.trajectory[data.columns.command.start + i], dt);
+            let mut curves: Vec<Curve> = commands
+                .into_iter()
+                .map(|run| Curve::new(COMMAND_LABEL, run, Colour::Series(0), Line::Solid(2)))
+                .collect();
+            curves.extend(
+                applied_steps(data, i)
+                    .into_iter()
+                    .map(|run| Curve::new(APPLIED_LABEL, run, Colour::Series(1), Line::Solid(1))),
             );
+            let mut panel = Panel::new(component.name, unit_desc(component), curves);
             if let Some((lo, hi)) = limits.get(i) {
                 panel.bounds = vec![
                     Curve::level("limit", *lo, &span, Colour::Limit),
@@ -230,8 +244,30 @@ fn commands_figure(data: &RunData) -> Figure {
             panel
         })
         .collect();
-    data.figure_over_time("commands", panels, span)
+    data.figure_over_time("commands and the applied input", panels, span)
 }
+
+/// Input component `i` as the actuator applied it, as steps, one run per stretch of rows that
+/// have it (a row without the plant's state has none). Row k's value was applied over t(k−1) to
+/// t(k), so it is drawn over that period; row 0's (the period before the run) is left out.
+fn applied_steps(data: &RunData, i: usize) -> Vec<Vec<(f64, f64)>> {
+    let dt = data.config.dt();
+    let start: Vec<f64> = data.t().iter().skip(1).map(|t| t - dt).collect();
+    let applied = data.trajectory[data.columns.applied.start + i].get(1..).unwrap_or(&[]);
+    runs(&start, applied, 0.0)
+        .into_iter()
+        .map(|run| {
+            let mut run = steps(&run);
+            let &(end, value) = run.last().expect("a run has a value");
+            run.push((end + dt, value));
+            run
+        })
+        .collect()
+}
+
+/// The legend's names of the commands chart's curves: every run of commands has the first.
+pub const COMMAND_LABEL: &str = "command (gaps: none came)";
+pub const APPLIED_LABEL: &str = "applied by the actuator";
 
 /// The time window of the sensors' figure: 25 samples of the slowest sensor (at least 50 ticks),
 /// from the start, so that each hold's steps are wide enough to see.
@@ -246,19 +282,18 @@ fn sensors_figure(data: &RunData) -> Figure {
     let t = data.t();
     let vectors = data.scenario.vectors();
     let state = |row: usize| -> Vec<f64> { data.columns.state.clone().map(|c| data.trajectory[c][row]).collect() };
-    let command = |row: usize| -> Vec<f64> { data.columns.command.clone().map(|c| data.trajectory[c][row]).collect() };
+    let applied = |row: usize| -> Vec<f64> { data.columns.applied.clone().map(|c| data.trajectory[c][row]).collect() };
     let window = sensor_window(&data.config);
     let rows = t.iter().take_while(|t| **t <= window.end).count();
     let mut panels = Vec::new();
     for ((name, _), columns) in data.layout.sensors.iter().zip(&data.columns.sensors) {
         let signal = vectors.signal(&data.config.sensors[name].signal).expect("sensor signals are checked at load");
         // The truth as the signal reads it: the true state and the input applied over the last
-        // interval (the previous tick's command).
+        // interval, as the sensors' process read it.
         let mut truth = vec![Vec::new(); columns.len()];
         let mut out = vec![0.0; columns.len()];
         for (row, &at) in t.iter().enumerate().take(rows) {
-            let applied = if row == 0 { vec![0.0; data.columns.command.len()] } else { command(row - 1) };
-            let applied: Vec<f64> = applied.into_iter().map(|u| if u.is_finite() { u } else { 0.0 }).collect();
+            let applied: Vec<f64> = applied(row).into_iter().map(|u| if u.is_finite() { u } else { 0.0 }).collect();
             let x = state(row);
             if x.iter().all(|v| v.is_finite()) {
                 (signal.read)(at, &x, &applied, &mut out);
@@ -374,10 +409,17 @@ mod tests {
     #[test]
     fn columns_lie_in_the_monitors_order() {
         let columns = Columns::of(&Layout::example());
-        // k, t, theta, omega, encoder's angle, imu's x and y, theta's estimate, u.
+        // k, t, theta, omega, encoder's angle, imu's x and y, theta's estimate, u, applied u.
         assert_eq!(
             columns,
-            Columns { state: 2..4, sensors: vec![4..5, 5..7], estimate: 7..8, command: 8..9, count: 9 }
+            Columns {
+                state: 2..4,
+                sensors: vec![4..5, 5..7],
+                estimate: 7..8,
+                command: 8..9,
+                applied: 9..10,
+                count: 10
+            }
         );
     }
 
