@@ -13,6 +13,9 @@ use crate::launcher::summary::Summary;
 /// The launcher's exit code for a finished run, and the error line it prints, if any.
 pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
     match outcome {
+        Outcome::Completed if !summary.lost_stages.is_empty() && summary.loops == summary.loops_planned => {
+            (EXIT_FAILED, Some(format!("the run ran its {} loops {}", summary.loops, lost_text(summary))))
+        }
         Outcome::Completed if !summary.completed => {
             let why =
                 summary.stopped_because.as_ref().map_or("it ran fewer loops than planned".into(), |r| r.to_string());
@@ -28,6 +31,14 @@ pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
         Outcome::Interrupted => (EXIT_INTERRUPTED, None),
         Outcome::Failed(why) => (EXIT_FAILED, Some(why.clone())),
     }
+}
+
+/// "with a stage LOST: controller died at 1000 ms and was not restarted (on_death = continue)".
+fn lost_text(s: &Summary) -> String {
+    let lost: Vec<String> =
+        s.lost_stages.iter().map(|l| format!("{} died at {:.0} ms", l.process, l.at_ms)).collect();
+    let stage = if lost.len() == 1 { "a stage" } else { "stages" };
+    format!("with {stage} LOST: {} and was not restarted (on_death = continue)", lost.join(", "))
 }
 
 fn micros(ns: Option<u64>) -> String {
@@ -79,6 +90,10 @@ pub fn render(s: &Summary) -> String {
         (Some(why), _) => format!("stopped early: {why}"),
         (None, true) => "completed".into(),
         (None, false) => "did not complete".into(),
+    };
+    let status = match (&s.stopped_because, s.lost_stages.is_empty()) {
+        (None, false) => format!("ran every loop {}", lost_text(s)),
+        _ => status,
     };
     let status = match s.diverged_at_loop {
         Some(k) => format!("{status}, the simulation DIVERGED at loop {k}"),

@@ -61,11 +61,15 @@ pub struct Summary {
     /// Loops (ticks) that ran: states published plus skipped ticks.
     pub loops: u64,
     pub loops_planned: u64,
-    /// Every planned loop ran and every process ended cleanly.
+    /// Every planned loop ran and every process ended cleanly (a run that lost a stage is not).
     pub completed: bool,
     /// Why the run ended early, when it did.
     #[schemars(with = "Option<String>")]
     pub stopped_because: Option<StopReason>,
+    /// Stages that died and were not restarted while the run went on to its planned end
+    /// without them (`supervision.on_death = "continue"`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lost_stages: Vec<LostStage>,
     pub deadline_misses: u64,
     pub rejected_commands: u64,
     pub skipped_ticks: u64,
@@ -329,6 +333,19 @@ pub struct RunLog {
     pub faults: Vec<FaultSeen>,
     pub timeline: Vec<TimelineEntry>,
     pub restarts: Vec<RestartRecord>,
+    /// The stages that died and were not restarted while the run went on (`on_death = "continue"`).
+    pub lost: Vec<LostStage>,
+}
+
+/// A stage that died, was not restarted, and whose run went on to its planned end without it
+/// (`supervision.on_death = "continue"`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
+pub struct LostStage {
+    pub process: Role,
+    /// When the launcher saw it die, wall-clock ms after tick 0.
+    pub at_ms: f64,
+    /// How it died and why it was not restarted.
+    pub why: String,
 }
 
 impl RunLog {
@@ -388,8 +405,12 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         started_at,
         loops: plant.loops,
         loops_planned: config.loops(),
-        completed: *outcome == Outcome::Completed && !plant.stopped_early && plant.loops == config.loops(),
+        completed: *outcome == Outcome::Completed
+            && !plant.stopped_early
+            && plant.loops == config.loops()
+            && log.lost.is_empty(),
         stopped_because: StopReason::of(outcome, plant.stopped_early),
+        lost_stages: log.lost.clone(),
         deadline_misses: counters.deadline_misses,
         rejected_commands: counters.rejected_commands,
         skipped_ticks: counters.skipped_ticks,
@@ -555,6 +576,7 @@ pub(crate) mod tests {
             loops_planned: 1000,
             completed: true,
             stopped_because: None,
+            lost_stages: vec![],
             deadline_misses: 0,
             rejected_commands: 0,
             skipped_ticks: 0,
