@@ -33,10 +33,13 @@ pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
     }
 }
 
-/// "with a stage LOST: controller died at 1000 ms and was not restarted (on_death = continue)".
+/// "with a stage LOST: controller died at loop 1000 (t = 1 s) and was not restarted (on_death = continue)".
 fn lost_text(s: &Summary) -> String {
     let lost: Vec<String> =
-        s.lost_stages.iter().map(|l| format!("{} died at {:.0} ms", l.process, l.at_ms)).collect();
+        s.lost_stages.iter().map(|l| match l.at_loop {
+            Some(k) => format!("{} died at loop {k} (t = {} s)", l.process, k as f64 / s.rate_hz),
+            None => format!("{} died {:.0} ms after tick 0 (wall clock)", l.process, l.at_ms),
+        }).collect();
     let stage = if lost.len() == 1 { "a stage" } else { "stages" };
     format!("with {stage} LOST: {} and was not restarted (on_death = continue)", lost.join(", "))
 }
@@ -225,7 +228,7 @@ fn ms(value: Option<f64>) -> String {
 
 /// Writes `rows` (the first is the header) as a table indented by two spaces, each column as
 /// wide as its widest cell and two spaces from the next; `right[i]` aligns column i right.
-fn write_table(out: &mut String, rows: &[Vec<String>], right: &[bool]) {
+pub(crate) fn write_table(out: &mut String, rows: &[Vec<String>], right: &[bool]) {
     let mut widths = vec![0; right.len()];
     for row in rows {
         for (width, cell) in widths.iter_mut().zip(row) {
@@ -334,7 +337,11 @@ fn render_faults(out: &mut String, s: &Summary) {
                 format!("{} ticks", e.outage_ticks),
                 e.worst_error_during.map_or("-".into(), |v| format!("{v:.4}")),
                 e.worst_error_after.map_or("-".into(), |v| format!("{v:.4}")),
-                e.recovery_s.map_or("never".into(), |v| format!("{v:.3} s")),
+                match e.recovery_s {
+                    _ if e.never_back => format!("never: {} lost", f.process),
+                    Some(v) => format!("{v:.3} s"),
+                    None => "never".into(),
+                },
                 if e.within_limits { "kept" } else { "EXCEEDED" },
             ),
             None => ("-".into(), "-".into(), "-".into(), "-".into(), "no record"),
@@ -359,6 +366,7 @@ fn render_faults(out: &mut String, s: &Summary) {
             f.fault
         );
     }
+    crate::launcher::report_phases::render_never_back(out, s);
     // Real time: a kill or stop the launcher sent later than planned (it was stopped or starved).
     for f in &s.faults {
         if let Some(late) = f.injected_at_ms.map(|at| at - f.at_s * 1e3).filter(|late| *late > LATE_INJECTION_MS) {
@@ -369,6 +377,7 @@ fn render_faults(out: &mut String, s: &Summary) {
             let _ = writeln!(out, "  note: `{}` was cut short by the run's end (continued{after})", f.fault);
         }
     }
+    crate::launcher::report_phases::render(out, s);
     if !s.timeline.is_empty() {
         let _ = writeln!(out, "\n  timeline (wall-clock ms after tick 0)");
         for entry in &s.timeline {

@@ -344,6 +344,9 @@ pub struct LostStage {
     pub process: Role,
     /// When the launcher saw it die, wall-clock ms after tick 0.
     pub at_ms: f64,
+    /// The loop from which it was missing: real time, the loop running when its death was seen;
+    /// lockstep, the loop the plant was held at for its kill (None: it died by itself).
+    pub at_loop: Option<u64>,
     /// How it died and why it was not restarted.
     pub why: String,
 }

@@ -8,7 +8,7 @@ use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::protocol::PlantReport;
 use crate::contract::role::Role;
-use crate::launcher::inject::DetectedBy;
+use crate::launcher::inject::{self, DetectedBy};
 use crate::launcher::outcome::Outcome;
 use crate::launcher::restart::{self, Decision, RestartRecord};
 use crate::launcher::summary::LostStage;
@@ -73,7 +73,14 @@ impl Supervisor<'_> {
         self.note(ns, format!("{why}; the run goes on without it (on_death = continue)"));
         self.processes[role].lost = true;
         let at_ms = self.log.since_start_ms(ns);
-        self.log.lost.push(LostStage { process: role, at_ms, why: format!("{why}; see logs/{role}.log") });
+        let at_loop = match self.config.mode {
+            Mode::Lockstep => self.last_pause.filter(|_| self.paused),
+            Mode::Realtime => {
+                self.log.plant_start_ns.map(|start| inject::loop_at(ns, start, inject::period_ns(self.config.rate_hz)))
+            }
+        };
+        let why = format!("{why}; see logs/{role}.log");
+        self.log.lost.push(LostStage { process: role, at_ms, at_loop, why });
         self.tell_plant_lost();
         None
     }
