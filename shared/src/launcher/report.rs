@@ -35,11 +35,14 @@ pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
 
 /// "with a stage LOST: controller died at loop 1000 (t = 1 s) and was not restarted (on_death = continue)".
 fn lost_text(s: &Summary) -> String {
-    let lost: Vec<String> =
-        s.lost_stages.iter().map(|l| match l.at_loop {
+    let lost: Vec<String> = s
+        .lost_stages
+        .iter()
+        .map(|l| match l.at_loop {
             Some(k) => format!("{} died at loop {k} (t = {} s)", l.process, k as f64 / s.rate_hz),
             None => format!("{} died {:.0} ms after tick 0 (wall clock)", l.process, l.at_ms),
-        }).collect();
+        })
+        .collect();
     let stage = if lost.len() == 1 { "a stage" } else { "stages" };
     format!("with {stage} LOST: {} and was not restarted (on_death = continue)", lost.join(", "))
 }

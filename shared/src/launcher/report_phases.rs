@@ -26,9 +26,21 @@ pub fn render(out: &mut String, s: &Summary) {
     for (f, phases) in split {
         let _ = writeln!(out, "  {}", f.fault);
         let mut rows = vec![
-            ["", "loops", "from s", "to s", "no command", "misses", "e2e p50 µs", "p99 µs", "max µs", "error max", "rms"]
-                .map(String::from)
-                .to_vec(),
+            [
+                "",
+                "loops",
+                "from s",
+                "to s",
+                "no command",
+                "misses",
+                "e2e p50 µs",
+                "p99 µs",
+                "max µs",
+                "error max",
+                "rms",
+            ]
+            .map(String::from)
+            .to_vec(),
         ];
         for (name, p) in [("before", &phases.before), ("during", &phases.during), ("after", &phases.after)] {
             rows.push(row(name, p, s.rate_hz));

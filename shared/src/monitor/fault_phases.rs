@@ -53,7 +53,8 @@ impl Tally {
         }
         if let Some(e) = facts.error {
             // NaN (a diverged state) is the largest error of all.
-            self.error_max = Some(self.error_max.map_or(e, |m: f64| if e.is_nan() || m.is_nan() { f64::NAN } else { m.max(e) }));
+            self.error_max =
+                Some(self.error_max.map_or(e, |m: f64| if e.is_nan() || m.is_nan() { f64::NAN } else { m.max(e) }));
             self.error_sum_sq += e * e;
             self.errors += 1;
         }

@@ -5,7 +5,8 @@ use std::fmt;
 
 use crate::config::error::LaunchError;
 use crate::config::faults::{
-    FAULT_KINDS, FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, ON_DEATH_CONTINUE_ROLES, OnDeath, MAX_STOP_S, MAX_TIMEOUT_S, Supervision,
+    FAULT_KINDS, FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, ON_DEATH_CONTINUE_ROLES,
+    OnDeath, Supervision,
 };
 use crate::config::launch::types::{LaunchConfig, MAX_DURATION_S, MAX_LOOPS, MAX_RATE_HZ, Origins, PerComponent};
 use crate::config::wait::{MAX_WAIT_US, WaitSettings};

@@ -88,7 +88,10 @@ impl Supervisor<'_> {
     /// Lockstep: a stage was lost, so command k will never come; the plant goes on without
     /// waiting for it, applying `on_stale` (real time: its command timeout does that already).
     pub(super) fn tell_plant_lost(&mut self) {
-        if self.config.mode == Mode::Lockstep && !self.log.lost.is_empty() && !self.processes[Role::Plant].write_line("lost") {
+        if self.config.mode == Mode::Lockstep
+            && !self.log.lost.is_empty()
+            && !self.processes[Role::Plant].write_line("lost")
+        {
             self.note(now_ns(), "cannot tell the plant that a stage was lost".into());
         }
     }

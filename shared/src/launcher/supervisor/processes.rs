@@ -240,7 +240,8 @@ mod tests {
     use crate::config::faults::{OnDeath, Restart};
     use crate::launcher::restart::{Decision, decide};
 
-    const ON_FAILURE: Policy = Policy { restart: Restart::OnFailure, on_death: OnDeath::End, max_restarts: 3, backoff_s: 0.01 };
+    const ON_FAILURE: Policy =
+        Policy { restart: Restart::OnFailure, on_death: OnDeath::End, max_restarts: 3, backoff_s: 0.01 };
 
     fn ms(ms: u64) -> Duration {
         Duration::from_millis(ms)
