@@ -231,7 +231,7 @@ fn ms(value: Option<f64>) -> String {
 
 /// Writes `rows` (the first is the header) as a table indented by two spaces, each column as
 /// wide as its widest cell and two spaces from the next; `right[i]` aligns column i right.
-pub(crate) fn write_table(out: &mut String, rows: &[Vec<String>], right: &[bool]) {
+fn write_table(out: &mut String, rows: &[Vec<String>], right: &[bool]) {
     let mut widths = vec![0; right.len()];
     for row in rows {
         for (width, cell) in widths.iter_mut().zip(row) {
@@ -380,7 +380,7 @@ fn render_faults(out: &mut String, s: &Summary) {
             let _ = writeln!(out, "  note: `{}` was cut short by the run's end (continued{after})", f.fault);
         }
     }
-    crate::launcher::report_phases::render(out, s);
+    crate::launcher::report_phases::render(out, s, write_table);
     if !s.timeline.is_empty() {
         let _ = writeln!(out, "\n  timeline (wall-clock ms after tick 0)");
         for entry in &s.timeline {

@@ -6,7 +6,6 @@ use std::fmt::Write as _;
 
 use crate::config::launch::Mode;
 use crate::contract::report::PhaseStats;
-use crate::launcher::report::write_table;
 use crate::launcher::summary::Summary;
 
 /// What "during" means, said once above the tables.
@@ -15,7 +14,8 @@ pub const DURING: &str = "during = from the injection to the first loop whose co
                           if that never came";
 
 /// One table per fault: before, during, after.
-pub fn render(out: &mut String, s: &Summary) {
+/// `write_table` is the report's table writer (passed in: the report calls this module).
+pub fn render(out: &mut String, s: &Summary, write_table: fn(&mut String, &[Vec<String>], &[bool])) {
     let split: Vec<_> = s.faults.iter().filter_map(|f| Some((f, f.effect.as_ref()?.phases.as_ref()?))).collect();
     if split.is_empty() {
         return;

@@ -346,7 +346,7 @@ pub fn plot_run(run_dir: &Path, catalog: &Catalog) -> Result<Vec<PathBuf>, ToolE
     }
     written.push(latency::run_latency_figure(run_dir)?);
     let folder = RunFolder::open(run_dir, &RUN_FILES)?;
-    written.extend(crate::tools::plot::fault_zoom::plot_faults(run_dir, &data, &folder)?);
+    written.extend(crate::tools::plot::fault_zoom::plot_faults(run_dir, &folder, data.scenario.as_ref(), &data)?);
     Ok(written)
 }
 
