@@ -248,12 +248,32 @@ pub enum OnStale {
     Zero,
 }
 
+/// What happens to the run when a process dies and is not restarted (its policy says no, or it
+/// had its `max_restarts`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OnDeath {
+    /// The run ends there (a failure).
+    End,
+    /// The run goes on to its planned end with the process dead: the plant's fail-safe
+    /// (`on_stale`) applies, and the report says what the loop did after the loss. Only for the
+    /// stages (sensors, estimator, controller); the monitor always goes on.
+    Continue,
+}
+
+/// The processes `on_death = "continue"` may be set for: the stages. The plant is the loop
+/// itself and a bridge is a stage's only way in; the monitor's loss never ends the run.
+pub const ON_DEATH_CONTINUE_ROLES: [Role; 3] = Role::STAGES;
+
 /// One process's restart policy; keys left out take the `[supervision]` defaults.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProcessPolicy {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub restart: Option<Restart>,
+    /// end | continue: what a death without a restart does to the run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub on_death: Option<OnDeath>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_restarts: Option<u32>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -266,6 +286,9 @@ pub struct ProcessPolicy {
 pub struct Supervision {
     /// never | on-failure | always, for every process without its own policy.
     pub restart: Restart,
+    /// end | continue, for every stage without its own: what a stage's death without a restart
+    /// does to the run (the plant and the bridges always end it; the monitor's never does).
+    pub on_death: OnDeath,
     /// Restarts allowed per process in one run.
     pub max_restarts: u32,
     /// Wait before a restart, s; it doubles with each restart of the same process, up to 1 s.
@@ -297,6 +320,7 @@ impl Default for Supervision {
     fn default() -> Self {
         Self {
             restart: Restart::OnFailure,
+            on_death: OnDeath::End,
             max_restarts: 10,
             backoff_s: 0.01,
             backoff_reset_s: 1.0,
@@ -319,6 +343,7 @@ impl Default for Supervision {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Policy {
     pub restart: Restart,
+    pub on_death: OnDeath,
     pub max_restarts: u32,
     pub backoff_s: f64,
 }
@@ -328,8 +353,20 @@ impl Supervision {
         let own = self.policy_of(role);
         Policy {
             restart: own.restart.unwrap_or(self.restart),
+            on_death: own.on_death.unwrap_or(self.default_on_death(role)),
             max_restarts: own.max_restarts.unwrap_or(self.max_restarts),
             backoff_s: own.backoff_s.unwrap_or(self.backoff_s),
+        }
+    }
+
+    /// What a death without a restart does when the role's own table does not say: the
+    /// `[supervision]` default for a stage; the monitor's loss never ends the run (the loop goes
+    /// on without its recorder); the plant's and a bridge's always do.
+    fn default_on_death(&self, role: Role) -> OnDeath {
+        match role {
+            Role::Monitor => OnDeath::Continue,
+            _ if ON_DEATH_CONTINUE_ROLES.contains(&role) => self.on_death,
+            _ => OnDeath::End,
         }
     }
 

@@ -252,6 +252,47 @@ pub struct FaultEffect {
     /// the run ended first). `unrecorded` too: it had no effect to judge.
     #[serde(default)]
     pub not_injected: bool,
+    /// A kill whose process never came back (not restarted, or not before the next fault or
+    /// the end): the loop ran without it from the injection on, and it did not recover.
+    #[serde(default)]
+    pub never_back: bool,
+    /// The first time from the injection the error reached the scenario's limit.
+    #[serde(default)]
+    pub limit_exceeded_at_s: Option<f64>,
+    /// The whole run split at this fault: before it, during it, after it (None: not injected).
+    #[serde(default)]
+    pub phases: Option<FaultPhases>,
+}
+
+/// The run split at one fault into three spans of loops that together cover every loop:
+/// before (from loop 0 to the injection), during (from the injection to the first loop whose
+/// command was fresh again once the fault was over, through the restarted process after a
+/// kill; to the end of the run if that never came) and after (from there to the end).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct FaultPhases {
+    pub before: PhaseStats,
+    pub during: PhaseStats,
+    pub after: PhaseStats,
+}
+
+/// The loop over one span of a run, loops `from_k` to `to_k` (exclusive).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct PhaseStats {
+    pub from_k: u64,
+    pub to_k: u64,
+    /// Loops of the span whose state the monitor recorded.
+    pub loops: u64,
+    /// Of those, loops whose command never reached the plant.
+    pub without_command: u64,
+    /// Of those, loops with no command in time: none came, or it came after the next tick
+    /// (lockstep has no clock: there, a miss is a loop without a command).
+    pub misses: u64,
+    /// End to end, over the loops with a command.
+    pub end_to_end_ns: Stats,
+    /// The scenario's error measure (the fault report's) over the span: its largest value and
+    /// its root mean square.
+    pub error_max: Option<f64>,
+    pub error_rms: Option<f64>,
 }
 
 #[cfg(test)]

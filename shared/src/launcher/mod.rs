@@ -9,6 +9,7 @@ pub mod inject;
 pub mod network;
 pub mod outcome;
 pub mod report;
+pub mod report_phases;
 pub mod restart;
 pub mod run_dir;
 pub mod summary;

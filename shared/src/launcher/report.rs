@@ -13,6 +13,9 @@ use crate::launcher::summary::Summary;
 /// The launcher's exit code for a finished run, and the error line it prints, if any.
 pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
     match outcome {
+        Outcome::Completed if !summary.lost_stages.is_empty() && summary.loops == summary.loops_planned => {
+            (EXIT_FAILED, Some(format!("the run ran its {} loops {}", summary.loops, lost_text(summary))))
+        }
         Outcome::Completed if !summary.completed => {
             let why =
                 summary.stopped_because.as_ref().map_or("it ran fewer loops than planned".into(), |r| r.to_string());
@@ -28,6 +31,20 @@ pub fn exit_code(outcome: &Outcome, summary: &Summary) -> (u8, Option<String>) {
         Outcome::Interrupted => (EXIT_INTERRUPTED, None),
         Outcome::Failed(why) => (EXIT_FAILED, Some(why.clone())),
     }
+}
+
+/// "with a stage LOST: controller died at loop 1000 (t = 1 s) and was not restarted (on_death = continue)".
+fn lost_text(s: &Summary) -> String {
+    let lost: Vec<String> = s
+        .lost_stages
+        .iter()
+        .map(|l| match l.at_loop {
+            Some(k) => format!("{} died at loop {k} (t = {} s)", l.process, k as f64 / s.rate_hz),
+            None => format!("{} died {:.0} ms after tick 0 (wall clock)", l.process, l.at_ms),
+        })
+        .collect();
+    let stage = if lost.len() == 1 { "a stage" } else { "stages" };
+    format!("with {stage} LOST: {} and was not restarted (on_death = continue)", lost.join(", "))
 }
 
 fn micros(ns: Option<u64>) -> String {
@@ -102,6 +119,10 @@ pub fn render(s: &Summary) -> String {
         (Some(why), _) => format!("stopped early: {why}"),
         (None, true) => "completed".into(),
         (None, false) => "did not complete".into(),
+    };
+    let status = match (&s.stopped_because, s.lost_stages.is_empty()) {
+        (None, false) => format!("ran every loop {}", lost_text(s)),
+        _ => status,
     };
     let status = match s.diverged_at_loop {
         Some(k) => format!("{status}, the simulation DIVERGED at loop {k}"),
@@ -361,7 +382,11 @@ fn render_faults(out: &mut String, s: &Summary) {
                 format!("{} ticks", e.outage_ticks),
                 e.worst_error_during.map_or("-".into(), |v| format!("{v:.4}")),
                 e.worst_error_after.map_or("-".into(), |v| format!("{v:.4}")),
-                e.recovery_s.map_or("never".into(), |v| format!("{v:.3} s")),
+                match e.recovery_s {
+                    _ if e.never_back => format!("never: {} lost", f.process),
+                    Some(v) => format!("{v:.3} s"),
+                    None => "never".into(),
+                },
                 if e.within_limits { "kept" } else { "EXCEEDED" },
             ),
             None => ("-".into(), "-".into(), "-".into(), "-".into(), "no record"),
@@ -386,6 +411,7 @@ fn render_faults(out: &mut String, s: &Summary) {
             f.fault
         );
     }
+    crate::launcher::report_phases::render_never_back(out, s);
     // Real time: a kill or stop the launcher sent later than planned (it was stopped or starved).
     for f in &s.faults {
         if let Some(late) = f.injected_at_ms.map(|at| at - f.at_s * 1e3).filter(|late| *late > LATE_INJECTION_MS) {
@@ -396,6 +422,7 @@ fn render_faults(out: &mut String, s: &Summary) {
             let _ = writeln!(out, "  note: `{}` was cut short by the run's end (continued{after})", f.fault);
         }
     }
+    crate::launcher::report_phases::render(out, s, write_table);
     if !s.timeline.is_empty() {
         let _ = writeln!(out, "\n  timeline (wall-clock ms after tick 0)");
         for entry in &s.timeline {

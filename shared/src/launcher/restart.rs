@@ -98,8 +98,10 @@ pub struct RestartRecord {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::faults::OnDeath;
 
-    const ON_FAILURE: Policy = Policy { restart: Restart::OnFailure, max_restarts: 10, backoff_s: 0.01 };
+    const ON_FAILURE: Policy =
+        Policy { restart: Restart::OnFailure, on_death: OnDeath::End, max_restarts: 10, backoff_s: 0.01 };
 
     fn killed(restarts: u32, quick_restarts: u32, ran_s: Option<f64>) -> Death {
         Death { clean: false, restarts, quick_restarts, ran_s, disk_full: false }

@@ -62,11 +62,15 @@ pub struct Summary {
     /// Loops (ticks) that ran: states published plus skipped ticks.
     pub loops: u64,
     pub loops_planned: u64,
-    /// Every planned loop ran and every process ended cleanly.
+    /// Every planned loop ran and every process ended cleanly (a run that lost a stage is not).
     pub completed: bool,
     /// Why the run ended early, when it did.
     #[schemars(with = "Option<String>")]
     pub stopped_because: Option<StopReason>,
+    /// Stages that died and were not restarted while the run went on to its planned end
+    /// without them (`supervision.on_death = "continue"`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lost_stages: Vec<LostStage>,
     /// Real time: loops whose state went out but whose command did not reach the plant by the
     /// deadline (late, or never). Lockstep has no deadline: always 0 there.
     pub deadline_misses: u64,
@@ -353,6 +357,22 @@ pub struct RunLog {
     /// How each loop process was scheduled once it was ready, by role and incarnation (read
     /// only when `[realtime]` asks for something).
     pub scheduling: BTreeMap<(Role, u32), Scheduling>,
+    /// The stages that died and were not restarted while the run went on (`on_death = "continue"`).
+    pub lost: Vec<LostStage>,
+}
+
+/// A stage that died, was not restarted, and whose run went on to its planned end without it
+/// (`supervision.on_death = "continue"`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
+pub struct LostStage {
+    pub process: Role,
+    /// When the launcher saw it die, wall-clock ms after tick 0.
+    pub at_ms: f64,
+    /// The loop from which it was missing: real time, the loop running when its death was seen;
+    /// lockstep, the loop the plant was held at for its kill (None: it died by itself).
+    pub at_loop: Option<u64>,
+    /// How it died and why it was not restarted.
+    pub why: String,
 }
 
 impl RunLog {
@@ -413,8 +433,12 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         started_at,
         loops: plant.loops,
         loops_planned: config.loops(),
-        completed: *outcome == Outcome::Completed && !plant.stopped_early && plant.loops == config.loops(),
+        completed: *outcome == Outcome::Completed
+            && !plant.stopped_early
+            && plant.loops == config.loops()
+            && log.lost.is_empty(),
         stopped_because: StopReason::of(outcome, plant.stopped_early),
+        lost_stages: log.lost.clone(),
         deadline_misses: counters.deadline_misses,
         deadline_us: realtime.then(|| config.deadline_ns() as f64 / 1e3),
         deadline_miss_share: realtime.then(|| counters.deadline_misses as f64 / plant.loops.max(1) as f64),
@@ -584,6 +608,7 @@ pub(crate) mod tests {
             loops_planned: 1000,
             completed: true,
             stopped_because: None,
+            lost_stages: vec![],
             deadline_misses: 0,
             deadline_us: None,
             deadline_miss_share: None,

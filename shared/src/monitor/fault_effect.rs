@@ -15,6 +15,7 @@ use crate::config::launch::LaunchConfig;
 use crate::contract::report::FaultEffect;
 use crate::contract::role::Role;
 use crate::model::scenario::ErrorMeasure;
+use crate::monitor::fault_phases::{LoopFacts, Phase, PhaseTally};
 use crate::monitor::join::LoopParts;
 
 /// Loops a tracker keeps while it waits for its fault's injection: the launcher's lateness and
@@ -30,8 +31,8 @@ struct Seen {
     incarnation: Option<u32>,
     /// The loop's record says its command was fresh.
     fresh: bool,
-    /// The error measure of its state (only for loops from the fault on).
-    error: Option<f64>,
+    /// What the before/during/after split needs of it (its error measure too).
+    facts: LoopFacts,
 }
 
 /// A fault injected from outside, in real time, whose injection the monitor has not heard of.
@@ -70,6 +71,10 @@ pub struct FaultTracker {
     awaiting: Option<Awaiting>,
     /// The launcher did not inject it (its process was not running).
     not_injected: bool,
+    /// The run's planned loops.
+    loops: u64,
+    /// The run split at this fault: before, during, after.
+    phases: PhaseTally,
     effect: FaultEffect,
 }
 
@@ -110,6 +115,8 @@ impl FaultTracker {
                     recorded: false,
                     awaiting,
                     not_injected: false,
+                    loops,
+                    phases: PhaseTally::default(),
                     effect: FaultEffect { within_limits: true, ..Default::default() },
                 }
             })
@@ -120,17 +127,25 @@ impl FaultTracker {
     pub fn observe(&mut self, k: u64, part: &LoopParts, measure: &ErrorMeasure) {
         let incarnation = self.slot.zip(part.record.as_ref()).map(|(i, r)| r.header.incarnations[i]);
         let fresh = part.record.as_ref().is_some_and(|r| r.deadline_miss == 0 && r.rejected == 0 && r.lost == 0);
-        // The error only in the fault's window (which an awaited injection may move on).
-        let needed = k >= self.from && (k < self.window_end || self.awaiting.is_some());
-        let error = part.state.as_ref().filter(|_| needed).map(|s| (measure.of_state)(s.header.t, &s.x));
-        let seen = Seen { k, incarnation, fresh, error };
+        // Every loop's error: the before/during/after split covers the whole run.
+        let error = part.state.as_ref().map(|s| (measure.of_state)(s.header.t, &s.x));
+        let facts = LoopFacts {
+            state: part.state.is_some(),
+            commanded: part.record.is_some(),
+            in_time: part.record.as_ref().is_some_and(|r| r.deadline_miss == 0),
+            end_to_end_ns: part.end_to_end_ns(),
+            error,
+        };
+        let seen = Seen { k, incarnation, fresh, facts };
         match &mut self.awaiting {
             Some(awaiting) if k >= self.from => {
                 awaiting.log.push_back(seen);
                 if awaiting.log.len() > AWAITED_LOOPS
                     && let Some(oldest) = awaiting.log.pop_front()
                 {
+                    // Past the bound the oldest loops count as before the fault.
                     self.incarnation_before = oldest.incarnation.or(self.incarnation_before);
+                    self.phases.add(Phase::Before, &oldest.facts);
                 }
             }
             _ => self.take(seen, measure),
@@ -162,14 +177,18 @@ impl FaultTracker {
 
     /// Takes one loop, the fault's injection known.
     fn take(&mut self, seen: Seen, measure: &ErrorMeasure) {
-        let Seen { k, incarnation, fresh, error } = seen;
+        let Seen { k, incarnation, fresh, facts } = seen;
         if k < self.from {
             self.incarnation_before = incarnation.or(self.incarnation_before);
+            self.phases.add(Phase::Before, &facts);
             return;
         }
         if k >= self.window_end {
+            let phase = if self.back.is_some() { Phase::After } else { Phase::During };
+            self.phases.add(phase, &facts);
             return;
         }
+        let error = facts.error;
         self.recorded = true;
         if self.rejoined.is_none()
             && self.incarnation_before.is_some()
@@ -187,7 +206,12 @@ impl FaultTracker {
                 self.effect.outage_ticks += 1;
             }
         }
+        self.phases.add(if self.back.is_some() { Phase::After } else { Phase::During }, &facts);
         if let Some(error) = error {
+            if (error.is_nan() || error >= measure.limit) && self.effect.limit_exceeded_at_s.is_none() {
+                // Loop index for now; `finish` turns it into simulation time.
+                self.effect.limit_exceeded_at_s = Some(k as f64);
+            }
             let worst = if self.back.is_none() {
                 &mut self.effect.worst_error_during
             } else {
@@ -220,10 +244,15 @@ impl FaultTracker {
             return FaultEffect { not_injected: true, unrecorded: true, within_limits: true, ..Default::default() };
         }
         self.effect.unrecorded = !self.recorded;
+        self.effect.limit_exceeded_at_s = self.effect.limit_exceeded_at_s.map(|k| at(k as u64));
+        // A killed process that never came back: the loop never recovered from its loss, whatever
+        // the error did meanwhile.
+        self.effect.never_back = self.after_restart && self.rejoined.is_none() && self.recorded;
+        self.effect.phases = Some(self.phases.finish(self.from, self.back, self.loops));
         self.effect.commands_back_at_s = self.back.map(at);
         self.effect.rejoined_at_s = self.rejoined.map(at);
         self.effect.recovery_s = match self.last_outside {
-            _ if self.end >= self.window_end => None,
+            _ if self.end >= self.window_end || self.effect.never_back => None,
             None => Some(0.0),
             Some(k) if k < self.end => Some(0.0),
             Some(k) if k + 1 >= self.window_end => None,
@@ -305,6 +334,9 @@ mod tests {
         assert_eq!(
             effects[0],
             FaultEffect {
+                never_back: false,
+                limit_exceeded_at_s: None,
+                phases: effects[0].phases.clone(),
                 outage_ticks: 2,
                 commands_back_at_s: Some(8.0 / rate),
                 rejoined_at_s: None,
@@ -321,6 +353,9 @@ mod tests {
         assert_eq!(
             effects[1],
             FaultEffect {
+                never_back: false,
+                limit_exceeded_at_s: Some(15.0 / rate),
+                phases: effects[1].phases.clone(),
                 outage_ticks: 1,
                 commands_back_at_s: Some(14.0 / rate),
                 rejoined_at_s: Some(14.0 / rate),
@@ -389,6 +424,9 @@ mod tests {
         assert_eq!(
             effect,
             FaultEffect {
+                never_back: false,
+                limit_exceeded_at_s: None,
+                phases: effect.phases.clone(),
                 outage_ticks: 200,
                 commands_back_at_s: Some(0.5),
                 rejoined_at_s: Some(0.5),
@@ -403,6 +441,11 @@ mod tests {
                 not_injected: false,
             }
         );
+        // Split at the real injection (300) and the restarted estimator's first loop (500).
+        let phases = effect.phases.unwrap();
+        let spans = [&phases.before, &phases.during, &phases.after].map(|p| (p.from_k, p.to_k, p.loops, p.misses));
+        assert_eq!(spans, [(0, 300, 300, 0), (300, 500, 200, 200), (500, 1000, 500, 0)]);
+        assert_eq!((phases.during.error_max, phases.after.error_max), (Some(0.5), Some(0.2)));
     }
 
     /// A stop of the controller that really happened at loop 400, for 200 loops: no fresh
@@ -410,6 +453,24 @@ mod tests {
     fn stopped_at_400(k: u64) -> LoopParts {
         let outage = (400..600).contains(&k);
         loop_with(if outage { 0.5 } else { 0.0 }, Some((outage, 0)))
+    }
+
+    #[test]
+    fn a_kill_whose_process_never_came_back_never_recovered_and_is_during_to_the_end() {
+        let (config, mut tracker) = real_time_tracker("kill estimator at 100ms", 1.0);
+        tracker.injected_at(100, &measure());
+        // No command from the kill on, and the error back within the band at once: still no
+        // recovery, since the loop never had its estimator again.
+        for k in 0..1000 {
+            let record = (k < 100).then_some((false, 0));
+            tracker.observe(k, &loop_with(if k < 100 { 0.0 } else { 0.05 }, record), &measure());
+        }
+        let effect = tracker.finish(config.rate_hz);
+        assert!(effect.never_back, "{effect:?}");
+        assert_eq!((effect.recovery_s, effect.commands_back_at_s, effect.outage_ticks), (None, None, 900));
+        let phases = effect.phases.unwrap();
+        assert_eq!((phases.during.from_k, phases.during.to_k, phases.during.misses), (100, 1000, 900));
+        assert_eq!((phases.after.loops, phases.before.loops), (0, 100));
     }
 
     #[test]

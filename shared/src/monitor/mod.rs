@@ -16,6 +16,7 @@ pub mod clock_fit;
 pub mod crossing;
 pub mod distribution;
 pub mod fault_effect;
+pub mod fault_phases;
 pub mod injections;
 pub mod join;
 pub mod layout;

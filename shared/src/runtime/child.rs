@@ -186,28 +186,65 @@ pub fn emit_if_room(event: &ChildEvent) -> Result<bool> {
 /// Blocks until the launcher writes `expected` as a line on stdin. Returns false if a stop was
 /// requested or the launcher went away first.
 pub fn wait_for_line(stop: &StopFlag, expected: &str) -> Result<bool> {
-    let mut line = Vec::new();
+    Ok(wait_for_lines(stop, &[expected])?.is_some())
+}
+
+/// Blocks until the launcher writes one of `expected` as a line on stdin; returns it. None if
+/// a stop was requested or the launcher went away first.
+pub fn wait_for_lines<'a>(stop: &StopFlag, expected: &[&'a str]) -> Result<Option<&'a str>> {
     while !stop.requested() {
-        let mut pfd = libc::pollfd { fd: 0, events: libc::POLLIN, revents: 0 };
-        // SAFETY: one valid pollfd; a signal makes poll return early, which the loop handles.
-        let ready = unsafe { libc::poll(&mut pfd, 1, 100) };
-        if ready <= 0 {
-            continue;
+        match read_line(100) {
+            StdinLine::Line(line) => {
+                if let Some(found) = expected.iter().find(|e| e.as_bytes() == line) {
+                    return Ok(Some(found));
+                }
+            }
+            StdinLine::Nothing => {}
+            StdinLine::Closed => return Ok(None),
         }
+    }
+    Ok(None)
+}
+
+/// Whether the launcher has written `expected` on stdin, without waiting if nothing is there.
+/// Other lines are read and dropped.
+pub fn line_written(expected: &str) -> bool {
+    loop {
+        match read_line(0) {
+            StdinLine::Line(line) if line == expected.as_bytes() => return true,
+            StdinLine::Line(_) => {}
+            StdinLine::Nothing | StdinLine::Closed => return false,
+        }
+    }
+}
+
+enum StdinLine {
+    Line(Vec<u8>),
+    /// Nothing within the wait.
+    Nothing,
+    /// The launcher closed our stdin.
+    Closed,
+}
+
+/// One line from stdin, if one begins within `timeout_ms` (the launcher writes whole lines).
+fn read_line(timeout_ms: i32) -> StdinLine {
+    let mut pfd = libc::pollfd { fd: 0, events: libc::POLLIN, revents: 0 };
+    // SAFETY: one valid pollfd; a signal makes poll return early, which the callers handle.
+    let ready = unsafe { libc::poll(&mut pfd, 1, timeout_ms) };
+    if ready <= 0 {
+        return StdinLine::Nothing;
+    }
+    let mut line = Vec::new();
+    loop {
         let mut byte = [0u8; 1];
         // SAFETY: reads one byte from stdin into a buffer we own.
         let n = unsafe { libc::read(0, byte.as_mut_ptr().cast(), 1) };
         if n <= 0 {
-            return Ok(false);
+            return StdinLine::Closed;
         }
         if byte[0] == b'\n' {
-            if line == expected.as_bytes() {
-                return Ok(true);
-            }
-            line.clear();
-        } else {
-            line.push(byte[0]);
+            return StdinLine::Line(line);
         }
+        line.push(byte[0]);
     }
-    Ok(false)
 }

@@ -8,7 +8,8 @@
 //! - real time: once the newest command is older than `supervision.command_timeout_s`, the
 //!   plant applies `supervision.on_stale` (hold or zero) and counts the ticks;
 //! - lockstep: if command k has not come after `supervision.lockstep_stall_s`, the run ends as
-//!   stalled instead of hanging.
+//!   stalled instead of hanging; once the launcher says a stage was lost (`lost` on stdin,
+//!   `on_death = "continue"`), every tick goes on at once with `on_stale` applied.
 //!
 //! The physical system does not stop when its simulator dies. After each tick the plant writes
 //! a snapshot (state, command in effect, counters, schedule) to a small shared-memory file; a
@@ -27,7 +28,7 @@ use crate::contract::msg::*;
 use crate::contract::protocol::{ChildEvent, PlantReport};
 use crate::contract::role::{Role, Topic};
 use crate::model::scenario::Scenario;
-use crate::runtime::child::{Context, WAIT_SLICE, emit, wait, wait_for_line, waitset};
+use crate::runtime::child::{Context, WAIT_SLICE, emit, line_written, wait, wait_for_line, wait_for_lines, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
@@ -71,6 +72,9 @@ pub struct PlantCore {
     pub k: u64,
     /// When commands arrive after their tick's state goes out (real time).
     arrivals: ArrivalModel,
+    /// Lockstep: a stage was lost (`on_death = "continue"`), so no command will come: every
+    /// tick from here on is stale and gets `on_stale`.
+    pub open_loop: bool,
 }
 
 impl PlantCore {
@@ -102,6 +106,7 @@ impl PlantCore {
             report: PlantReport::default(),
             k: 0,
             arrivals: ArrivalModel::new((config.dt() * 1e9).round() as u64),
+            open_loop: false,
         }
     }
 
@@ -185,7 +190,8 @@ impl PlantCore {
             self.counters.deadline_misses += 1;
         }
         let m = self.limits.len();
-        let stale = due.is_some_and(|due| due.saturating_sub(self.held_arrived) > self.command_timeout_ns);
+        let stale =
+            self.open_loop || due.is_some_and(|due| due.saturating_sub(self.held_arrived) > self.command_timeout_ns);
         if stale {
             self.counters.stale_ticks += 1;
             if self.on_stale == OnStale::Zero {
@@ -378,15 +384,20 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
             'ticks: while p.k < loops && !context.stop.requested() {
                 if pauses.contains(&p.k) {
                     emit(&ChildEvent::Paused { k: p.k })?;
-                    if !wait_for_line(&context.stop, "go")? {
-                        break;
+                    // A stage killed at the pause and not restarted is lost before the `go`.
+                    loop {
+                        match wait_for_lines(&context.stop, &["go", "lost"])? {
+                            Some("lost") => p.open_loop = true,
+                            Some(_) => break,
+                            None => break 'ticks,
+                        }
                     }
                 }
                 p.publish_state(TickTiming::default())?;
                 let published = Instant::now();
                 // Tick k → k+1 only once command k is in (if it was rejected, the last valid
-                // one is held).
-                while p.in_time_k != Some(p.k) {
+                // one is held), or, once a stage is lost, at once: no command will come.
+                while !p.open_loop && p.in_time_k != Some(p.k) {
                     if context.stop.requested() {
                         break 'ticks;
                     }
@@ -402,6 +413,10 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
                         || commands.asleep(|| wait(&ws)),
                     )?;
                     p.drain(&commands)?;
+                    // Only while command k is awaited: the launcher says so of a lost stage.
+                    if p.in_time_k != Some(p.k) && line_written("lost") {
+                        p.open_loop = true;
+                    }
                 }
                 p.advance();
             }

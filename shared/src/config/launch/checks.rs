@@ -5,7 +5,8 @@ use std::fmt;
 
 use crate::config::error::LaunchError;
 use crate::config::faults::{
-    FAULT_KINDS, FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, Supervision,
+    FAULT_KINDS, FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, ON_DEATH_CONTINUE_ROLES,
+    OnDeath, Supervision,
 };
 use crate::config::launch::types::{LaunchConfig, MAX_DURATION_S, MAX_LOOPS, MAX_RATE_HZ, Origins, PerComponent};
 use crate::config::realtime::MAX_PRIORITY;
@@ -270,6 +271,16 @@ pub(super) fn check_supervision(s: &Supervision, c: &LaunchConfig) -> Result<(),
             return Err(
                 c.error(&key("backoff_s"), format!("must be 0 to {MAX_BACKOFF_S} seconds, got {}", policy.backoff_s))
             );
+        }
+        let continues = s.policy_of(role).on_death == Some(OnDeath::Continue);
+        if continues && role != Role::Monitor && !ON_DEATH_CONTINUE_ROLES.contains(&role) {
+            return Err(c.error(
+                &format!("supervision.{role}.on_death"),
+                format!(
+                    "must be \"end\" for the {role}: the loop cannot go on without it (on_death = \"continue\" is \
+                     for sensors, estimator and controller)"
+                ),
+            ));
         }
         if policy.max_restarts > MAX_RESTARTS {
             return Err(c.error(

@@ -1,13 +1,17 @@
 //! Deaths and restarts: a process whose output ended either finished the run (the plant), or is
 //! restarted once its resources are cleaned up and its backoff is over (`launcher::restart`
-//! decides), or is gone, which ends the run unless it is the monitor.
+//! decides), or is gone, which ends the run unless its `on_death` says the run goes on (the
+//! monitor's default; a stage's with `on_death = "continue"`).
 
+use crate::config::faults::OnDeath;
+use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::protocol::PlantReport;
 use crate::contract::role::Role;
-use crate::launcher::inject::DetectedBy;
+use crate::launcher::inject::{self, DetectedBy};
 use crate::launcher::outcome::Outcome;
 use crate::launcher::restart::{self, Decision, RestartRecord};
+use crate::launcher::summary::LostStage;
 
 use super::Supervisor;
 
@@ -55,12 +59,41 @@ impl Supervisor<'_> {
         }
         let why = format!("{exit}; {}", decision.refusal().expect("a refusal says why"));
         self.processes[role].gone = true;
-        self.note(ns, why.clone());
+        if self.processes[role].policy.on_death == OnDeath::End {
+            self.note(ns, why.clone());
+            return Some(Outcome::Failed(format!("{why}; see logs/{role}.log")));
+        }
         if role == Role::Monitor {
             // The loop goes on without its recorder; the report says which loops have none.
+            self.note(ns, why);
             return None;
         }
-        Some(Outcome::Failed(format!("{why}; see logs/{role}.log")))
+        // on_death = continue: the loop runs on to its planned end without the stage, under the
+        // plant's fail-safe; the summary and the report say it was lost.
+        self.note(ns, format!("{why}; the run goes on without it (on_death = continue)"));
+        self.processes[role].lost = true;
+        let at_ms = self.log.since_start_ms(ns);
+        let at_loop = match self.config.mode {
+            Mode::Lockstep => self.last_pause.filter(|_| self.paused),
+            Mode::Realtime => {
+                self.log.plant_start_ns.map(|start| inject::loop_at(ns, start, inject::period_ns(self.config.rate_hz)))
+            }
+        };
+        let why = format!("{why}; see logs/{role}.log");
+        self.log.lost.push(LostStage { process: role, at_ms, at_loop, why });
+        self.tell_plant_lost();
+        None
+    }
+
+    /// Lockstep: a stage was lost, so command k will never come; the plant goes on without
+    /// waiting for it, applying `on_stale` (real time: its command timeout does that already).
+    pub(super) fn tell_plant_lost(&mut self) {
+        if self.config.mode == Mode::Lockstep
+            && !self.log.lost.is_empty()
+            && !self.processes[Role::Plant].write_line("lost")
+        {
+            self.note(now_ns(), "cannot tell the plant that a stage was lost".into());
+        }
     }
 
     /// The newest restart of `role`, the one under way.

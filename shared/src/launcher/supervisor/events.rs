@@ -81,6 +81,10 @@ impl Supervisor<'_> {
             }
             ChildEvent::Paused { k } => self.pause_at(k),
             ChildEvent::Stall { process, since_ns, detected_ns } => {
+                // A stage lost for good is dead, not stalled: its death is on the timeline.
+                if process.parse::<Role>().is_ok_and(|r| self.processes[r].lost) {
+                    return None;
+                }
                 if let Ok(stalled) = process.parse::<Role>() {
                     self.faults.detect(stalled, DetectedBy::InputDeadline, detected_ns);
                     // A stage across the link waits on the link: a cut stalls it.
@@ -150,8 +154,12 @@ impl Supervisor<'_> {
         }
         self.faults.restarted(role, ns);
         self.note(ns, format!("{role} ready again"));
-        if role == Role::Plant && !self.processes[role].write_line("start") {
-            self.note(ns, "cannot tell the restarted plant to start".into());
+        if role == Role::Plant {
+            if !self.processes[role].write_line("start") {
+                self.note(ns, "cannot tell the restarted plant to start".into());
+            }
+            // A restarted plant hears again of a stage lost before.
+            self.tell_plant_lost();
         }
     }
 }

@@ -47,6 +47,7 @@ impl Supervisor<'_> {
             self.monitor_faults_held = Some((k, now_ns(), on_monitor));
         }
         self.paused = true;
+        self.last_pause = Some(k);
     }
 
     /// Lockstep: injects the monitor's held faults once it has written and saved every loop

@@ -116,6 +116,8 @@ struct Supervisor<'a> {
     faults: FaultLedger<'a>,
     /// Lockstep: the plant is paused and waits for `go`.
     paused: bool,
+    /// Lockstep: the loop of the newest pause (a stage lost there is lost from that loop on).
+    last_pause: Option<u64>,
     /// Lockstep: the faults on the monitor due at the paused loop, held until the monitor has
     /// written and saved every loop before it, so that its successor goes on from there and no
     /// loop is lost: (the loop, when the pause began (ns), the faults).
@@ -183,6 +185,7 @@ impl<'a> Supervisor<'a> {
             log: RunLog::default(),
             faults: FaultLedger::new(&config.faults),
             paused: false,
+            last_pause: None,
             monitor_faults_held: None,
             monitor_written: 0,
             closing: vec![],

@@ -34,6 +34,9 @@ pub(super) struct Process {
     pub(super) stopped: bool,
     /// It died and will not be restarted (the monitor may; the others end the run).
     pub(super) gone: bool,
+    /// A stage gone with `on_death = "continue"`: the run goes on without it, and its death is
+    /// the summary's `lost_stages`, not an unclean end.
+    pub(super) lost: bool,
 }
 
 /// A restart under way: it starts once the dead process's resources are removed and the backoff
@@ -56,6 +59,7 @@ impl Process {
             quick_restarts: 0,
             stopped: false,
             gone: false,
+            lost: false,
         }
     }
 
@@ -209,9 +213,10 @@ impl Processes {
             .collect()
     }
 
-    /// How each process that did not end cleanly ended.
+    /// How each process that did not end cleanly ended (a lost stage is the summary's
+    /// `lost_stages`).
     pub(super) fn unclean_ends(&self) -> Vec<String> {
-        self.iter().filter(|p| !p.ended_cleanly()).map(Process::exit_text).collect()
+        self.iter().filter(|p| !p.ended_cleanly() && !p.lost).map(Process::exit_text).collect()
     }
 }
 
@@ -232,10 +237,11 @@ impl IndexMut<Role> for Processes {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::faults::Restart;
+    use crate::config::faults::{OnDeath, Restart};
     use crate::launcher::restart::{Decision, decide};
 
-    const ON_FAILURE: Policy = Policy { restart: Restart::OnFailure, max_restarts: 3, backoff_s: 0.01 };
+    const ON_FAILURE: Policy =
+        Policy { restart: Restart::OnFailure, on_death: OnDeath::End, max_restarts: 3, backoff_s: 0.01 };
 
     fn ms(ms: u64) -> Duration {
         Duration::from_millis(ms)

@@ -85,13 +85,13 @@ fn ends_outcome(processes: &Processes, monitor_reported: bool) -> Outcome {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::faults::{Policy, Restart};
+    use crate::config::faults::{OnDeath, Policy, Restart};
     use crate::launcher::child::Start;
     use crate::launcher::outcome::Exit;
     use crate::launcher::supervisor::processes::Process;
 
     fn ended(exits: [Exit; 5]) -> Processes {
-        let policy = Policy { restart: Restart::OnFailure, max_restarts: 0, backoff_s: 0.0 };
+        let policy = Policy { restart: Restart::OnFailure, on_death: OnDeath::End, max_restarts: 0, backoff_s: 0.0 };
         let processes = Role::START_ORDER.into_iter().zip(exits).map(|(role, exit)| {
             let mut p = Process::new(role, policy);
             p.started(Start { pid: 0, exit, cpu_s: 0.0 }, None);

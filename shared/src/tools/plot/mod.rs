@@ -4,6 +4,7 @@
 //! compare); `run`: a run folder's figures (`looplab plot`); `paper`: the papers' figures
 //! reproduced, as each scenario declares them.
 
+pub mod fault_zoom;
 pub mod figure;
 pub mod latency;
 pub mod paper;

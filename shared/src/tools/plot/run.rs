@@ -399,6 +399,8 @@ pub fn plot_run(run_dir: &Path, catalog: &Catalog) -> Result<Vec<PathBuf>, ToolE
         written.push(path);
     }
     written.push(latency::run_latency_figure(run_dir, &data.summary)?);
+    let folder = RunFolder::open(run_dir, &RUN_FILES)?;
+    written.extend(crate::tools::plot::fault_zoom::plot_faults(run_dir, &folder, data.scenario.as_ref(), &data)?);
     Ok(written)
 }
 

@@ -1,0 +1,92 @@
+//! One figure per fault, zoomed on it: `fault-<n>-<kind>-<process>.png`, from a little before
+//! the injection to a little after the loop was whole again (or after the loss, for a stage
+//! that never came back): the scenario's error against its limit, and each loop's end-to-end
+//! latency.
+
+use std::path::{Path, PathBuf};
+
+use crate::launcher::summary::FaultReport;
+use crate::model::figure::RunColumns;
+use crate::model::scenario::Scenario;
+use crate::tools::ToolError;
+use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel};
+use crate::tools::run_folder::RunFolder;
+
+/// Shown before the injection and after the end of "during", s (at least 50 loops).
+const MARGIN_S: f64 = 0.5;
+/// The longest "during" shown; a stage lost for good is shown this long after its loss.
+const LONGEST_DURING_S: f64 = 2.0;
+
+/// `fault-1-kill-controller.png`: numbered from 1 in the launch file's order.
+pub fn file_name(n: usize, f: &FaultReport) -> String {
+    format!("fault-{n}-{}-{}.png", <&str>::from(f.kind), f.process)
+}
+
+/// Draws each fault's zoomed figure into the run folder; returns the paths written.
+pub fn plot_faults(
+    run_dir: &Path,
+    folder: &RunFolder,
+    scenario: &dyn Scenario,
+    data: &dyn RunColumns,
+) -> Result<Vec<PathBuf>, ToolError> {
+    let summary = folder.summary()?;
+    if summary.faults.is_empty() {
+        return Ok(vec![]);
+    }
+    let loops = folder.table("loops.csv")?;
+    let (t_loops, publish, receive) =
+        (loops.floats("t_s")?, loops.floats("plant_publish_ns")?, loops.floats("plant_receive_ns")?);
+    let latency_us: Vec<(f64, f64)> = t_loops
+        .iter()
+        .zip(publish.iter().zip(&receive))
+        .filter(|(_, (p, r))| p.is_finite() && r.is_finite() && **r >= **p && **p > 0.0)
+        .map(|(t, (p, r))| (*t, (r - p) / 1e3))
+        .collect();
+    let measure = scenario.error_measure();
+    let t = data.t();
+    let names: Vec<&str> = scenario.vectors().state.iter().map(|c| c.name).collect();
+    let state: Vec<&[f64]> = names.iter().filter_map(|n| data.state(n)).collect();
+    let error: Vec<(f64, f64)> = (0..t.len())
+        .filter_map(|row| {
+            let x: Vec<f64> = state.iter().map(|column| column[row]).collect();
+            let e = (measure.of_state)(t[row], &x);
+            e.is_finite().then_some((t[row], e))
+        })
+        .collect();
+    let rate = data.config().rate_hz;
+    let mut written = vec![];
+    for (i, f) in summary.faults.iter().enumerate() {
+        let during_end =
+            f.effect.as_ref().and_then(|e| e.phases.as_ref()).map_or(f.at_s, |p| p.during.to_k as f64 / rate);
+        let window = f.at_s - MARGIN_S.max(50.0 / rate)
+            ..(during_end.min(f.at_s + LONGEST_DURING_S) + MARGIN_S.max(50.0 / rate)).min(data.config().duration_s);
+        let window = window.start.max(0.0)..window.end.max(window.start.max(0.0) + 1.0 / rate);
+        let within = |points: &[(f64, f64)]| -> Vec<(f64, f64)> {
+            points.iter().copied().filter(|(t, _)| window.contains(t)).collect()
+        };
+        let mut error_panel = Panel::new(
+            format!("{} (limit {})", measure.name, measure.limit),
+            measure.name,
+            vec![Curve::new(measure.name, within(&error), Colour::Series(0), Line::Solid(2))],
+        );
+        error_panel.bounds = vec![Curve::level("limit", measure.limit, &window, Colour::Limit)];
+        let latency_panel = Panel::new(
+            "end to end, each loop with a command",
+            "latency, µs",
+            vec![Curve::new("end to end", within(&latency_us), Colour::Series(1), Line::Solid(1))],
+        );
+        let figure = Figure {
+            title: format!("{}: {} (during: {:.3} s to {:.3} s)", scenario.title(), f.fault, f.at_s, during_end),
+            panels: vec![error_panel, latency_panel],
+            x: window.clone(),
+            x_desc: "t, s",
+            faults: vec![FaultMark { t: f.at_s, label: format!("{} {}", <&str>::from(f.kind), f.process) }],
+            faults_label: "fault",
+            caption: None,
+        };
+        let path = run_dir.join(file_name(i + 1, f));
+        figure.draw(&path)?;
+        written.push(path);
+    }
+    Ok(written)
+}
