@@ -13,6 +13,7 @@ pub mod restart;
 pub mod run_dir;
 pub mod summary;
 pub mod supervisor;
+pub mod verdict;
 
 pub use child::{Binaries, locate_binaries, supervised};
 pub use outcome::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Exit, Outcome, StopReason};

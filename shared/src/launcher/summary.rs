@@ -21,6 +21,7 @@ use crate::launcher::network::{self, Network};
 use crate::launcher::outcome::{Exit, Outcome, StopReason};
 use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
+use crate::launcher::verdict::{self, LimitsVerdict};
 pub use crate::model::scenario::ErrorMeasureInfo;
 use crate::model::scenario::Scenario;
 
@@ -108,6 +109,9 @@ pub struct Summary {
     /// What the fault report's errors measure, the band a recovery must reach and the limit
     /// the physical system must stay within.
     pub error_measure: ErrorMeasureInfo,
+    /// The control outcome: the whole run judged against `error_measure`'s limit.
+    #[serde(default)]
+    pub limits: LimitsVerdict,
     pub faults: Vec<FaultReport>,
     /// What the launcher saw, in order: injections, exits, restarts, stalls.
     pub timeline: Vec<TimelineEntry>,
@@ -420,6 +424,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         notes: monitor.notes.clone(),
         diverged_at_loop: monitor.diverged_at,
         error_measure: scenario.error_measure().describe(),
+        limits: verdict::judge(&monitor.limits, &scenario.error_measure().describe()),
         faults: fault_reports(config, log, &monitor),
         timeline: log.timeline.clone(),
         restart_steps: log.restarts.iter().map(|r| restart_steps(r, log)).collect(),
@@ -573,7 +578,13 @@ pub(crate) mod tests {
             metrics: BTreeMap::new(),
             notes: vec![],
             diverged_at_loop: None,
-            error_measure: ErrorMeasureInfo { name: "angle".into(), recovery_band: 0.05, limit: 1.0 },
+            error_measure: ErrorMeasureInfo {
+                name: "angle".into(),
+                recovery_band: 0.05,
+                limit: 1.0,
+                ..Default::default()
+            },
+            limits: LimitsVerdict::default(),
             faults: vec![],
             timeline: vec![],
             restart_steps: vec![],

@@ -18,6 +18,7 @@ use crate::config::launch::{LaunchConfig, Override};
 use crate::contract::role::Role;
 use crate::launcher::in_process::run_in_process;
 use crate::launcher::inject::target;
+use crate::launcher::verdict::Verdict as ControlVerdict;
 use crate::launcher::{Binaries, EXIT_BAD_INPUT, EXIT_INTERRUPTED, Outcome, StopReason, Summary, run_once};
 use crate::model::catalog::Catalog;
 use crate::model::scenario::{Scenario, TheoreticalMargin};
@@ -57,6 +58,8 @@ pub struct SweepPoint {
     pub growth: Option<f64>,
     pub worst_error: Option<f64>,
     pub within_limits: Option<bool>,
+    /// The whole run judged against the scenario's limits (summary.json's `limits`).
+    pub control: ControlVerdict,
     pub metrics: BTreeMap<String, f64>,
     pub run_dir: String,
 }
@@ -70,10 +73,16 @@ pub enum Verdict {
     Unstable,
     /// The run did not complete.
     Failed,
-    /// The run has no fault to judge.
+    /// The run has no fault to judge, and it stayed within the scenario's limits.
     #[serde(rename = "no fault")]
     #[strum(serialize = "no fault")]
     NoFault,
+    /// No fault, but the run went beyond the scenario's limit (and came back).
+    #[serde(rename = "exceeded")]
+    #[strum(serialize = "exceeded")]
+    Exceeded,
+    /// The run was lost (the pendulum fell; see `launcher::verdict`), whatever the fault did.
+    Lost,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -85,6 +94,13 @@ pub struct SweepReport {
     pub first_unstable: Option<f64>,
     /// For a controller delay in ticks: the scenario's theory.
     pub theory: Option<TheoreticalMargin>,
+}
+
+impl Verdict {
+    /// The loop did not hold: the fault's disturbance grew, or the run was lost.
+    fn is_unstable(self) -> bool {
+        matches!(self, Verdict::Unstable | Verdict::Lost)
+    }
 }
 
 fn value_text(v: f64) -> String {
@@ -195,7 +211,7 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
             }
         }
     }
-    let first_unstable = points.iter().find(|p| p.verdict == Verdict::Unstable).map(|p| p.value);
+    let first_unstable = points.iter().find(|p| p.verdict.is_unstable()).map(|p| p.value);
     let (_, config, scenario) = &configs[0];
     let controller_delay = fault_index
         .and_then(|i| config.faults.get(i))
@@ -284,12 +300,17 @@ fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>)
         _ => None,
     });
     let within_limits = effect.as_ref().map(|e| e.within_limits);
+    let control = summary.limits.verdict;
     let verdict = if !summary.completed || *outcome != Outcome::Completed {
         Verdict::Failed
-    } else if effect.is_none() {
-        Verdict::NoFault
     } else if within_limits == Some(false) || growth.is_some_and(|g| g > UNSTABLE_GROWTH) {
         Verdict::Unstable
+    } else if control == ControlVerdict::Lost {
+        Verdict::Lost
+    } else if effect.is_none() && control == ControlVerdict::LimitsExceeded {
+        Verdict::Exceeded
+    } else if effect.is_none() {
+        Verdict::NoFault
     } else {
         Verdict::Stable
     };
@@ -303,6 +324,7 @@ fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>)
             .as_ref()
             .and_then(|e| [e.worst_error_during, e.worst_error_after].into_iter().flatten().reduce(f64::max)),
         within_limits,
+        control,
         metrics: summary.metrics.clone(),
         run_dir: summary.run_dir.clone(),
     }
@@ -316,7 +338,11 @@ fn metric_width(name: &str) -> usize {
 fn render(r: &SweepReport, metrics: &[String]) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "\nLoopLab sweep · {} · {} (lockstep)", r.scenario, r.param);
-    let _ = write!(out, "  {:>10}  {:<9}{:>12}{:>14}  within limits", "value", "verdict", "growth", "worst error");
+    let _ = write!(
+        out,
+        "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  control",
+        "value", "verdict", "growth", "worst error", "within limits"
+    );
     for name in metrics {
         let _ = write!(out, "  {name:>width$}", width = metric_width(name));
     }
@@ -325,12 +351,13 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
         let mut line = String::new();
         let _ = write!(
             line,
-            "  {:>10}  {:<9}{:>12}{:>14}  {:<13}",
+            "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  {:<15}",
             value_text(p.value),
             p.verdict,
             p.growth.map_or("-".into(), |g| format!("{g:.3}")),
             p.worst_error.map_or("-".into(), |e| format!("{e:.5}")),
-            p.within_limits.map_or("-", |w| if w { "yes" } else { "NO" })
+            p.within_limits.map_or("-", |w| if w { "yes" } else { "NO" }),
+            p.control.to_string()
         );
         for name in metrics {
             let value = p.metrics.get(name).map_or("-".into(), |v| format!("{v:.5}"));
@@ -338,7 +365,8 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
         }
         let _ = writeln!(out, "{}", line.trim_end());
     }
-    if r.points.iter().all(|p| p.verdict == Verdict::NoFault) {
+    let _ = writeln!(out, "  control: the whole run against the scenario's limits (summary.json's `limits`)");
+    if r.points.iter().all(|p| p.within_limits.is_none()) {
         let what = if metrics.is_empty() {
             "each run's summary.json has its metrics (--metric NAME shows one here)"
         } else {
@@ -410,6 +438,7 @@ mod tests {
             growth: None,
             worst_error: None,
             within_limits: None,
+            control: ControlVerdict::WithinLimits,
             metrics: [("theta_max_abs_rad".to_string(), 0.25)].into(),
             run_dir: "r".into(),
         };
@@ -433,6 +462,8 @@ mod tests {
             (Verdict::Unstable, "unstable"),
             (Verdict::Failed, "failed"),
             (Verdict::NoFault, "no fault"),
+            (Verdict::Exceeded, "exceeded"),
+            (Verdict::Lost, "lost"),
         ] {
             assert_eq!(serde_json::to_value(verdict).unwrap(), text);
             assert_eq!(format!("{verdict:<9}|"), format!("{text:<9}|"));
