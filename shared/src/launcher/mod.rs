@@ -3,6 +3,7 @@
 //! stops them in order, checks that nothing is left in shared memory, and writes the summary.
 //! The command line that calls it is `crate::cli`.
 
+pub mod budget;
 pub mod child;
 pub mod dashboard;
 pub mod inject;

@@ -21,6 +21,7 @@ use crate::launcher::network::{self, Network};
 use crate::launcher::outcome::{Exit, Outcome, StopReason};
 use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
+use crate::launcher::budget::{self, LatencyBudget};
 use crate::launcher::verdict::{self, LimitsVerdict};
 pub use crate::model::scenario::ErrorMeasureInfo;
 use crate::model::scenario::Scenario;
@@ -91,6 +92,9 @@ pub struct Summary {
     #[serde(default, serialize_with = "by_name")]
     pub adaptive_waits: BTreeMap<Role, WaitCounts>,
     pub latency_ns: Latency,
+    /// The latency budget in ms: end to end against the deadline and the delay margin.
+    #[serde(default)]
+    pub latency_budget: LatencyBudget,
     pub jitter_ns: Jitter,
     /// Per sensor: how old the sample behind command k was when command k took effect.
     pub data_age_ns: BTreeMap<String, Stats>,
@@ -406,6 +410,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         processes: processes(config, starts, reports, &monitor),
         adaptive_waits: adaptive_waits(&plant, reports),
         latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
+        latency_budget: budget::build(config, scenario, &monitor.end_to_end),
         jitter_ns: Jitter {
             plant_tick: monitor.plant_tick_jitter.clone(),
             plant_wake_latency: monitor.plant_wake_latency.clone(),
@@ -572,6 +577,7 @@ pub(crate) mod tests {
             processes: vec![],
             adaptive_waits: BTreeMap::new(),
             latency_ns: Latency::default(),
+            latency_budget: LatencyBudget::default(),
             jitter_ns: Jitter::default(),
             data_age_ns: BTreeMap::new(),
             monitor: MonitorCounts::default(),
