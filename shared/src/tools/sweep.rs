@@ -241,8 +241,7 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
     // Bisect between the last stable value and the first unstable one, one run at a time (each
     // lockstep, so the answer is the same every time).
     let whole = [args.from, args.step].iter().all(|v| v.fract() == 0.0);
-    loop {
-        let Some(i) = points.iter().position(|p| p.verdict.is_unstable()) else { break };
+    while let Some(i) = points.iter().position(|p| p.verdict.is_unstable()) {
         let Some(mid) = i
             .checked_sub(1)
             .filter(|&j| points[j].verdict == Verdict::Stable)
