@@ -112,7 +112,7 @@ impl LimitsVerdict {
         let exceeded =
             |t: f64| format!("limits exceeded at t = {} s ({} = {})", number(t), self.limit_key, number(self.limit));
         match self.verdict {
-            Verdict::NotJudged => "not judged: no state of the plant was recorded".into(),
+            Verdict::NotJudged => "not judged: the monitor recorded no state of the plant".into(),
             Verdict::WithinLimits => format!(
                 "within limits: {} stayed within {} ({}); {worst}",
                 self.measure,
