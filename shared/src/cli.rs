@@ -197,7 +197,8 @@ struct LaunchArgs {
     after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
 and meaning; --set takes any of them.\n\
 Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, run.mcap, launch.toml (resolved), logs/.\n\
-Exit codes: 0 completed (or stopped with q in the dashboard), 1 the run failed (a process died, or files were left in shared memory), \
+Exit codes: 0 completed (or stopped with q in the dashboard), 1 the run failed (a process died, or files were left in shared memory; \
+with --fail-on-limits also a control outcome of limits exceeded or lost), \
 2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
 )]
 struct RunArgs {
@@ -230,6 +231,10 @@ struct RunArgs {
     /// After the run, draw its figures into the run folder, as `looplab plot` does
     #[arg(long)]
     plot: bool,
+    /// Exit 1 when the control outcome is `limits exceeded` or `lost` (the scenario's [limits],
+    /// judged over the whole run: the report's `control:` line, summary.json's `limits`), for CI
+    #[arg(long)]
+    fail_on_limits: bool,
 }
 
 impl Default for RunArgs {
@@ -243,6 +248,7 @@ impl Default for RunArgs {
             dashboard: false,
             in_process: false,
             plot: false,
+            fail_on_limits: false,
         }
     }
 }
@@ -488,7 +494,14 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
     match ran {
         Ok((summary, outcome)) => {
             say_raw!("{}", report::render(&summary));
-            let (code, error) = launcher::exit_code(&outcome, &summary);
+            let (mut code, mut error) = launcher::exit_code(&outcome, &summary);
+            // A run that failed otherwise keeps its code and its error.
+            if code == launcher::EXIT_OK
+                && args.fail_on_limits
+                && let Some(why) = launcher::verdict::limits_failure(&summary.limits)
+            {
+                (code, error) = (launcher::EXIT_FAILED, Some(why));
+            }
             if let Some(error) = error {
                 tell!("error: {error}");
             }

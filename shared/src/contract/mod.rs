@@ -3,6 +3,7 @@
 
 pub mod clock;
 pub mod codec;
+pub mod limits;
 pub mod msg;
 pub mod protocol;
 pub mod report;

@@ -133,6 +133,9 @@ pub struct MonitorReport {
     /// With a stage on another host: its clock and the link's round trip, from the loops' stamps.
     #[serde(default)]
     pub crossing: Option<CrossingReport>,
+    /// The error against the scenario's limits over every loop recorded (the run's verdict).
+    #[serde(default)]
+    pub limits: crate::contract::limits::LimitsWatch,
 }
 
 /// What the loops' own stamps tell of the other host: each loop that goes there and back is an

@@ -3,6 +3,7 @@
 //! stops them in order, checks that nothing is left in shared memory, and writes the summary.
 //! The command line that calls it is `crate::cli`.
 
+pub mod budget;
 pub mod child;
 pub mod dashboard;
 pub mod inject;
@@ -14,6 +15,7 @@ pub mod restart;
 pub mod run_dir;
 pub mod summary;
 pub mod supervisor;
+pub mod verdict;
 
 pub use child::{Binaries, locate_binaries, supervised};
 pub use outcome::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Exit, Outcome, StopReason};

@@ -138,6 +138,8 @@ pub fn render(s: &Summary) -> String {
         "  {status}: {} of {} loops in {:.2} s ({:.0} loops/s) · deadline misses {misses} · rejected commands {}",
         s.loops, s.loops_planned, s.wall_time_s, s.loops_per_s, s.rejected_commands
     );
+    let _ = writeln!(out, "  control: {}", s.limits.line());
+    let _ = writeln!(out, "  {}", s.latency_budget.line());
     let _ = writeln!(
         out,
         "  monitor: {} loop records, {} lost; {} loops had no command (a stage skipped them), {} ticks were skipped{}",

@@ -21,6 +21,8 @@ use crate::launcher::network::{self, Network};
 use crate::launcher::outcome::{Exit, Outcome, StopReason};
 use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
+use crate::launcher::budget::{self, LatencyBudget};
+use crate::launcher::verdict::{self, LimitsVerdict};
 pub use crate::model::scenario::ErrorMeasureInfo;
 use crate::model::scenario::Scenario;
 use crate::runtime::realtime::Scheduling;
@@ -104,6 +106,9 @@ pub struct Summary {
     #[serde(default, serialize_with = "by_name")]
     pub adaptive_waits: BTreeMap<Role, WaitCounts>,
     pub latency_ns: Latency,
+    /// The latency budget in ms: end to end against the deadline and the delay margin.
+    #[serde(default)]
+    pub latency_budget: LatencyBudget,
     pub jitter_ns: Jitter,
     /// Per sensor: how old the sample behind command k was when command k took effect.
     pub data_age_ns: BTreeMap<String, Stats>,
@@ -122,6 +127,9 @@ pub struct Summary {
     /// What the fault report's errors measure, the band a recovery must reach and the limit
     /// the physical system must stay within.
     pub error_measure: ErrorMeasureInfo,
+    /// The control outcome: the whole run judged against `error_measure`'s limit.
+    #[serde(default)]
+    pub limits: LimitsVerdict,
     pub faults: Vec<FaultReport>,
     /// What the launcher saw, in order: injections, exits, restarts, stalls.
     pub timeline: Vec<TimelineEntry>,
@@ -453,6 +461,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         processes: processes(config, starts, reports, &monitor, &log.scheduling),
         adaptive_waits: adaptive_waits(&plant, reports),
         latency_ns: Latency { end_to_end: monitor.end_to_end.clone(), hops: monitor.hops.clone() },
+        latency_budget: budget::build(config, scenario, &monitor.end_to_end),
         jitter_ns: Jitter {
             plant_tick: monitor.plant_tick_jitter.clone(),
             plant_wake_latency: monitor.plant_wake_latency.clone(),
@@ -471,6 +480,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         notes: monitor.notes.clone(),
         diverged_at_loop: monitor.diverged_at,
         error_measure: scenario.error_measure().describe(),
+        limits: verdict::judge(&monitor.limits, &scenario.error_measure().describe()),
         faults: fault_reports(config, log, &monitor),
         timeline: log.timeline.clone(),
         restart_steps: log.restarts.iter().map(|r| restart_steps(r, log)).collect(),
@@ -623,13 +633,20 @@ pub(crate) mod tests {
             processes: vec![],
             adaptive_waits: BTreeMap::new(),
             latency_ns: Latency::default(),
+            latency_budget: LatencyBudget::default(),
             jitter_ns: Jitter::default(),
             data_age_ns: BTreeMap::new(),
             monitor: MonitorCounts::default(),
             metrics: BTreeMap::new(),
             notes: vec![],
             diverged_at_loop: None,
-            error_measure: ErrorMeasureInfo { name: "angle".into(), recovery_band: 0.05, limit: 1.0 },
+            error_measure: ErrorMeasureInfo {
+                name: "angle".into(),
+                recovery_band: 0.05,
+                limit: 1.0,
+                ..Default::default()
+            },
+            limits: LimitsVerdict::default(),
             faults: vec![],
             timeline: vec![],
             restart_steps: vec![],

@@ -169,15 +169,21 @@ pub struct TheoreticalMargin {
 /// The error at simulation time t in true state x.
 pub type ErrorOfState = Arc<dyn Fn(f64, &[f64]) -> f64 + Send + Sync>;
 
-/// How far the physical system is from where it should be, for fault reports: the worst value
-/// during and after a fault, the band it must come back within (recovery), and the limit it
-/// must never pass (for the pendulum: the angle at which it has fallen).
+/// How far the physical system is from where it should be, for fault reports and the run's
+/// verdict: the worst value during and after a fault, the band it must come back within
+/// (recovery), the limit it must never pass (for the pendulum: the angle at which it has
+/// fallen), and where it has one, the point of no return past which the run is lost.
 #[derive(Clone)]
 pub struct ErrorMeasure {
     pub name: &'static str,
     pub of_state: ErrorOfState,
     pub recovery_band: f64,
     pub limit: f64,
+    /// The launch-file key of `limit`, for the verdict ("limits.fall_angle_rad").
+    pub limit_key: &'static str,
+    /// An error at or beyond which the system cannot come back, and what that means in words.
+    /// None: the scenario has no such point (the run is lost only if it ends beyond the limit).
+    pub lost_beyond: Option<(f64, &'static str)>,
 }
 
 impl ErrorMeasure {
@@ -195,11 +201,32 @@ impl ErrorMeasure {
             of_state: Arc::new(move |t, x| reference.lock().expect("reference lock").error(t, x)),
             recovery_band,
             limit,
+            limit_key: "limits",
+            lost_beyond: None,
         }
     }
 
+    /// With `limit` named by its launch-file key.
+    pub fn keyed(mut self, limit_key: &'static str) -> Self {
+        self.limit_key = limit_key;
+        self
+    }
+
+    /// With a point of no return: an error of `value` or more, which `meaning` explains.
+    pub fn lost_beyond(mut self, value: f64, meaning: &'static str) -> Self {
+        self.lost_beyond = Some((value, meaning));
+        self
+    }
+
     pub fn describe(&self) -> ErrorMeasureInfo {
-        ErrorMeasureInfo { name: self.name.into(), recovery_band: self.recovery_band, limit: self.limit }
+        ErrorMeasureInfo {
+            name: self.name.into(),
+            recovery_band: self.recovery_band,
+            limit: self.limit,
+            limit_key: self.limit_key.into(),
+            lost_beyond: self.lost_beyond.map(|(value, _)| value),
+            lost_means: self.lost_beyond.map(|(_, meaning)| meaning.into()),
+        }
     }
 }
 
@@ -209,6 +236,15 @@ pub struct ErrorMeasureInfo {
     pub name: String,
     pub recovery_band: f64,
     pub limit: f64,
+    /// The launch-file key of `limit`.
+    #[serde(default)]
+    pub limit_key: String,
+    /// The point of no return, if the scenario has one: an error this large loses the run.
+    #[serde(default)]
+    pub lost_beyond: Option<f64>,
+    /// What passing it means, in words.
+    #[serde(default)]
+    pub lost_means: Option<String>,
 }
 
 /// `[limits]` of a vehicle's launch file: how fault reports judge its flight by the distance
@@ -234,6 +270,7 @@ impl PositionLimits {
     /// The error measure of `reference`, named `name`, judged by these limits.
     pub fn error_measure<R: Reference + 'static>(&self, name: &'static str, reference: R) -> ErrorMeasure {
         ErrorMeasure::of_reference(name, reference, self.recovery_band_m, self.position_error_limit_m)
+            .keyed("limits.position_error_limit_m")
     }
 }
 

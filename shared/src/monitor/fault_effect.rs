@@ -278,7 +278,14 @@ mod tests {
 
     /// The error is the first state component; back within 0.1, fallen at 1.
     fn measure() -> ErrorMeasure {
-        ErrorMeasure { name: "error", of_state: std::sync::Arc::new(|_, x| x[0]), recovery_band: 0.1, limit: 1.0 }
+        ErrorMeasure {
+            name: "error",
+            of_state: std::sync::Arc::new(|_, x| x[0]),
+            recovery_band: 0.1,
+            limit: 1.0,
+            limit_key: "limits.error",
+            lost_beyond: None,
+        }
     }
 
     /// Loop k with error `error`; its record (if any) says whether the command was lost and

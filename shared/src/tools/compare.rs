@@ -266,6 +266,17 @@ fn render(runs: &[Run]) -> String {
     out
 }
 
+/// The control outcome in a cell: "within limits", "exceeded 1.234 s", "lost 0.512 s".
+fn control_text(s: &Summary) -> String {
+    use crate::launcher::verdict::Verdict;
+    let l = &s.limits;
+    match (l.verdict, l.exceeded_at_s, l.lost_at_s) {
+        (Verdict::LimitsExceeded, Some(t), _) => format!("exceeded {t} s"),
+        (Verdict::Lost, _, Some(t)) => format!("LOST {t} s"),
+        (verdict, _, _) => verdict.to_string(),
+    }
+}
+
 /// The table's lines: latency per hop and end to end, the loop, the scenario's metrics.
 fn lines(runs: &[Run]) -> Vec<Line> {
     let mut lines = vec![Line::Heading("latency, µs (from loops.csv)")];
@@ -288,6 +299,7 @@ fn lines(runs: &[Run]) -> Vec<Line> {
         Line::Numbers("  loops/s".into(), each(&|s| format!("{:.0}", s.loops_per_s))),
         Line::Words("  wait strategy".into(), runs.iter().map(|r| r.wait.clone()).collect()),
         Line::Words("  mode".into(), each(&|s| s.mode.name().to_owned())),
+        Line::Words("  control".into(), each(&control_text)),
     ]);
     let mut metrics: Vec<&String> = runs.iter().flat_map(|r| r.summary.metrics.keys()).collect();
     metrics.sort();

@@ -16,8 +16,10 @@ use serde::Serialize;
 use crate::config::faults::FaultKind;
 use crate::config::launch::{LaunchConfig, Override};
 use crate::contract::role::Role;
+use crate::launcher::budget::theoretical_margin;
 use crate::launcher::in_process::run_in_process;
 use crate::launcher::inject::target;
+use crate::launcher::verdict::Verdict as ControlVerdict;
 use crate::launcher::{Binaries, EXIT_BAD_INPUT, EXIT_INTERRUPTED, Outcome, StopReason, Summary, run_once};
 use crate::model::catalog::Catalog;
 use crate::model::scenario::{Scenario, TheoreticalMargin};
@@ -57,6 +59,8 @@ pub struct SweepPoint {
     pub growth: Option<f64>,
     pub worst_error: Option<f64>,
     pub within_limits: Option<bool>,
+    /// The whole run judged against the scenario's limits (summary.json's `limits`).
+    pub control: ControlVerdict,
     pub metrics: BTreeMap<String, f64>,
     pub run_dir: String,
 }
@@ -70,10 +74,16 @@ pub enum Verdict {
     Unstable,
     /// The run did not complete.
     Failed,
-    /// The run has no fault to judge.
+    /// The run has no fault to judge, and it stayed within the scenario's limits.
     #[serde(rename = "no fault")]
     #[strum(serialize = "no fault")]
     NoFault,
+    /// No fault, but the run went beyond the scenario's limit (and came back).
+    #[serde(rename = "exceeded")]
+    #[strum(serialize = "exceeded")]
+    Exceeded,
+    /// The run was lost (the pendulum fell; see `launcher::verdict`), whatever the fault did.
+    Lost,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -83,8 +93,40 @@ pub struct SweepReport {
     pub points: Vec<SweepPoint>,
     /// The smallest swept value whose loop went unstable.
     pub first_unstable: Option<f64>,
-    /// For a controller delay in ticks: the scenario's theory.
+    /// For a swept delay: the first unstable value as a delay in ticks and in ms.
+    pub first_unstable_ticks: Option<f64>,
+    pub first_unstable_ms: Option<f64>,
+    /// For a controller delay: the scenario's theory for the loop swept, or why there is none.
     pub theory: Option<TheoreticalMargin>,
+    /// The theory's margin in ms.
+    pub theory_ms: Option<f64>,
+    pub theory_unknown: Option<String>,
+}
+
+/// A swept value as a delay in (ticks, ms), for a key that is one: `…delay_ticks`, `…delay_s`.
+fn as_delay(param: &str, value: f64, rate_hz: f64) -> Option<(f64, f64)> {
+    if param.ends_with(".delay_ticks") {
+        Some((value, value * 1e3 / rate_hz))
+    } else if param.ends_with(".delay_s") {
+        Some((value * rate_hz, value * 1e3))
+    } else {
+        None
+    }
+}
+
+/// The value halfway between a stable `a` and an unstable `b`, if one is left to try: whole
+/// numbers for a sweep of whole numbers, else down to a sixteenth of the step.
+fn between(a: f64, b: f64, step: f64, whole: bool) -> Option<f64> {
+    let mid = if whole { ((a + b) / 2.0).floor() } else { (a + b) / 2.0 };
+    let enough = if whole { b - a <= 1.0 } else { b - a <= step / 16.0 + 1e-12 };
+    (!enough && mid > a && mid < b).then_some(mid)
+}
+
+impl Verdict {
+    /// The loop did not hold: the fault's disturbance grew, or the run was lost.
+    fn is_unstable(self) -> bool {
+        matches!(self, Verdict::Unstable | Verdict::Lost)
+    }
 }
 
 fn value_text(v: f64) -> String {
@@ -130,18 +172,19 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         ));
     }
     let values = values(args.from, args.to, args.step);
+    let resolve = |value: f64| -> Result<(f64, LaunchConfig, Box<dyn Scenario>), String> {
+        let mut overrides = vec![Override::parse("mode=lockstep").expect("valid")];
+        overrides.extend(args.overrides.iter().cloned());
+        overrides.push(Override::parse(&format!("{}={}", args.param, value_text(value))).map_err(|e| e.to_string())?);
+        let (config, scenario) = catalog.resolve(&args.target, &overrides).map_err(|e| e.to_string())?;
+        Ok((value, config, scenario))
+    };
     // Check every value's launch file before running any.
     let mut configs: Vec<(f64, LaunchConfig, Box<dyn Scenario>)> = vec![];
     for &value in &values {
-        let mut overrides = vec![Override::parse("mode=lockstep").expect("valid")];
-        overrides.extend(args.overrides.iter().cloned());
-        match Override::parse(&format!("{}={}", args.param, value_text(value))) {
-            Ok(o) => overrides.push(o),
-            Err(e) => return bad(e.to_string()),
-        }
-        match catalog.resolve(&args.target, &overrides) {
-            Ok((config, scenario)) => configs.push((value, config, scenario)),
-            Err(e) => return bad(e.to_string()),
+        match resolve(value) {
+            Ok(c) => configs.push(c),
+            Err(e) => return bad(e),
         }
     }
     let fault_index = swept_fault(&args.param).or((!configs[0].1.faults.is_empty()).then_some(0));
@@ -195,15 +238,55 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
             }
         }
     }
-    let first_unstable = points.iter().find(|p| p.verdict == Verdict::Unstable).map(|p| p.value);
+    // Bisect between the last stable value and the first unstable one, one run at a time (each
+    // lockstep, so the answer is the same every time).
+    let whole = [args.from, args.step].iter().all(|v| v.fract() == 0.0);
+    while let Some(i) = points.iter().position(|p| p.verdict.is_unstable()) {
+        let Some(mid) = i
+            .checked_sub(1)
+            .filter(|&j| points[j].verdict == Verdict::Stable)
+            .and_then(|j| between(points[j].value, points[i].value, args.step, whole))
+        else {
+            break;
+        };
+        let config = match resolve(mid) {
+            Ok(c) => c,
+            Err(e) => return bad(e),
+        };
+        tell!("bisecting: {} = {}", args.param, value_text(mid));
+        let result = run_all(std::slice::from_ref(&config), binaries.as_ref(), &out, &args.param, 1, &stop);
+        match result.into_iter().next().flatten() {
+            Some(Ok((summary, outcome))) => points.insert(i, point(mid, &summary, &outcome, fault_index)),
+            Some(Err(e)) => {
+                tell!("error: the run for {} = {} failed: {e:#}", args.param, value_text(mid));
+                return ExitCode::FAILURE;
+            }
+            None => return ExitCode::from(EXIT_INTERRUPTED),
+        }
+    }
+    let first_unstable = points.iter().find(|p| p.verdict.is_unstable()).map(|p| p.value);
     let (_, config, scenario) = &configs[0];
+    let delay = first_unstable.and_then(|v| as_delay(&args.param, v, config.rate_hz));
     let controller_delay = fault_index
         .and_then(|i| config.faults.get(i))
         .is_some_and(|f| f.kind == FaultKind::Delay && target(f) == Role::Controller)
         && args.param.ends_with(".delay_ticks");
-    let theory = if controller_delay { scenario.delay_margin(config) } else { None };
-    let report =
-        SweepReport { scenario: config.scenario.clone(), param: args.param.clone(), points, first_unstable, theory };
+    let (theory, theory_unknown) = match controller_delay.then(|| theoretical_margin(config, scenario.as_ref())) {
+        Some(Ok(theory)) => (Some(theory), None),
+        Some(Err(why)) => (None, Some(why)),
+        None => (None, None),
+    };
+    let report = SweepReport {
+        scenario: config.scenario.clone(),
+        param: args.param.clone(),
+        points,
+        first_unstable,
+        first_unstable_ticks: delay.map(|d| d.0),
+        first_unstable_ms: delay.map(|d| d.1),
+        theory_ms: theory.as_ref().map(|t| f64::from(t.ticks) * 1e3 / config.rate_hz),
+        theory,
+        theory_unknown,
+    };
     say_raw!("{}", render(&report, &args.metrics));
     for name in &args.metrics {
         if report.points.iter().all(|p| !p.metrics.contains_key(name)) {
@@ -284,12 +367,17 @@ fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>)
         _ => None,
     });
     let within_limits = effect.as_ref().map(|e| e.within_limits);
+    let control = summary.limits.verdict;
     let verdict = if !summary.completed || *outcome != Outcome::Completed {
         Verdict::Failed
-    } else if effect.is_none() {
-        Verdict::NoFault
     } else if within_limits == Some(false) || growth.is_some_and(|g| g > UNSTABLE_GROWTH) {
         Verdict::Unstable
+    } else if control == ControlVerdict::Lost {
+        Verdict::Lost
+    } else if effect.is_none() && control == ControlVerdict::LimitsExceeded {
+        Verdict::Exceeded
+    } else if effect.is_none() {
+        Verdict::NoFault
     } else {
         Verdict::Stable
     };
@@ -303,6 +391,7 @@ fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>)
             .as_ref()
             .and_then(|e| [e.worst_error_during, e.worst_error_after].into_iter().flatten().reduce(f64::max)),
         within_limits,
+        control,
         metrics: summary.metrics.clone(),
         run_dir: summary.run_dir.clone(),
     }
@@ -316,7 +405,11 @@ fn metric_width(name: &str) -> usize {
 fn render(r: &SweepReport, metrics: &[String]) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "\nLoopLab sweep · {} · {} (lockstep)", r.scenario, r.param);
-    let _ = write!(out, "  {:>10}  {:<9}{:>12}{:>14}  within limits", "value", "verdict", "growth", "worst error");
+    let _ = write!(
+        out,
+        "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  control",
+        "value", "verdict", "growth", "worst error", "within limits"
+    );
     for name in metrics {
         let _ = write!(out, "  {name:>width$}", width = metric_width(name));
     }
@@ -325,12 +418,13 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
         let mut line = String::new();
         let _ = write!(
             line,
-            "  {:>10}  {:<9}{:>12}{:>14}  {:<13}",
+            "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  {:<15}",
             value_text(p.value),
             p.verdict,
             p.growth.map_or("-".into(), |g| format!("{g:.3}")),
             p.worst_error.map_or("-".into(), |e| format!("{e:.5}")),
-            p.within_limits.map_or("-", |w| if w { "yes" } else { "NO" })
+            p.within_limits.map_or("-", |w| if w { "yes" } else { "NO" }),
+            p.control.to_string()
         );
         for name in metrics {
             let value = p.metrics.get(name).map_or("-".into(), |v| format!("{v:.5}"));
@@ -338,7 +432,8 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
         }
         let _ = writeln!(out, "{}", line.trim_end());
     }
-    if r.points.iter().all(|p| p.verdict == Verdict::NoFault) {
+    let _ = writeln!(out, "  control: the whole run against the scenario's limits (summary.json's `limits`)");
+    if r.points.iter().all(|p| p.within_limits.is_none()) {
         let what = if metrics.is_empty() {
             "each run's summary.json has its metrics (--metric NAME shows one here)"
         } else {
@@ -353,7 +448,11 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
     );
     match r.first_unstable {
         Some(v) => {
-            let _ = writeln!(out, "\n  measured: the loop goes unstable at {} = {}", r.param, value_text(v));
+            let delay = match (r.first_unstable_ticks, r.first_unstable_ms) {
+                (Some(ticks), Some(ms)) => format!(" ({} ticks = {ms:.3} ms)", value_text(ticks)),
+                _ => String::new(),
+            };
+            let _ = writeln!(out, "\n  measured: the loop goes unstable at {} = {}{delay}", r.param, value_text(v));
         }
         None => {
             let _ = writeln!(out, "\n  measured: the loop stayed stable over the whole sweep");
@@ -362,8 +461,9 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
     if let Some(t) = &r.theory {
         let _ = writeln!(
             out,
-            "  theory:   the linearised sampled loop goes unstable at {} ticks (per-tick spectral radius {:.6} at {}, {:.6} at {})",
+            "  theory:   the linearised sampled loop goes unstable at {} ticks = {:.3} ms (per-tick spectral radius {:.6} at {}, {:.6} at {})",
             t.ticks,
+            r.theory_ms.unwrap_or(f64::NAN),
             t.radius_before,
             t.ticks.saturating_sub(1),
             t.radius_at_margin,
@@ -379,6 +479,9 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
             let verdict = if diff.abs() <= 1.0 { "agree within one tick" } else { "DISAGREE by more than one tick" };
             let _ = writeln!(out, "  measured and theory {verdict} ({diff:+} ticks)");
         }
+    }
+    if let Some(why) = &r.theory_unknown {
+        let _ = writeln!(out, "  theory:   margin unknown ({why}); only the measured margin applies");
     }
     out
 }
@@ -410,6 +513,7 @@ mod tests {
             growth: None,
             worst_error: None,
             within_limits: None,
+            control: ControlVerdict::WithinLimits,
             metrics: [("theta_max_abs_rad".to_string(), 0.25)].into(),
             run_dir: "r".into(),
         };
@@ -418,12 +522,59 @@ mod tests {
             param: "seed".into(),
             points: vec![point],
             first_unstable: None,
+            first_unstable_ticks: None,
+            first_unstable_ms: None,
             theory: None,
+            theory_unknown: None,
+            theory_ms: None,
         };
         let bare = render(&report, &[]);
         assert!(bare.ends_with("no fault to judge the loop by: each run's summary.json has its metrics (--metric NAME shows one here)\n"), "{bare}");
         let shown = render(&report, &["theta_max_abs_rad".to_string()]);
         assert!(shown.contains("0.25000") && shown.contains("the metrics above say what each value did"), "{shown}");
+    }
+
+    #[test]
+    fn bisection_stops_at_neighbours() {
+        assert_eq!(between(25.0, 35.0, 5.0, true), Some(30.0));
+        assert_eq!(between(30.0, 32.0, 5.0, true), Some(31.0));
+        assert_eq!(between(30.0, 31.0, 5.0, true), None);
+        assert_eq!(between(0.0, 0.01, 0.01, false), Some(0.005));
+        assert_eq!(between(0.0, 0.0005, 0.01, false), None);
+        assert_eq!(as_delay("faults.0.delay_ticks", 31.0, 1000.0), Some((31.0, 31.0)));
+        assert_eq!(as_delay("faults.0.delay_s", 0.004, 500.0), Some((2.0, 4.0)));
+        assert_eq!(as_delay("seed", 1.0, 1000.0), None);
+    }
+
+    /// A loop with a controller of the user's own: no stock theory, no "agree".
+    #[test]
+    fn a_sweep_of_a_loop_not_the_stock_laws_does_not_claim_the_theory() {
+        let point = |value: f64, verdict| SweepPoint {
+            value,
+            completed: true,
+            stopped_because: None,
+            verdict,
+            growth: Some(1.0),
+            worst_error: Some(0.1),
+            within_limits: Some(true),
+            control: ControlVerdict::WithinLimits,
+            metrics: BTreeMap::new(),
+            run_dir: "r".into(),
+        };
+        let report = SweepReport {
+            scenario: "pendulum".into(),
+            param: "faults.0.delay_ticks".into(),
+            points: vec![point(30.0, Verdict::Stable), point(31.0, Verdict::Unstable)],
+            first_unstable: Some(31.0),
+            first_unstable_ticks: Some(31.0),
+            first_unstable_ms: Some(31.0),
+            theory: None,
+            theory_ms: None,
+            theory_unknown: Some("not the stock law: the controller is a stage of your own".into()),
+        };
+        let text = render(&report, &[]);
+        assert!(text.contains("theory:   margin unknown (not the stock law"), "{text}");
+        assert!(!text.contains("agree"), "{text}");
     }
 
     #[test]
@@ -433,6 +584,8 @@ mod tests {
             (Verdict::Unstable, "unstable"),
             (Verdict::Failed, "failed"),
             (Verdict::NoFault, "no fault"),
+            (Verdict::Exceeded, "exceeded"),
+            (Verdict::Lost, "lost"),
         ] {
             assert_eq!(serde_json::to_value(verdict).unwrap(), text);
             assert_eq!(format!("{verdict:<9}|"), format!("{text:<9}|"));

@@ -282,6 +282,10 @@ impl ScenarioParts for Pendulum {
 
     fn error_measure(&self) -> ErrorMeasure {
         ErrorMeasure::of_reference("|theta| rad", Upright, self.limits.recovery_band_rad, self.limits.fall_angle_rad)
+            .keyed("limits.fall_angle_rad")
+            // Past the horizontal, gravity's torque is many times what the wheel's current limit
+            // gives: it has fallen (or swung over), and nothing brings it back up.
+            .lost_beyond(std::f64::consts::FRAC_PI_2, "fallen past the horizontal")
     }
 
     fn delay_margin(&self, config: &LaunchConfig) -> Option<TheoreticalMargin> {

@@ -336,6 +336,7 @@ impl ScenarioParts for Tethered {
             self.limits.etrack_recovery_band,
             self.limits.etrack_limit,
         )
+        .keyed("limits.etrack_limit")
     }
 }
 
