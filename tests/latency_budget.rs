@@ -14,7 +14,7 @@ fn number_after(line: &str, label: &str) -> f64 {
 
 #[test]
 fn the_budget_line_says_what_the_summary_says() {
-    let run = run("budget", &["pendulum", "--mode", "lockstep", "--duration", "1"]);
+    let run = run("budget", &["pendulum", "--mode", "realtime", "--duration", "1"]);
     let stdout = run.stdout();
     let line = stdout.lines().find(|l| l.starts_with("  budget (ms): ")).expect(&stdout);
     let b = &run.summary["latency_budget"];

@@ -9,14 +9,15 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::config::launch::LaunchConfig;
+use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::report::Stats;
 use crate::contract::role::Role;
 use crate::model::scenario::{Scenario, TheoreticalMargin};
 
-/// The loop's deadline in µs: one loop period. The one place it is decided.
-pub fn deadline_us(config: &LaunchConfig) -> f64 {
-    1e6 / config.rate_hz
+/// The loop's deadline in ms (`deadline_us`, by default one period); None in lockstep, which has
+/// no clock to keep a deadline by.
+fn deadline_ms(config: &LaunchConfig) -> Option<f64> {
+    (config.mode == Mode::Realtime).then(|| ms(config.deadline_ns() as f64 / 1e6))
 }
 
 /// The scenario's theoretical delay margin for the loop `config` runs, or why there is none.
@@ -34,8 +35,8 @@ pub struct LatencyBudget {
     pub p99_ms: Option<f64>,
     pub p999_ms: Option<f64>,
     pub max_ms: Option<f64>,
-    /// The deadline: one loop period.
-    pub deadline_ms: f64,
+    /// The deadline (`deadline_us`, by default one loop period); None in lockstep.
+    pub deadline_ms: Option<f64>,
     /// The extra command delay at which the loop goes unstable, in ms and loop periods (ticks);
     /// None where unknown.
     pub delay_margin_ms: Option<f64>,
@@ -58,7 +59,7 @@ fn ms(value: f64) -> f64 {
 pub fn build(config: &LaunchConfig, scenario: &dyn Scenario, end_to_end: &Stats) -> LatencyBudget {
     let of_ns = |ns: Option<u64>| ns.map(|ns| ms(ns as f64 / 1e6));
     let (p99_ms, p999_ms, max_ms) = (of_ns(end_to_end.p99), of_ns(end_to_end.p999), of_ns(end_to_end.max));
-    let deadline_ms = ms(deadline_us(config) / 1e3);
+    let deadline_ms = deadline_ms(config);
     let (delay_margin_ms, delay_margin_ticks, delay_margin_source) = match theoretical_margin(config, scenario) {
         Ok(m) => (
             Some(ms(f64::from(m.ticks) * 1e3 / config.rate_hz)),
@@ -75,7 +76,7 @@ pub fn build(config: &LaunchConfig, scenario: &dyn Scenario, end_to_end: &Stats)
         delay_margin_ms,
         delay_margin_ticks,
         delay_margin_source,
-        headroom_to_deadline_ms: p999_ms.map(|p| ms(deadline_ms - p)),
+        headroom_to_deadline_ms: deadline_ms.zip(p999_ms).map(|(d, p)| ms(d - p)),
         headroom_to_margin_ms: delay_margin_ms.zip(p999_ms).map(|(m, p)| ms(m - p)),
     }
 }
@@ -88,16 +89,21 @@ impl LatencyBudget {
             (Some(m), Some(ticks)) => format!("delay margin {m:.3} ({ticks} ticks, {})", self.delay_margin_source),
             _ => format!("delay margin {}", self.delay_margin_source),
         };
+        let (deadline, to_deadline) = match (self.deadline_ms, self.headroom_to_deadline_ms) {
+            (Some(d), h) => (format!("{d:.3}"), format!("{} to the deadline", text(h))),
+            (None, _) => ("n/a (lockstep)".into(), String::new()),
+        };
+        let to_margin = self.headroom_to_margin_ms.map(|h| format!("{h:.3} to the delay margin"));
+        let headroom: Vec<String> =
+            [Some(to_deadline), to_margin].into_iter().flatten().filter(|t| !t.is_empty()).collect();
         let mut line = format!(
-            "budget (ms): end to end p99 {} · p99.9 {} · max {} · deadline {:.3} (one period) · {margin} · headroom at p99.9: {} to the deadline",
+            "budget (ms): end to end p99 {} · p99.9 {} · max {} · deadline {deadline} · {margin}",
             text(self.p99_ms),
             text(self.p999_ms),
             text(self.max_ms),
-            self.deadline_ms,
-            text(self.headroom_to_deadline_ms),
         );
-        if let Some(h) = self.headroom_to_margin_ms {
-            line.push_str(&format!(", {h:.3} to the delay margin"));
+        if !headroom.is_empty() {
+            line.push_str(&format!(" · headroom at p99.9: {}", headroom.join(", ")));
         }
         line
     }
@@ -117,7 +123,7 @@ mod tests {
     fn the_pendulums_budget_has_the_stock_laws_margin_and_a_stage_of_ones_own_has_none() {
         let (config, scenario) = resolve("pendulum", &[]).unwrap();
         let b = build(&config, scenario.as_ref(), &stats(386_000, 520_400, 1_040_000));
-        assert_eq!((b.p99_ms, b.p999_ms, b.max_ms, b.deadline_ms), (Some(0.386), Some(0.52), Some(1.04), 1.0));
+        assert_eq!((b.p99_ms, b.p999_ms, b.max_ms, b.deadline_ms), (Some(0.386), Some(0.52), Some(1.04), Some(1.0)));
         assert_eq!((b.delay_margin_ticks, b.delay_margin_ms), (Some(31), Some(31.0)));
         assert_eq!((b.headroom_to_deadline_ms, b.headroom_to_margin_ms), (Some(0.48), Some(30.48)));
         assert!(b.line().contains("p99.9 0.520 · max 1.040 · deadline 1.000"), "{}", b.line());
@@ -130,6 +136,20 @@ mod tests {
         assert_eq!(b.delay_margin_ms, None);
         assert_eq!(b.delay_margin_source, "unknown (not the stock law: the controller is a stage of your own)");
         assert!(b.line().contains("delay margin unknown (not the stock law"), "{}", b.line());
+    }
+
+    #[test]
+    fn the_deadline_is_deadline_us_and_lockstep_has_none() {
+        let short = Override::parse("deadline_us=400").unwrap();
+        let (config, scenario) = resolve("pendulum", &[short]).unwrap();
+        let b = build(&config, scenario.as_ref(), &stats(386_000, 520_400, 1_040_000));
+        assert_eq!((b.deadline_ms, b.headroom_to_deadline_ms), (Some(0.4), Some(-0.12)));
+        let lockstep = Override::parse("mode=\"lockstep\"").unwrap();
+        let (config, scenario) = resolve("pendulum", &[lockstep]).unwrap();
+        let b = build(&config, scenario.as_ref(), &stats(386_000, 520_400, 1_040_000));
+        assert_eq!((b.deadline_ms, b.headroom_to_deadline_ms), (None, None));
+        assert!(b.line().contains("deadline n/a (lockstep) · delay margin 31.000"), "{}", b.line());
+        assert!(b.line().ends_with("headroom at p99.9: 30.480 to the delay margin"), "{}", b.line());
     }
 
     #[test]
