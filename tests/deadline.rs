@@ -8,7 +8,7 @@
 mod common;
 mod figure_check;
 
-use common::{Mode, fresh_dir, looplab, run};
+use common::{Mode, fresh_dir, load_summary, looplab, run};
 use figure_check::assert_figure;
 use looplab_shared::tools::plot::latency::{self, END_TO_END, MISSED, cdf_points, legend_stats, missed_count};
 use looplab_shared::tools::plot::run::{RunData, tick_period_figure};
@@ -18,7 +18,33 @@ use looplab_shared::tools::run_folder::RunFolder;
 /// deadline misses is summary.json's and returns that count and the loops at +∞.
 fn misses_agree(name: &str, fault: &str) -> (u64, usize) {
     let r = run(name, &["pendulum", "--duration", "1.5", "--fault", fault, "--plot"]);
-    let s = r.summary();
+    misses_agree_in(&r.dir, r.summary(), &r.stdout())
+}
+
+/// The same, for a run whose controller is killed and never restarted while the run goes on
+/// (`restart = "never"`, `on_death = "continue"`: it exits 1, a stage lost).
+#[test]
+fn a_controller_lost_for_good_misses_the_same_loops_in_every_count() {
+    let dir = fresh_dir("deadline-never");
+    let output = looplab()
+        .args(["run", "pendulum", "--duration", "1.5", "--fault", "kill controller at 0.5s", "--plot", "-q"])
+        .args(["--set", "supervision.controller.restart=\"never\""])
+        .args(["--set", "supervision.controller.on_death=\"continue\"", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
+    let s = load_summary(&dir);
+    assert_eq!(s.lost_stages.len(), 1);
+    let (misses, without_command) = misses_agree_in(&dir, &s, &String::from_utf8_lossy(&output.stdout));
+    assert!(without_command as u64 * 2 > misses, "after the loss no command comes: {without_command} of {misses}");
+}
+
+fn misses_agree_in(
+    dir: &std::path::Path,
+    s: &looplab_shared::launcher::summary::Summary,
+    report: &str,
+) -> (u64, usize) {
     assert_eq!(s.mode, Mode::Realtime);
     assert_eq!(s.deadline_us, Some(1000.0), "the default is one period");
     let misses = s.deadline_misses;
@@ -26,7 +52,7 @@ fn misses_agree(name: &str, fault: &str) -> (u64, usize) {
     assert_eq!(s.deadline_miss_share, Some(misses as f64 / s.loops as f64));
 
     // loops.csv: one row per loop, the loops without a command flagged with no end to end.
-    let loops = RunFolder::open(&r.dir, &["loops.csv"]).unwrap().table("loops.csv").unwrap();
+    let loops = RunFolder::open(dir, &["loops.csv"]).unwrap().table("loops.csv").unwrap();
     let flags = loops.column::<u64>("deadline_miss").unwrap();
     let end_to_end = loops.column::<u64>("end_to_end_ns").unwrap();
     assert_eq!(flags.len() as u64, s.loops, "no monitor restart: every loop that ran has a row");
@@ -35,7 +61,7 @@ fn misses_agree(name: &str, fault: &str) -> (u64, usize) {
     assert!(without_command > 0, "some loops got no command at all");
 
     // The tick-period figure's title, from the data it is drawn from; its marks above the curve.
-    let data = RunData::read(&r.dir, &looplab_shared::scenarios::builtin()).unwrap();
+    let data = RunData::read(dir, &looplab_shared::scenarios::builtin()).unwrap();
     let figure = tick_period_figure(&data).expect("a real-time run has a tick period");
     let panel = &figure.panels[0];
     let share = misses as f64 * 100.0 / s.loops as f64;
@@ -64,10 +90,13 @@ fn misses_agree(name: &str, fault: &str) -> (u64, usize) {
     assert!(samples.iter().filter(|v| **v != MISSED).count() as u64 == s.monitor.records);
 
     // The figures are written, each with data in its panels.
-    assert_figure(&r.dir.join("tick-period.png"), 1, false);
-    assert!(r.dir.join("latency-cdf.png").is_file());
+    assert_figure(&dir.join("tick-period.png"), 1, false);
+    assert!(dir.join("latency-cdf.png").is_file());
+    // The zoom on the fault: the error, and the latency with each miss marked and the deadline.
+    let fault = &s.faults[0];
+    let zoom = looplab_shared::tools::plot::fault_zoom::file_name(1, fault);
+    assert_figure(&dir.join(&zoom), 2, false);
     // The report says the share and the deadline.
-    let report = r.stdout();
     assert!(report.contains(&format!("deadline misses {misses} of {} ({share:.1} %), deadline 1.000 ms", s.loops)));
     (misses, without_command)
 }

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::launcher::summary::FaultReport;
-use crate::model::figure::RunColumns;
+use crate::model::figure::{RunColumns, runs};
 use crate::model::scenario::Scenario;
 use crate::tools::ToolError;
 use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel};
@@ -34,14 +34,12 @@ pub fn plot_faults(
         return Ok(vec![]);
     }
     let loops = folder.table("loops.csv")?;
-    let (t_loops, publish, receive) =
-        (loops.floats("t_s")?, loops.floats("plant_publish_ns")?, loops.floats("plant_receive_ns")?);
-    let latency_us: Vec<(f64, f64)> = t_loops
-        .iter()
-        .zip(publish.iter().zip(&receive))
-        .filter(|(_, (p, r))| p.is_finite() && r.is_finite() && **r >= **p && **p > 0.0)
-        .map(|(t, (p, r))| (*t, (r - p) / 1e3))
-        .collect();
+    let (t_loops, end_to_end, missed) =
+        (loops.floats("t_s")?, loops.floats("end_to_end_ns")?, loops.floats("deadline_miss")?);
+    let latency_us: Vec<f64> = end_to_end.iter().map(|ns| ns / 1e3).collect();
+    let misses: Vec<f64> = t_loops.iter().zip(&missed).filter(|(_, m)| **m > 0.0).map(|(t, _)| *t).collect();
+    // The deadline in µs (real time only; lockstep has none).
+    let deadline_us = summary.deadline_us;
     let measure = scenario.error_measure();
     let t = data.t();
     let names: Vec<&str> = scenario.vectors().state.iter().map(|c| c.name).collect();
@@ -70,11 +68,25 @@ pub fn plot_faults(
             vec![Curve::new(measure.name, within(&error), Colour::Series(0), Line::Solid(2))],
         );
         error_panel.bounds = vec![Curve::level("limit", measure.limit, &window, Colour::Limit)];
-        let latency_panel = Panel::new(
-            "end to end, each loop with a command",
-            "latency, µs",
-            vec![Curve::new("end to end", within(&latency_us), Colour::Series(1), Line::Solid(1))],
-        );
+        // Each stretch of loops with a command drawn apart: a loop without one leaves a gap,
+        // not a ramp across the outage, and each miss is a cross along the top.
+        let latency: Vec<Curve> = runs(&t_loops, &latency_us, 1.0 / rate)
+            .into_iter()
+            .map(|run| within(&run))
+            .filter(|run| !run.is_empty())
+            .map(|run| Curve::new("end to end", run, Colour::Series(1), Line::Solid(1)))
+            .collect();
+        let in_view: Vec<f64> = misses.iter().copied().filter(|t| window.contains(t)).collect();
+        let top = latency.iter().flat_map(|c| &c.points).map(|p| p.1).fold(deadline_us.unwrap_or(0.0), f64::max) * 1.06;
+        let title = match deadline_us {
+            Some(_) => format!("end to end · {} deadline misses in view (crosses: late or no command)", in_view.len()),
+            None => "end to end, each loop with a command (lockstep: no deadline)".into(),
+        };
+        let mut latency_panel = Panel::new(title, "latency, µs", latency);
+        if let Some(deadline) = deadline_us {
+            latency_panel.bounds = vec![Curve::level("deadline", deadline, &window, Colour::Limit)];
+            latency_panel.marks = in_view.into_iter().map(|t| (t, top)).collect();
+        }
         let figure = Figure {
             title: format!("{}: {} (during: {:.3} s to {:.3} s)", scenario.title(), f.fault, f.at_s, during_end),
             panels: vec![error_panel, latency_panel],
