@@ -67,7 +67,7 @@ fn an_added_scenario_runs_by_name_with_its_own_defaults() {
     let stiff_dir = run_in_process(&catalog, "pendulum-stiff");
     assert_eq!(
         sha256(&builtin_dir.join("trajectory.csv")),
-        "6cedfd494f6be9aeae62d8500c72b293b18dcc8db27c64e39540ef487af7ea3d",
+        "02185331ac0bbefa0c73e42086e7090f8f51a6a97b6eea57d5533158ba18c5af",
         "the built-in pendulum's pinned trajectory"
     );
     let (builtin, stiff) =
