@@ -34,6 +34,10 @@ fn parse_rows(body: &str) -> Vec<Row> {
                 return Row { label: line.trim().to_string(), cells: vec![] };
             }
             let words: Vec<&str> = line.split_whitespace().collect();
+            // The control outcome's cells are words and numbers ("within limits", "LOST 1.2 s").
+            if words[0] == "control" {
+                return Row { label: "control".into(), cells: vec![] };
+            }
             let first_cell = words.iter().position(|w| is_cell(w)).unwrap_or(words.len());
             let (label, cells) = if first_cell == words.len() && words.len() > 2 {
                 // A row of words: the label is all but the last two.
@@ -98,7 +102,7 @@ fn two_wait_strategies_side_by_side_with_ratios_of_the_printed_numbers() {
     let metrics: Vec<&String> = block.summary().metrics.keys().collect();
     let expected: Vec<&str> = std::iter::once("latency, µs (from loops.csv)")
         .chain(latency_labels.iter().map(String::as_str))
-        .chain(["loop", "loops", "deadline misses", "loops/s", "wait strategy", "mode", "metrics"])
+        .chain(["loop", "loops", "deadline misses", "loops/s", "wait strategy", "mode", "control", "metrics"])
         .chain(metrics.iter().map(|m| m.as_str()))
         .collect();
     assert_eq!(labels, expected);

@@ -48,6 +48,9 @@ fn a_lockstep_run_without_its_controller_runs_every_loop_and_its_phases_add_up()
     assert_eq!(p.before.misses + p.during.misses + p.after.misses, s.loops_without_command);
     assert_eq!(p.during.without_command, 1500);
     assert_eq!(p.before.end_to_end_ns.count + p.during.end_to_end_ns.count, s.latency_ns.end_to_end.count);
+    // The metrics follow the pendulum after the loss too: its largest angle is the verdict's.
+    assert_eq!(Some(s.metrics["theta_max_abs_rad"]), s.limits.worst_error, "{:?}", s.metrics);
+    assert!(s.metrics["theta_max_abs_rad"] > 1.0, "it fell without its controller: {:?}", s.metrics);
     let report = String::from_utf8_lossy(&output.stdout);
     assert!(report.contains("never: controller lost") && !report.contains(" kept"), "{report}");
     assert!(report.contains("during = from the injection"), "{report}");

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 
 use crate::config::launch::{LaunchConfig, Mode};
-use crate::contract::msg::{MONITOR_BUFFER, PlantCounters};
+use crate::contract::msg::{Command, Estimate, MONITOR_BUFFER, Measurements, PlantCounters};
 use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::role::Role;
@@ -65,6 +65,9 @@ pub struct Recording {
     injections: Option<PathBuf>,
     /// Why that could not be read, the last time it could not.
     injections_failed: Option<String>,
+    /// The newest measurements, estimate and command seen: what each stage's output holds at a
+    /// loop it gave none (a stopped or dead stage), for the metrics.
+    held: (Option<Measurements>, Option<Estimate>, Option<Command>),
 }
 
 impl Recording {
@@ -107,6 +110,7 @@ impl Recording {
             resume_failed: None,
             injections: None,
             injections_failed: None,
+            held: (None, None, None),
         })
     }
 
@@ -362,20 +366,28 @@ impl Recording {
         for sink in &mut self.sinks {
             sink.loop_joined(&joined)?;
         }
+        if parts.state.is_none() || parts.measurements.is_none() || parts.estimate.is_none() || parts.command.is_none()
+        {
+            self.report.partial_rows += 1;
+        }
+        // The metrics follow the physical system through every loop with a state: a part that
+        // did not come is the newest one seen, which is what that stage's output held (so a
+        // pendulum that falls while its controller is dead is seen falling).
+        let held = &mut self.held;
+        held.0 = parts.measurements.or(held.0);
+        held.1 = parts.estimate.or(held.1);
+        held.2 = parts.command.or(held.2);
         let layout = &self.layout;
-        match parts {
-            LoopParts { state: Some(s), measurements: Some(m), estimate: Some(e), command: Some(c), .. } => {
-                self.metrics.observe(&Row {
-                    k,
-                    t,
-                    state: &s.x[..layout.state.len()],
-                    readings: &m.readings[..layout.sensors.len()],
-                    estimate: &e.x[..layout.estimate.len()],
-                    command: &c.u[..layout.input.len()],
-                    applied: &s.u_applied[..layout.input.len()],
-                })
-            }
-            _ => self.report.partial_rows += 1,
+        if let (Some(s), (Some(m), Some(e), Some(c))) = (&parts.state, &self.held) {
+            self.metrics.observe(&Row {
+                k,
+                t,
+                state: &s.x[..layout.state.len()],
+                readings: &m.readings[..layout.sensors.len()],
+                estimate: &e.x[..layout.estimate.len()],
+                command: &c.u[..layout.input.len()],
+                applied: &s.u_applied[..layout.input.len()],
+            })
         }
         Ok(())
     }
