@@ -1,7 +1,7 @@
 //! The control outcome: every run judged against its scenario's `[limits]`, in the report,
 //! summary.json's `limits`, and `--fail-on-limits` (five processes, lockstep).
 
-mod common;
+use crate::common;
 
 use common::*;
 use looplab_shared::launcher::verdict::Verdict;

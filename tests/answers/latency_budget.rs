@@ -1,7 +1,7 @@
 //! The latency budget: the report's `budget (ms):` line says what summary.json's
 //! `latency_budget` says, and a delay sweep bisects to the margin and gives it in ms.
 
-mod common;
+use crate::common;
 
 use common::*;
 

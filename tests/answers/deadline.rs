@@ -5,8 +5,8 @@
 //! load with one line naming the key and the allowed range. The counts are compared with each
 //! other, never with a wall-clock threshold.
 
-mod common;
-mod figure_check;
+use crate::common;
+use crate::figure_check;
 
 use common::{Mode, fresh_dir, load_summary, looplab, run};
 use figure_check::assert_figure;

@@ -2,7 +2,7 @@
 //! on to its planned end under the plant's fail-safe, says the stage was lost, and splits each
 //! fault's statistics before, during and after it.
 
-mod common;
+use crate::common;
 
 use common::*;
 use looplab_shared::contract::report::FaultPhases;
