@@ -331,11 +331,12 @@ fn seconds(s: f64) -> String {
 }
 
 /// The deadline misses loops.csv flags, as the tick-period figure counts them: the times of the
-/// misses, and how many loops that ran have no row at all (no monitor was up to record them:
-/// their misses are in summary.json's count but not here).
+/// misses, and how many loops no monitor was up to record (around a monitor's restart: their
+/// misses are in summary.json's count but not here). Ticks the plant skipped at the very end
+/// have no row either, but they published nothing and so missed nothing.
 pub fn tick_misses(ticks: &Ticks, summary: &Summary) -> (Vec<f64>, u64) {
     let misses = ticks.t.iter().zip(&ticks.deadline_miss).filter(|(_, miss)| **miss > 0.0).map(|(t, _)| *t).collect();
-    (misses, summary.loops.saturating_sub(ticks.t.len() as u64))
+    (misses, summary.monitor.missing.missing_before_restart)
 }
 
 /// The tick-period panel's title: the misses as the report counts them.
