@@ -7,6 +7,7 @@ pub mod command_link;
 pub mod figure;
 pub mod integrate;
 pub mod mean;
+pub mod plant_model;
 pub mod poly;
 pub mod reference;
 pub mod scenario;
