@@ -41,7 +41,11 @@ fn a_declared_system_runs_in_five_processes_byte_identical_to_in_process() {
     for (x, f) in x.iter().zip(&spring) {
         assert_eq!(*f, -2.0 * x, "y = C x");
     }
-    assert_eq!(t.col("est.velocity_m_per_s"), t.col("velocity_m_per_s"), "exact sensors: the pass-through is the truth");
+    assert_eq!(
+        t.col("est.velocity_m_per_s"),
+        t.col("velocity_m_per_s"),
+        "exact sensors: the pass-through is the truth"
+    );
     assert!(five.dir.join("run.mcap").is_file());
 
     let one = run_in_process("declared-in-process", &[EXAMPLE]);
@@ -133,8 +137,18 @@ fn bad_declared_files_are_one_clear_line_with_exit_2() {
         ("shape", replace("b = [[0.0], [1.0]]", "b = [[0.0, 1.0]]"), "plant.linear.b", "must be 2 × 1"),
         ("no-controller", replace("gains = [[4.0, 2.0]]", ""), "controller", "needs a controller"),
         ("limits", replace("min = -10.0", "min = 11.0"), "system.input.0.min", "must be at most max"),
-        ("signal", replace(r#"reads = ["state.position"]"#, r#"signal = "position""#), "sensors.encoder.signal", "reads"),
-        ("bad-name", replace(r#"name = "spring_force""#, r#"name = "spring force""#), "system.outputs.0.name", "not a name"),
+        (
+            "signal",
+            replace(r#"reads = ["state.position"]"#, r#"signal = "position""#),
+            "sensors.encoder.signal",
+            "reads",
+        ),
+        (
+            "bad-name",
+            replace(r#"name = "spring_force""#, r#"name = "spring force""#),
+            "system.outputs.0.name",
+            "not a name",
+        ),
         (
             "unread-estimate",
             replace(r#"reads = ["state.velocity", "input.force"]"#, r#"reads = ["input.force"]"#),
