@@ -28,6 +28,11 @@ impl Unpacked {
     pub fn resources(&self) -> PathBuf {
         self.folder.path().join("resources")
     }
+
+    /// Whether the archive holds resources/ files the FMU may read while it runs.
+    pub fn has_resources(&self) -> bool {
+        std::fs::read_dir(self.resources()).is_ok_and(|mut d| d.next().is_some())
+    }
 }
 
 /// The binaries/ folder name for this machine, in each FMI version's naming.

@@ -13,7 +13,10 @@ use crate::model::plant_model::{ModelSpec, PlantModel, Stepping};
 pub struct FmuModel {
     // Dropped first: the instance is freed and the library closed before its folder is removed.
     instance: Instance,
-    _unpacked: Unpacked,
+    /// The unpacked FMU's folder, kept while the FMU may read its resources; an FMU without
+    /// resources needs nothing of it once its binary is loaded, so it is removed at once (and a
+    /// killed plant leaves nothing behind).
+    _folder: Option<tempfile::TempDir>,
     describe: String,
     /// The FMU's file name, first in every error.
     label: String,
@@ -58,7 +61,7 @@ impl FmuModel {
             map,
             x: vec![0.0; n],
             dx: vec![0.0; n],
-            _unpacked: unpacked,
+            _folder: unpacked.has_resources().then_some(unpacked.folder),
         })
     }
 

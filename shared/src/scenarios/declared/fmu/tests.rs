@@ -324,3 +324,49 @@ fn bad_input_is_one_line_naming_the_fmu_and_what_it_has() {
     let platform = platform(Version::Fmi2);
     assert_eq!(platform, "linux64", "the tests' platform names are Linux x86-64's");
 }
+
+/// The plant's step cost per tick (1 kHz, 10 RK4 substeps), printed: the built-in pendulum, the
+/// FMU in Model Exchange (LoopLab's RK4 over 40 derivative calls through the FMI functions) and in
+/// Co-Simulation (one doStep). A measurement, not a check:
+/// `cargo test --release -p looplab-shared --lib step_cost_per_tick -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn step_cost_per_tick() {
+    use crate::model::scenario::Plant;
+    use crate::scenarios::pendulum::plant::PendulumPlant;
+    const TICKS: u32 = 200_000;
+    let time = |label: &str, f: &mut dyn FnMut(u32)| {
+        (0..1000).for_each(&mut *f);
+        let start = std::time::Instant::now();
+        (0..TICKS).for_each(&mut *f);
+        println!("{label}: {:.0} ns/tick", start.elapsed().as_nanos() as f64 / f64::from(TICKS));
+    };
+    let mut builtin = PendulumPlant::new(paper_model(), 10, Vector3::new(0.05, 0.0, 0.0));
+    time("built-in pendulum", &mut |k| builtin.step(f64::from(k) * 1e-3, &[0.1], 1e-3));
+    for version in VERSIONS {
+        let mut me = load(&pendulum_spec(), &pendulum_fmu(version)).unwrap();
+        let mut x = me.initial_state().unwrap();
+        let (mut k1, mut k2, mut k3, mut k4, mut tmp) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
+        time(&format!("{version:?} Model Exchange"), &mut |k| {
+            let h = 1e-3 / 10.0;
+            let t0 = f64::from(k) * 1e-3;
+            for s in 0..10 {
+                let t = t0 + f64::from(s) * h;
+                me.derivative(t, &x, &[0.1], &mut k1).unwrap();
+                (0..3).for_each(|i| tmp[i] = x[i] + k1[i] * (h / 2.0));
+                me.derivative(t + h / 2.0, &tmp, &[0.1], &mut k2).unwrap();
+                (0..3).for_each(|i| tmp[i] = x[i] + k2[i] * (h / 2.0));
+                me.derivative(t + h / 2.0, &tmp, &[0.1], &mut k3).unwrap();
+                (0..3).for_each(|i| tmp[i] = x[i] + k3[i] * h);
+                me.derivative(t + h, &tmp, &[0.1], &mut k4).unwrap();
+                (0..3).for_each(|i| x[i] += (k1[i] + k2[i] * 2.0 + k3[i] * 2.0 + k4[i]) * (h / 6.0));
+            }
+        });
+        let mut cs = load_as(&pendulum_spec(), &pendulum_fmu(version), Some(FmiKind::CoSimulation)).unwrap();
+        let mut x = cs.initial_state().unwrap();
+        time(&format!("{version:?} Co-Simulation"), &mut |k| cs.do_step(f64::from(k) * 1e-3, 1e-3, &[0.1], &mut x).unwrap());
+        let mut saved = 0;
+        time(&format!("{version:?} Co-Simulation save (serialise)"), &mut |_| saved = cs.save().unwrap().unwrap().len());
+        println!("{version:?} serialised state: {saved} bytes");
+    }
+}
