@@ -57,13 +57,12 @@ pub fn load(spec: &ModelSpec, fmu: &Path) -> Result<Box<dyn PlantModel>, String>
 }
 
 /// The FMU as a plant model through the interface `kind` (None: Model Exchange where offered).
-/// A relative `fmu` is relative to the launch file's folder. Every error is one line naming the
-/// launch file and the FMU.
+/// A relative `fmu` is relative to the launch file's folder. Every error is one line that starts
+/// with the FMU's file name (the caller names the launch file and its key).
 pub fn load_as(spec: &ModelSpec, fmu: &Path, kind: Option<FmiKind>) -> Result<Box<dyn PlantModel>, String> {
     let path = if fmu.is_relative() { spec.folder.join(fmu) } else { fmu.to_path_buf() };
     let label = fmu.file_name().map_or_else(|| fmu.display().to_string(), |n| n.to_string_lossy().into_owned());
-    let fail = |message: String| format!("{}: [plant] fmu: {message}", spec.file);
-    let unpacked = archive::unpack(&path, &label).map_err(fail)?;
+    let unpacked = archive::unpack(&path, &label)?;
     let d = &unpacked.description;
     let kind = match kind {
         Some(k) => k,
@@ -81,17 +80,17 @@ pub fn load_as(spec: &ModelSpec, fmu: &Path, kind: Option<FmiKind>) -> Result<Bo
             .map(|(k, _)| k.label())
             .collect::<Vec<_>>()
             .join(" and ");
-        return Err(fail(format!("{label} offers no {} (it offers {offered})", kind.label())));
+        return Err(format!("{label} offers no {} (it offers {offered})", kind.label()));
     };
-    let map = Mapping::new(spec, d, kind, &label).map_err(fail)?;
+    let map = Mapping::new(spec, d, kind, &label)?;
     let binary = unpacked.binary(&interface.identifier);
     if !binary.exists() {
-        return Err(fail(format!("{label}: no {} in binaries/{}", interface.identifier, platform(d.version))));
+        return Err(format!("{label}: no {} in binaries/{}", interface.identifier, platform(d.version)));
     }
     let describe = format!("{label}, {} {}", d.version.label(), kind.label());
     model::FmuModel::new(unpacked, interface, kind, map, spec, label.clone(), describe)
         .map(|m| Box::new(m) as Box<dyn PlantModel>)
-        .map_err(|e| fail(format!("{label}: {e:#}")))
+        .map_err(|e| format!("{label}: {e:#}"))
 }
 
 /// The declared names as the FMU's value references.
@@ -171,7 +170,7 @@ impl Mapping {
             };
             if v.kind == Kind::Integer {
                 if value.fract() != 0.0 || value.abs() > f64::from(i32::MAX) {
-                    return Err(format!("[plant.parameters] {name} = {value}: {label} takes an integer"));
+                    return Err(format!("{label}: parameter {name} is an integer, [plant.parameters] gives {value}"));
                 }
                 integer_parameters.0.push(v.vr);
                 integer_parameters.1.push(*value as i32);
