@@ -155,9 +155,10 @@ impl System {
             Some(_) if !matches!(source, PlantSource::Fmu(_)) => {
                 return Err(c.error("plant.fmu_interface", "is for an FMU plant (fmu = \"model.fmu\")"));
             }
-            Some(text) => Some(FmiKind::parse(text).ok_or_else(|| {
-                c.error("plant.fmu_interface", format!("\"{text}\": one of {}", FmiKind::NAMES))
-            })?),
+            Some(text) => Some(
+                FmiKind::parse(text)
+                    .ok_or_else(|| c.error("plant.fmu_interface", format!("\"{text}\": one of {}", FmiKind::NAMES)))?,
+            ),
         };
         if !plant.parameters.is_empty() && matches!(source, PlantSource::Linear(_)) {
             return Err(c.error("plant.parameters", "a linear plant has no parameters (its matrices are its model)"));

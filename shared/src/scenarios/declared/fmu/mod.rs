@@ -164,7 +164,7 @@ impl Mapping {
         for (name, value) in &spec.parameters {
             let Some(v) = d.by_name(name).filter(|v| is_parameter(v)) else {
                 return Err(format!(
-                    "[plant.parameters] {name}: {label} has no such parameter; its parameters: {}",
+                    "{label} has no parameter \"{name}\" ([plant.parameters]); its parameters: {}",
                     d.names(is_parameter)
                 ));
             };

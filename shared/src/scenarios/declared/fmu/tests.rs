@@ -341,7 +341,7 @@ fn step_cost_per_tick() {
         println!("{label}: {:.0} ns/tick", start.elapsed().as_nanos() as f64 / f64::from(TICKS));
     };
     let mut builtin = PendulumPlant::new(paper_model(), 10, Vector3::new(0.05, 0.0, 0.0));
-    time("built-in pendulum", &mut |k| builtin.step(f64::from(k) * 1e-3, &[0.1], 1e-3));
+    time("built-in pendulum", &mut |k| builtin.step(f64::from(k) * 1e-3, &[0.1], 1e-3).unwrap());
     for version in VERSIONS {
         let mut me = load(&pendulum_spec(), &pendulum_fmu(version)).unwrap();
         let mut x = me.initial_state().unwrap();
@@ -363,9 +363,13 @@ fn step_cost_per_tick() {
         });
         let mut cs = load_as(&pendulum_spec(), &pendulum_fmu(version), Some(FmiKind::CoSimulation)).unwrap();
         let mut x = cs.initial_state().unwrap();
-        time(&format!("{version:?} Co-Simulation"), &mut |k| cs.do_step(f64::from(k) * 1e-3, 1e-3, &[0.1], &mut x).unwrap());
+        time(&format!("{version:?} Co-Simulation"), &mut |k| {
+            cs.do_step(f64::from(k) * 1e-3, 1e-3, &[0.1], &mut x).unwrap()
+        });
         let mut saved = 0;
-        time(&format!("{version:?} Co-Simulation save (serialise)"), &mut |_| saved = cs.save().unwrap().unwrap().len());
+        time(&format!("{version:?} Co-Simulation save (serialise)"), &mut |_| {
+            saved = cs.save().unwrap().unwrap().len()
+        });
         println!("{version:?} serialised state: {saved} bytes");
     }
 }
