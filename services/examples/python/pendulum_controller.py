@@ -5,8 +5,9 @@ import looplab
 
 class StateFeedback:
     def __init__(self, stage):
-        self.k1, self.k2, self.k3 = stage.config["controller"]["gains"]
-        self.limit = stage.config["model"]["current_limit_a"]
+        config = dict(stage.config, **stage.config.get("parameters", {}))  # a declared system's [parameters]
+        self.k1, self.k2, self.k3 = config["controller"]["gains"]
+        self.limit = config["model"]["current_limit_a"]
 
     def step(self, t, x, u):  # x: the estimate (theta, theta_dot, wheel_speed, bias); u: (current,)
         current = -(self.k1 * x[0] + self.k2 * x[1] + self.k3 * x[2])

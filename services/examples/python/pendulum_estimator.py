@@ -27,13 +27,15 @@ def observer_gains(a, poles):
 
 
 def sensor_of(config, signal):
-    """The name of the sensor that reads `signal`."""
-    return next(name for name, sensor in config["sensors"].items() if sensor["signal"] == signal)
+    """The name of the sensor that reads `signal` (a scenario's `signal`, a declared system's `reads`)."""
+    reads = lambda sensor: sensor.get("signal") or sensor["reads"][0].split(".")[-1]
+    return next(name for name, sensor in config["sensors"].items() if reads(sensor) == signal)
 
 
 class BiasObserver:
     def __init__(self, stage):
-        config = stage.config
+        # A scenario's launch file, or a declared system's [parameters] table.
+        config = dict(stage.config, **stage.config.get("parameters", {}))
         if config["estimator"]["kind"] != "bias-observer":
             raise ValueError("this estimator is the bias observer: set estimator.kind = \"bias-observer\"")
         m = config["model"]

@@ -283,6 +283,13 @@ pub trait Plant {
     fn step(&mut self, t: f64, u: &[f64], dt: f64) -> anyhow::Result<()>;
     /// Sets the state, for a restarted plant going on from its snapshot.
     fn restore(&mut self, state: &[f64]);
+    /// The model's own whole state as bytes (an FMU's serialisation), kept beside the snapshot
+    /// after every tick; None: the state vector is all there is to keep.
+    fn save_model(&mut self) -> anyhow::Result<Option<Vec<u8>>> {
+        Ok(None)
+    }
+    /// After [`Plant::restore`]: goes on from what [`Plant::save_model`] returned.
+    fn restore_model(&mut self, _bytes: &[u8]) {}
     /// What the actuator applied over the last step, where it differs from the command (a
     /// command link that samples the commands): the estimator predicts with it.
     fn applied_input(&self) -> Option<&[f64]> {

@@ -30,7 +30,7 @@ use crate::contract::role::{Role, Topic};
 use crate::model::scenario::Scenario;
 use crate::runtime::child::{Context, WAIT_SLICE, emit, line_written, wait, wait_for_line, wait_for_lines, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
-use crate::runtime::snapshot::Snapshot;
+use crate::runtime::snapshot::{ModelSnapshot, Snapshot};
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
@@ -298,6 +298,8 @@ struct PlantProcess {
     state_out: TopicPublisher<PlantState>,
     loop_out: TopicPublisher<LoopRecord>,
     snapshot: Snapshot<SnapshotData>,
+    /// The plant model's own bytes for the same tick, where it serialises itself (an FMU).
+    model_snapshot: Option<ModelSnapshot>,
 }
 
 impl std::ops::Deref for PlantProcess {
@@ -340,9 +342,37 @@ impl PlantProcess {
         Ok(())
     }
 
+    /// The model's bytes first, then the snapshot of the same tick (see [`ModelSnapshot`]).
     fn save(&mut self) {
         let s = self.core.snapshot();
+        if let Some(model) = &mut self.model_snapshot {
+            let kept = match self.core.plant.save_model() {
+                Ok(Some(bytes)) => model.write(s.k, &bytes),
+                Ok(None) => false,
+                Err(e) => {
+                    eprintln!("plant: cannot save the model's state ({e:#}); a restart goes on from the state vector");
+                    false
+                }
+            };
+            if !kept {
+                self.model_snapshot = None;
+            }
+        }
         self.snapshot.write(&s);
+    }
+
+    /// Opens the model's snapshot where the model serialises itself; a restarted plant goes on
+    /// from the bytes of its snapshot's tick.
+    fn open_model_snapshot(&mut self, run_id: &str, restored: Option<u64>) -> Result<()> {
+        if !matches!(self.core.plant.save_model(), Ok(Some(_))) {
+            return Ok(());
+        }
+        let model = ModelSnapshot::open(run_id, Role::Plant.name())?;
+        if let Some(bytes) = restored.and_then(|k| model.read(k)) {
+            self.core.plant.restore_model(&bytes);
+        }
+        self.model_snapshot = Some(model);
+        Ok(())
     }
 }
 
@@ -356,8 +386,10 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
         state_out: context.ipc.publisher(Topic::State, writer_wakes(&context.config, Topic::State))?,
         loop_out: context.ipc.publisher(Topic::Loop, false)?,
         snapshot: Snapshot::open(&context.run_id, Role::Plant.name())?,
+        model_snapshot: None,
     };
     let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.core.restore(&s)).is_some();
+    p.open_model_snapshot(&context.run_id, restored.then_some(p.k))?;
     p.report.restored_at = restored.then_some(p.k);
     let ws = waitset()?;
     let _wake = commands.attach_to(&ws)?;

@@ -77,6 +77,85 @@ impl<T> Drop for Snapshot<T> {
     }
 }
 
+/// The most bytes of a plant model's own state (an FMU's serialised state) a [`ModelSnapshot`]
+/// keeps; a larger state is not kept, and a restart goes on from the state vector.
+pub const MAX_MODEL_BYTES: usize = 1 << 20;
+
+/// The plant model's own state as bytes (an FMU's serialisation), beside the plant's
+/// [`Snapshot`]: two slots of [`MAX_MODEL_BYTES`] written in turn, each tagged with the tick it
+/// belongs to. The plant writes it before its snapshot of the same tick, so whichever process
+/// death cuts in between, one slot matches the snapshot's tick. On tmpfs, pages never written
+/// take no memory.
+pub struct ModelSnapshot {
+    base: *mut u8,
+    sequence: u64,
+}
+
+/// A slot's header: sequence, tick, length; the bytes follow, then the sequence again.
+const HEADER: usize = 24;
+const SLOT: usize = HEADER + MAX_MODEL_BYTES + 8;
+
+impl ModelSnapshot {
+    pub fn open(run_id: &str, process: &str) -> Result<Self> {
+        let ptr = shared_file::map(&path(run_id, &format!("{process}.model"))?, 2 * SLOT, Open::OrCreate)?;
+        let mut snapshot = Self { base: ptr.cast(), sequence: 0 };
+        snapshot.sequence = (0..2).map(|i| snapshot.header(i).0).max().unwrap_or(0);
+        Ok(snapshot)
+    }
+
+    /// Slot i's (sequence, tick, length, closing sequence).
+    fn header(&self, i: usize) -> (u64, u64, usize, u64) {
+        // SAFETY: inside the mapping; volatile because another process wrote it.
+        unsafe {
+            let slot = self.base.add(i * SLOT).cast::<u64>();
+            let len = std::ptr::read_volatile(slot.add(2)) as usize;
+            let end = std::ptr::read_volatile(self.base.add(i * SLOT + HEADER + MAX_MODEL_BYTES).cast::<u64>());
+            (std::ptr::read_volatile(slot), std::ptr::read_volatile(slot.add(1)), len, end)
+        }
+    }
+
+    /// The bytes written whole for tick `k`, if any.
+    pub fn read(&self, k: u64) -> Option<Vec<u8>> {
+        (0..2).find_map(|i| {
+            let (begin, tick, len, end) = self.header(i);
+            (begin > 0 && begin == end && tick == k && len <= MAX_MODEL_BYTES).then(|| {
+                // SAFETY: `len` bytes inside the slot.
+                unsafe { std::slice::from_raw_parts(self.base.add(i * SLOT + HEADER), len) }.to_vec()
+            })
+        })
+    }
+
+    /// Keeps `bytes` as tick `k`'s; false (nothing written) where they exceed [`MAX_MODEL_BYTES`].
+    pub fn write(&mut self, k: u64, bytes: &[u8]) -> bool {
+        use std::sync::atomic::{Ordering, compiler_fence};
+        if bytes.len() > MAX_MODEL_BYTES {
+            return false;
+        }
+        self.sequence += 1;
+        let seq = self.sequence;
+        // SAFETY: the slot is inside our mapping; the fences order begin, the data and end, as
+        // in `Snapshot::write`.
+        unsafe {
+            let slot = self.base.add((seq % 2) as usize * SLOT);
+            std::ptr::write_volatile(slot.cast::<u64>(), seq);
+            compiler_fence(Ordering::SeqCst);
+            std::ptr::write_volatile(slot.cast::<u64>().add(1), k);
+            std::ptr::write_volatile(slot.cast::<u64>().add(2), bytes.len() as u64);
+            std::ptr::copy_nonoverlapping(bytes.as_ptr(), slot.add(HEADER), bytes.len());
+            compiler_fence(Ordering::SeqCst);
+            std::ptr::write_volatile(slot.add(HEADER + MAX_MODEL_BYTES).cast::<u64>(), seq);
+        }
+        true
+    }
+}
+
+impl Drop for ModelSnapshot {
+    fn drop(&mut self) {
+        // SAFETY: unmaps what `open` mapped.
+        unsafe { shared_file::unmap(self.base.cast(), 2 * SLOT) };
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::os::unix::fs::{MetadataExt, PermissionsExt};

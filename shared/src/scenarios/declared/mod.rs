@@ -53,7 +53,7 @@ pub fn build(c: &LaunchConfig, check_model: bool) -> Result<Box<dyn Scenario>, L
 pub fn model(system: &System) -> Result<Box<dyn PlantModel>, String> {
     match &system.source {
         PlantSource::Linear(linear) => Ok(Box::new(LinearModel::new(linear.clone(), &system.spec))),
-        PlantSource::Fmu(path) => fmu::load(&system.spec, path),
+        PlantSource::Fmu(path) => fmu::load_as(&system.spec, path, system.fmu_interface),
         PlantSource::Python { .. } => {
             Err("a Python plant runs as its own python3 process; it cannot be built in this one".to_owned())
         }

@@ -108,6 +108,19 @@ impl Plant for DeclaredPlant {
             self.failed = Some(e.context("the restarted plant cannot go on from its snapshot"));
         }
     }
+
+    fn save_model(&mut self) -> Result<Option<Vec<u8>>> {
+        self.model.save()
+    }
+
+    /// The model's own saved state: what a co-simulation FMU, which cannot be set from the state
+    /// vector, goes on from.
+    fn restore_model(&mut self, bytes: &[u8]) {
+        self.failed = match self.model.load(bytes) {
+            Ok(()) => None,
+            Err(e) => Some(e.context("the restarted plant cannot go on from its model's saved state")),
+        };
+    }
 }
 
 /// A plant whose model could not be built in this process: it has the declared size and fails

@@ -12,6 +12,7 @@ use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::contract::role::Role;
 use crate::model::plant_model::ModelSpec;
 use crate::model::scenario::check_substeps;
+use crate::scenarios::declared::fmu::FmiKind;
 
 /// Where the plant's model comes from (`[plant]`: exactly one of these keys).
 #[derive(Debug, Clone, PartialEq)]
@@ -48,6 +49,10 @@ struct PlantSection {
     linear: Option<LinearSection>,
     #[serde(default)]
     fmu: Option<String>,
+    /// Which of the FMU's interfaces runs it: "model-exchange" or "co-simulation" (default: Model
+    /// Exchange where the FMU offers it).
+    #[serde(default)]
+    fmu_interface: Option<String>,
     #[serde(default)]
     python: Option<String>,
     /// RK4 steps per loop period (a model LoopLab integrates).
@@ -91,6 +96,8 @@ pub struct System {
     pub pass_through: Option<Vec<(usize, usize)>>,
     /// The launch file's folder (a python or fmu path in the file is relative to it).
     pub folder: PathBuf,
+    /// `[plant] fmu_interface`; None: Model Exchange where the FMU offers it.
+    pub fmu_interface: Option<FmiKind>,
 }
 
 /// Checks that `rows` is a `rows × cols` matrix of finite numbers.
@@ -142,6 +149,16 @@ impl System {
                 return Err(c.error("plant.python", format!("\"{text}\": write \"file.py:ClassName\"")));
             };
             PlantSource::Python { file: folder.join(file), class: class.to_owned() }
+        };
+        let fmu_interface = match plant.fmu_interface.as_deref() {
+            None => None,
+            Some(_) if !matches!(source, PlantSource::Fmu(_)) => {
+                return Err(c.error("plant.fmu_interface", "is for an FMU plant (fmu = \"model.fmu\")"));
+            }
+            Some(text) => Some(
+                FmiKind::parse(text)
+                    .ok_or_else(|| c.error("plant.fmu_interface", format!("\"{text}\": one of {}", FmiKind::NAMES)))?,
+            ),
         };
         if !plant.parameters.is_empty() && matches!(source, PlantSource::Linear(_)) {
             return Err(c.error("plant.parameters", "a linear plant has no parameters (its matrices are its model)"));
@@ -209,7 +226,17 @@ impl System {
             dt: c.dt(),
         };
         let input_limits = vectors.input.iter().map(|u| (u.min, u.max)).collect();
-        Ok(System { vectors, source, spec, substeps: plant.substeps, input_limits, gains, pass_through, folder })
+        Ok(System {
+            vectors,
+            source,
+            spec,
+            substeps: plant.substeps,
+            input_limits,
+            gains,
+            pass_through,
+            folder,
+            fmu_interface,
+        })
     }
 
     /// One line for reports: what the plant is.

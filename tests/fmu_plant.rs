@@ -1,0 +1,127 @@
+//! The pendulum declared in a launch file with its plant from the project's own FMU
+//! (services/fmu/pendulum, built here with `cc`) and the built-in estimator and controller ported
+//! to Python: lockstep, five processes, the built-in pendulum's trajectory.csv byte for byte in
+//! Model Exchange (the FMU's ẋ is the same arithmetic) and in Co-Simulation (its doStep is the same
+//! RK4); a killed FMU plant goes on from the FMU's own serialised state; bad FMUs are one line.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use common::*;
+use looplab_shared::scenarios::declared::fmu::{Version, build_fmu, pendulum_source};
+
+const LAUNCH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/fmu/pendulum_fmu.toml");
+
+/// The Python stages' `looplab` module: this build's, linked where the stages import it from.
+fn module_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let target = Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher's folder");
+        if let Some(cargo) = std::env::var_os("CARGO") {
+            let mut build = std::process::Command::new(cargo);
+            build.args(["build", "--quiet", "-p", "looplab-python"]).current_dir(env!("CARGO_MANIFEST_DIR"));
+            if target.file_name().is_some_and(|name| name == "release") {
+                build.arg("--release");
+            }
+            assert!(build.status().expect("start cargo").success(), "cargo build -p looplab-python failed");
+        }
+        let dir = target.join("python-module-fmu");
+        std::fs::create_dir_all(&dir).unwrap();
+        let module = dir.join("looplab.so");
+        let _ = std::fs::remove_file(&module);
+        std::os::unix::fs::symlink(target.join("liblooplab.so"), &module).unwrap();
+        dir
+    })
+}
+
+fn launcher() -> std::process::Command {
+    let mut command = looplab();
+    command.env("PYTHONPATH", module_dir());
+    command
+}
+
+/// The pendulum FMU of `version`, built once per test process.
+fn fmu(version: Version) -> PathBuf {
+    static BUILT: OnceLock<PathBuf> = OnceLock::new();
+    let dir = BUILT.get_or_init(|| {
+        let dir = fresh_dir("fmu-plant-fmus");
+        std::fs::create_dir_all(&dir).unwrap();
+        build_fmu(&pendulum_source(), Version::Fmi2, &dir.join("pendulum2.fmu")).unwrap();
+        build_fmu(&pendulum_source(), Version::Fmi3, &dir.join("pendulum3.fmu")).unwrap();
+        dir
+    });
+    dir.join(if version == Version::Fmi2 { "pendulum2.fmu" } else { "pendulum3.fmu" })
+}
+
+fn trajectory_bytes(run: &Run) -> Vec<u8> {
+    std::fs::read(run.dir.join("trajectory.csv")).expect("trajectory.csv")
+}
+
+fn declared(name: &str, version: Version, interface: &str, extra: &[&str]) -> Run {
+    let fmu = format!("plant.fmu=\"{}\"", fmu(version).display());
+    let interface = format!("plant.fmu_interface=\"{interface}\"");
+    let mut args = vec![LAUNCH, "--duration", "3", "--set", &fmu, "--set", &interface];
+    args.extend_from_slice(extra);
+    run_from(launcher(), name, &args)
+}
+
+#[test]
+fn the_fmu_pendulum_with_python_stages_is_the_builtin_pendulum_byte_for_byte() {
+    let builtin = run_from(launcher(), "fmu-builtin", &["pendulum", "--mode", "lockstep", "--duration", "3"]);
+    for version in [Version::Fmi2, Version::Fmi3] {
+        for interface in ["model-exchange", "co-simulation"] {
+            let run = declared(&format!("fmu-{version:?}-{interface}"), version, interface, &[]);
+            let s = run.summary();
+            assert!(s.completed, "{version:?} {interface}: {:?}", s.stopped_because);
+            assert_eq!(s.loops, 3000);
+            assert!(
+                trajectory_bytes(&run) == trajectory_bytes(&builtin),
+                "{version:?} {interface}: trajectory.csv differs from the built-in pendulum's"
+            );
+            assert_nothing_left(s);
+        }
+    }
+}
+
+/// A co-simulation FMU cannot be set from a state vector: the restarted plant goes on only
+/// through the FMU's own serialised state, kept beside the plant's snapshot. In lockstep the
+/// killed run is the nominal one, byte for byte.
+#[test]
+fn a_killed_fmu_plant_goes_on_from_the_fmus_serialised_state() {
+    let nominal = declared("fmu-cs-nominal", Version::Fmi3, "co-simulation", &[]);
+    let killed = declared("fmu-cs-killed", Version::Fmi3, "co-simulation", &["--fault", "kill plant at 1.5s"]);
+    let s = killed.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.restarts[&looplab_shared::contract::role::Role::Plant], 1);
+    assert!(trajectory_bytes(&killed) == trajectory_bytes(&nominal), "the restarted FMU did not resume its state");
+    assert_nothing_left(s);
+}
+
+#[test]
+fn a_bad_fmu_is_one_line_and_exit_2() {
+    let dir = fresh_dir("fmu-bad");
+    std::fs::create_dir_all(&dir).unwrap();
+    let corrupt = dir.join("corrupt.fmu");
+    std::fs::write(&corrupt, b"not a zip").unwrap();
+    let cases: [(String, &str); 4] = [
+        (format!("plant.fmu=\"{}\"", dir.join("missing.fmu").display()), "missing.fmu: cannot open the FMU"),
+        (format!("plant.fmu=\"{}\"", corrupt.display()), "corrupt.fmu: not an FMU (a zip archive)"),
+        ("plant.parameters.mass=1.0".into(), "has no parameter \"mass\" ([plant.parameters]); its parameters: m_p"),
+        ("plant.fmu_interface=\"scheduled\"".into(), "\"scheduled\": one of model-exchange, co-simulation"),
+    ];
+    for (set, expected) in cases {
+        let fmu = format!("plant.fmu=\"{}\"", fmu(Version::Fmi2).display());
+        let output = launcher()
+            .args(["run", LAUNCH, "--duration", "1", "--set", &fmu, "--set", &set, "-q", "--out"])
+            .arg(dir.join("run"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{set}: {stderr}");
+        assert!(stderr.contains(expected), "{set}: {stderr}\n  should say: {expected}");
+        assert_eq!(stderr.trim().lines().count(), 1, "{set}: {stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
