@@ -4,6 +4,7 @@
 //! of their entries; [`builtin`] is the catalog of them that LoopLab's own binaries run, and that
 //! a crate outside this one extends with its own ([`Catalog::with`]).
 
+pub mod declared;
 pub mod fip;
 pub mod pendulum;
 pub mod quadcopter;
