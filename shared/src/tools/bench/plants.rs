@@ -1,0 +1,215 @@
+//! `looplab bench --plants [LAUNCH ...]`: what a plant costs per tick, and how fast the whole
+//! loop runs in lockstep in one process, per plant: the built-in Rust pendulum, a declared
+//! linear plant, and (where built here) the FMU and Python plants.
+//!
+//! - **step cost**: the scenario's `Box<dyn Plant>` stepped tick after tick with the input held
+//!   (its initial input, else zero), exactly as the plant process calls it, restored to its
+//!   initial state at the end of each run's worth of ticks (so an unstable plant stays in its
+//!   physical range); the median of 5 timed batches, ns per tick.
+//! - **in-process loops/s**: `runtime::in_process` (plant, sensors, estimator, controller called in
+//!   loop order in one thread, no IPC, nothing recorded) on the launch file in lockstep. A file
+//!   whose stages run as processes of their own (`[stages.*] command`) cannot run there and says
+//!   why.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Result;
+use serde::Serialize;
+
+use crate::config::launch::Override;
+use crate::model::catalog::Catalog;
+use crate::runtime::signals::StopFlag;
+
+/// A plant the bench measures by default.
+pub struct PlantRow {
+    pub label: &'static str,
+    /// A scenario name or a launch file, relative to the source tree's root.
+    pub target: &'static str,
+    /// Builds what the row needs into the bench's folder (an FMU) and returns the `--set`
+    /// overrides that use it, or why it cannot run here.
+    pub prepare: Option<fn(&Path) -> Result<Vec<String>, String>>,
+}
+
+/// The default rows, in order: adding a plant is one line.
+pub const PLANT_ROWS: &[PlantRow] = &[
+    PlantRow { label: "built-in Rust pendulum", target: "pendulum", prepare: None },
+    PlantRow { label: "declared linear (launch/system.toml)", target: "launch/system.toml", prepare: None },
+];
+
+/// One plant's numbers.
+#[derive(Debug, Clone, Serialize)]
+pub struct PlantBench {
+    pub label: String,
+    pub target: String,
+    /// What the plant says it is (its title).
+    pub title: String,
+    pub step_ticks: u64,
+    /// The median of 5 batches, ns per tick.
+    pub step_ns_per_tick: f64,
+    pub in_process_loops_per_s: Option<f64>,
+    /// Why it has no in-process figure.
+    pub in_process_refused: Option<String>,
+}
+
+/// The source tree's root (the bench is a developer's tool: it runs from a checkout).
+fn source_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The target as `Catalog::resolve` takes it: a name, or a file found from here or the source tree.
+fn locate(target: &str) -> Result<String, String> {
+    if !target.ends_with(".toml") || Path::new(target).is_file() {
+        return Ok(target.to_owned());
+    }
+    let in_tree = source_root().join(target);
+    if in_tree.is_file() { Ok(in_tree.display().to_string()) } else { Err(format!("{target} is missing")) }
+}
+
+/// Steps `target`'s plant `ticks` times; ns per tick (median of 5 batches) and its title.
+pub fn step_cost(catalog: &Catalog, target: &str, overrides: &[Override], ticks: u64) -> Result<(f64, String)> {
+    let (config, scenario) = catalog.resolve(target, overrides)?;
+    let mut plant = scenario.plant();
+    let initial = plant.state().to_vec();
+    let input = match plant.initial_input() {
+        Some(u) => u.to_vec(),
+        None => vec![0.0; scenario.input_names().len()],
+    };
+    let (dt, run_ticks) = (config.dt(), config.loops().max(1));
+    let batch = (ticks / 5).max(1);
+    let mut k: u64 = 0;
+    let mut per_tick = Vec::with_capacity(5);
+    for _ in 0..5 {
+        let start = Instant::now();
+        for _ in 0..batch {
+            if k == run_ticks {
+                plant.restore(&initial);
+                k = 0;
+            }
+            plant.step(k as f64 * dt, &input, dt);
+            std::hint::black_box(plant.state());
+            k += 1;
+        }
+        per_tick.push(start.elapsed().as_nanos() as f64 / batch as f64);
+    }
+    per_tick.sort_by(f64::total_cmp);
+    Ok((per_tick[2], scenario.title()))
+}
+
+/// Lockstep loops per second of `target` in one process over `loops` loops; Err(why) where the
+/// launch file cannot run in one process.
+pub fn in_process(
+    catalog: &Catalog,
+    target: &str,
+    overrides: &[Override],
+    loops: u64,
+    stop: &StopFlag,
+) -> Result<Result<f64, String>> {
+    let (probe, _) = catalog.resolve(target, overrides)?;
+    let mut all = overrides.to_vec();
+    all.push(Override::parse("mode=lockstep")?);
+    all.push(Override::parse(&format!("duration_s={}", loops as f64 / probe.rate_hz))?);
+    let (config, scenario) = catalog.resolve(target, &all)?;
+    if let Some(why) = crate::runtime::in_process::refusal(&config) {
+        return Ok(Err(why));
+    }
+    let start = Instant::now();
+    let reports = crate::runtime::in_process::run(&config, scenario.as_ref(), stop, |_| Ok(()))?;
+    Ok(Ok(reports.plant.loops as f64 / start.elapsed().as_secs_f64()))
+}
+
+/// Measures `targets` (none: [`PLANT_ROWS`]), prints the table and writes `plants.json` in `out`.
+pub fn run(catalog: &Catalog, targets: &[String], quick: bool, out: &Path, stop: &StopFlag) -> Result<Vec<PlantBench>> {
+    let (ticks, loops) = if quick { (200_000, 50_000) } else { (2_000_000, 500_000) };
+    let rows: Vec<(String, String, Option<fn(&Path) -> Result<Vec<String>, String>>)> = if targets.is_empty() {
+        PLANT_ROWS.iter().map(|r| (r.label.to_owned(), r.target.to_owned(), r.prepare)).collect()
+    } else {
+        targets.iter().map(|t| (t.clone(), t.clone(), None)).collect()
+    };
+    let mut results = Vec::new();
+    let mut skipped = Vec::new();
+    for (label, target, prepare) in rows {
+        let ready = locate(&target).and_then(|path| Ok((path, prepare.map_or(Ok(Vec::new()), |p| p(out))?)));
+        let (path, sets) = match ready {
+            Ok(ready) => ready,
+            Err(why) => {
+                skipped.push(format!("{label}: {why}"));
+                continue;
+            }
+        };
+        let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
+        let (step_ns_per_tick, title) = step_cost(catalog, &path, &overrides, ticks)?;
+        let in_process = in_process(catalog, &path, &overrides, loops, stop)?;
+        if stop.requested() {
+            return Err(crate::runtime::signals::Interrupted.into());
+        }
+        results.push(PlantBench {
+            label,
+            target,
+            title,
+            step_ticks: ticks,
+            step_ns_per_tick,
+            in_process_loops_per_s: in_process.as_ref().ok().copied(),
+            in_process_refused: in_process.err(),
+        });
+    }
+    crate::runtime::run_file::write(&out.join("plants.json"), serde_json::to_string_pretty(&results)?.as_bytes())?;
+    say_raw!("{}", render(&results, &skipped));
+    Ok(results)
+}
+
+fn render(rows: &[PlantBench], skipped: &[String]) -> String {
+    let mut s = String::new();
+    let _ =
+        writeln!(s, "\n  plants: step cost per tick (Box<dyn Plant>, input held) and lockstep loops/s in one process");
+    let _ = writeln!(s, "    {:<44}{:>14}{:>18}", "plant", "step ns/tick", "in-process loop/s");
+    for r in rows {
+        let loops = match (&r.in_process_loops_per_s, &r.in_process_refused) {
+            (Some(rate), _) => format!("{rate:.0}"),
+            (None, Some(_)) => "refused".into(),
+            (None, None) => "-".into(),
+        };
+        let _ = writeln!(s, "    {:<44}{:>14.1}{:>18}", r.label, r.step_ns_per_tick, loops);
+        if let Some(why) = &r.in_process_refused {
+            let _ = writeln!(s, "      in one process: {why}");
+        }
+    }
+    for why in skipped {
+        let _ = writeln!(s, "    skipped: {why}");
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pendulum's plant steps and its loop runs in one process: positive, finite numbers.
+    #[test]
+    fn the_pendulum_has_a_step_cost_and_an_in_process_rate() {
+        let catalog = crate::scenarios::builtin();
+        let (ns, title) = step_cost(&catalog, "pendulum", &[], 5_000).unwrap();
+        assert!(ns.is_finite() && ns > 0.0, "{ns}");
+        assert!(title.contains("pendulum"), "{title}");
+        let stop = StopFlag::install().unwrap();
+        let rate = in_process(&catalog, "pendulum", &[], 2_000, &stop).unwrap().unwrap();
+        assert!(rate.is_finite() && rate > 0.0, "{rate}");
+    }
+
+    /// A launch file whose controller is a process of its own is refused in one process, saying why.
+    #[test]
+    fn a_stage_command_is_refused_in_one_process() {
+        let catalog = crate::scenarios::builtin();
+        // Resolving checks only that the program exists; it never runs here.
+        let sets = [Override::parse(r#"stages.controller.command=["/bin/true"]"#).unwrap()];
+        let why = in_process(&catalog, "pendulum", &sets, 100, &StopFlag::install().unwrap()).unwrap().unwrap_err();
+        assert!(why.contains("stages.controller.command"), "{why}");
+    }
+
+    #[test]
+    fn a_missing_launch_file_is_skipped_with_its_name() {
+        assert_eq!(locate("launch/nope.toml").unwrap_err(), "launch/nope.toml is missing");
+        assert_eq!(locate("pendulum").unwrap(), "pendulum");
+    }
+}
