@@ -25,9 +25,9 @@ use crate::model::scenario::{Scenario, ScenarioEntry};
 /// The built-in scenarios' entries.
 pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY, tiltrotor::ENTRY, fip::ENTRY, tethered::ENTRY];
 
-/// The catalog of the built-in scenarios.
+/// The catalog of the built-in scenarios, and of declared systems (`[system]`, no scenario).
 pub fn builtin() -> Catalog {
-    Catalog::new(ALL.iter().cloned())
+    Catalog::new(ALL.iter().cloned()).with_declared(declared::build)
 }
 
 /// [`Catalog::resolve`] in the built-in catalog.

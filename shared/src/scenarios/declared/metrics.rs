@@ -14,6 +14,10 @@
 //! The error at one loop is the largest over the judged components of |component − r(t)| for
 //! one with a reference, |component| for one without (a regulator's setpoint is zero).
 //!
+//! Without `[limits]` nothing is judged: the limit and the recovery band are unbounded (the
+//! verdict is "within limits" unless the state stops being a number, which is "lost"), every
+//! state component is watched, and the report's notes say so.
+//!
 //! The plant's state message carries the state, then the outputs (`plant.rs`): an output's
 //! index there is the state's length plus its own.
 
@@ -23,6 +27,7 @@ use std::sync::{Arc, Mutex};
 use serde::{Deserialize, Serialize};
 
 use super::reference::{self, Part, Signal, Tracked};
+use crate::config::launch::declared::SystemSection;
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::positive;
 use crate::model::mean::max_keeping_nan;
@@ -34,6 +39,9 @@ pub struct Declared<'a> {
     pub state: &'a [String],
     pub outputs: &'a [String],
     pub input: &'a [String],
+    /// The unit of each state then output component (message order), for the error's name;
+    /// may be empty.
+    pub units: &'a [String],
 }
 
 impl Declared<'_> {
@@ -56,7 +64,7 @@ impl Declared<'_> {
 }
 
 /// `[limits]` of a declared launch file.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct LimitsSection {
     #[serde(default)]
@@ -101,10 +109,25 @@ pub struct DeclaredMeasures {
     tracked: Vec<(String, usize, Signal)>,
     judged: Vec<Judged>,
     measure_name: &'static str,
-    limits: LimitsSection,
+    /// None: the file has no `[limits]`, and nothing is judged.
+    limits: Option<LimitsSection>,
 }
 
+/// What the report notes when a file has no `[limits]`.
+const NO_LIMITS: &str = "no [limits] in the launch file: the verdict judges nothing but a state that stops being a \
+                         number; add [limits] error_limit, recovery_band (and of = [...]) to judge the run";
+
 impl DeclaredMeasures {
+    /// [`DeclaredMeasures::load`] for the system `[system]` declares.
+    pub fn from_system(c: &LaunchConfig, system: &SystemSection) -> Result<Self, LaunchError> {
+        let names = |items: &mut dyn Iterator<Item = &String>| items.cloned().collect::<Vec<String>>();
+        let state = names(&mut system.state.iter().map(|s| &s.name));
+        let outputs = names(&mut system.outputs.iter().map(|s| &s.name));
+        let input = names(&mut system.input.iter().map(|s| &s.name));
+        let units = names(&mut system.state.iter().map(|s| &s.unit).chain(system.outputs.iter().map(|s| &s.unit)));
+        Self::load(c, Declared { state: &state, outputs: &outputs, input: &input, units: &units })
+    }
+
     /// The metrics, references and `[limits]` of `c` for the system `names` declares.
     pub fn load(c: &LaunchConfig, names: Declared) -> Result<Self, LaunchError> {
         let observed = names.observed();
@@ -114,9 +137,11 @@ impl DeclaredMeasures {
             .map(|r| (format!("tracking.{}", r.path), names.message_index(r.part, r.index), r.signal.clone()))
             .collect();
         let limits = load_limits(c)?;
-        let of: Vec<String> = match &limits.of {
-            Some(of) => of.clone(),
-            None => references.iter().map(|r| r.path.clone()).collect(),
+        let of: Vec<String> = match limits.as_ref().and_then(|l| l.of.clone()) {
+            Some(of) => of,
+            None if !references.is_empty() => references.iter().map(|r| r.path.clone()).collect(),
+            None if limits.is_none() => names.state.iter().map(|n| format!("state.{n}")).collect(),
+            None => Vec::new(),
         };
         if of.is_empty() {
             return Err(c.error(
@@ -132,8 +157,14 @@ impl DeclaredMeasures {
                 reference::locate(path, names.state, names.outputs).map_err(|e| c.error("limits.of", e))?;
             let reference = references.iter().find(|r| &r.path == path).map(|r| r.signal.clone());
             let name = path.split_once('.').map_or(path.as_str(), |(_, name)| name);
-            words.push(if reference.is_some() { format!("|{name} − reference|") } else { format!("|{name}|") });
-            judged.push(Judged { index: names.message_index(part, index), reference });
+            let at = names.message_index(part, index);
+            let unit = names.units.get(at).map_or(String::new(), |u| format!(" {u}"));
+            words.push(if reference.is_some() {
+                format!("|{name} − reference|{unit}")
+            } else {
+                format!("|{name}|{unit}")
+            });
+            judged.push(Judged { index: at, reference });
         }
         let measure_name = match words.as_slice() {
             [one] => one.clone(),
@@ -157,34 +188,35 @@ impl DeclaredMeasures {
             stats: vec![Stats::default(); self.observed.len()],
             tracking: vec![Stats::default(); self.tracked.len()],
             last_t: None,
+            no_limits: self.limits.is_none(),
         })
     }
 
     /// How fault reports and the verdict judge the system: `[limits]`.
     pub fn error_measure(&self) -> ErrorMeasure {
         let judged = Arc::new(Mutex::new(self.judged.clone()));
+        let (limit, band) = self.limits.as_ref().map_or((f64::MAX, f64::MAX), |l| (l.error_limit, l.recovery_band));
         let measure = ErrorMeasure {
             name: self.measure_name,
             of_state: Arc::new(move |t, x| error_of(&judged.lock().expect("judged lock"), t, x)),
-            recovery_band: self.limits.recovery_band,
-            limit: self.limits.error_limit,
+            recovery_band: band,
+            limit,
             limit_key: "limits.error_limit",
             lost_beyond: None,
         };
-        match self.limits.lost_beyond {
+        match self.limits.as_ref().and_then(|l| l.lost_beyond) {
             Some(value) => measure.lost_beyond(value, "past limits.lost_beyond, the point of no return"),
             None => measure,
         }
     }
 }
 
-fn load_limits(c: &LaunchConfig) -> Result<LimitsSection, LaunchError> {
-    if !c.document.contains_key("limits") {
-        return Err(c.error(
-            "limits",
-            "a declared system needs [limits]: error_limit, recovery_band (and of = [\"state.<name>\", ...] \
-             unless a [[reference]] names what is judged; optional lost_beyond)",
-        ));
+/// `[limits]`, None where the file has none (or an empty one).
+fn load_limits(c: &LaunchConfig) -> Result<Option<LimitsSection>, LaunchError> {
+    match c.document.get("limits") {
+        None => return Ok(None),
+        Some(toml::Value::Table(t)) if t.is_empty() => return Ok(None),
+        Some(_) => {}
     }
     let limits: LimitsSection = c.section("limits")?;
     positive(c, "limits.error_limit", limits.error_limit)?;
@@ -209,7 +241,7 @@ fn load_limits(c: &LaunchConfig) -> Result<LimitsSection, LaunchError> {
             ),
         ));
     }
-    Ok(limits)
+    Ok(Some(limits))
 }
 
 /// Final value, largest magnitude and RMS of one series.
@@ -245,6 +277,8 @@ struct DeclaredMetrics {
     stats: Vec<Stats>,
     tracking: Vec<Stats>,
     last_t: Option<f64>,
+    /// The file has no `[limits]` (a note).
+    no_limits: bool,
 }
 
 impl Metrics for DeclaredMetrics {
@@ -277,16 +311,15 @@ impl Metrics for DeclaredMetrics {
 
     fn notes(&self) -> Vec<String> {
         let Some(last_t) = self.last_t else { return Vec::new() };
-        self.tracked
-            .iter()
-            .filter_map(|(prefix, _, signal)| match signal {
-                Signal::Table { t, .. } if t[t.len() - 1] < last_t => Some(format!(
-                    "{prefix}: the reference table ends at t = {} s; its last value held to the end ({last_t} s)",
-                    t[t.len() - 1]
-                )),
-                _ => None,
-            })
-            .collect()
+        let no_limits = self.no_limits.then(|| NO_LIMITS.to_owned());
+        let table_ends = self.tracked.iter().filter_map(|(prefix, _, signal)| match signal {
+            Signal::Table { t, .. } if t[t.len() - 1] < last_t => Some(format!(
+                "{prefix}: the reference table ends at t = {} s; its last value held to the end ({last_t} s)",
+                t[t.len() - 1]
+            )),
+            _ => None,
+        });
+        no_limits.into_iter().chain(table_ends).collect()
     }
 }
 
@@ -294,7 +327,14 @@ impl Metrics for DeclaredMetrics {
 pub fn generic(names: Declared) -> Box<dyn Metrics> {
     let observed = names.observed();
     let stats = vec![Stats::default(); observed.len()];
-    Box::new(DeclaredMetrics { observed, tracked: Vec::new(), stats, tracking: Vec::new(), last_t: None })
+    Box::new(DeclaredMetrics {
+        observed,
+        tracked: Vec::new(),
+        stats,
+        tracking: Vec::new(),
+        last_t: None,
+        no_limits: false,
+    })
 }
 
 #[cfg(test)]

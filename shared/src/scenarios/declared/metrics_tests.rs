@@ -23,15 +23,21 @@ struct System {
     state: Vec<String>,
     outputs: Vec<String>,
     input: Vec<String>,
+    units: Vec<String>,
 }
 
 impl System {
     /// state (x, v), output y, input u.
     fn new() -> Self {
-        System { state: strings(&["x", "v"]), outputs: strings(&["y"]), input: strings(&["u"]) }
+        System {
+            state: strings(&["x", "v"]),
+            outputs: strings(&["y"]),
+            input: strings(&["u"]),
+            units: strings(&["m", "m/s", "N"]),
+        }
     }
     fn declared(&self) -> Declared<'_> {
-        Declared { state: &self.state, outputs: &self.outputs, input: &self.input }
+        Declared { state: &self.state, outputs: &self.outputs, input: &self.input, units: &self.units }
     }
     fn load(&self, sections: &str) -> Result<DeclaredMeasures, LaunchError> {
         DeclaredMeasures::load(&config(sections), self.declared())
@@ -145,7 +151,7 @@ fn the_error_measure_judges_the_named_components_against_their_references() {
     let sections = "[limits]\nof = [\"state.x\", \"state.v\"]\nerror_limit = 0.5\nrecovery_band = 0.1\nlost_beyond = 3.0\n\n\
                     [[reference]]\ntrack = \"state.x\"\nexpression = \"2*t\"\n";
     let measure = sys.load(sections).unwrap().error_measure();
-    assert_eq!(measure.name, "max of |x − reference|, |v|");
+    assert_eq!(measure.name, "max of |x − reference| m, |v| m/s");
     assert_eq!((measure.limit, measure.recovery_band, measure.limit_key), (0.5, 0.1, "limits.error_limit"));
     assert_eq!(measure.lost_beyond.map(|(v, _)| v), Some(3.0));
     let error = |t: f64, x: &[f64]| (measure.of_state)(t, x);
@@ -167,9 +173,26 @@ fn the_limits_judge_the_tracked_components_by_default() {
     let sys = System::new();
     let sections = "[limits]\nerror_limit = 1.0\nrecovery_band = 0.1\n\n[[reference]]\ntrack = \"output.y\"\ntable = [[0.0, 1.0]]\n";
     let measure = sys.load(sections).unwrap().error_measure();
-    assert_eq!(measure.name, "|y − reference|");
+    assert_eq!(measure.name, "|y − reference| N");
     assert_eq!(measure.lost_beyond, None);
     assert_eq!((measure.of_state)(3.0, &[10.0, 10.0, 0.75]), 0.25);
+}
+
+/// No [limits]: every state component watched, nothing bounded, and a note that says so; a
+/// single [reference] table is one reference.
+#[test]
+fn without_limits_nothing_is_judged_and_the_notes_say_so() {
+    let sys = System::new();
+    let measures = sys.load("[limits]\n\n[reference]\ntrack = \"state.v\"\nexpression = \"1\"\n").unwrap();
+    let measure = measures.error_measure();
+    assert_eq!((measure.limit, measure.recovery_band, measure.lost_beyond), (f64::MAX, f64::MAX, None));
+    assert_eq!(measure.name, "|v − reference| m/s");
+    let measure = sys.load("").unwrap().error_measure();
+    assert_eq!(measure.name, "max of |x| m, |v| m/s");
+    assert_eq!((measure.of_state)(0.0, &[-3.0, 2.0, 99.0]), 3.0);
+    let mut m = sys.load("").unwrap().metrics();
+    feed(m.as_mut(), 10, 0..3, |_| [0.0; 3], |_| 0.0);
+    assert!(m.notes().iter().any(|n| n.contains("no [limits]")), "{:?}", m.notes());
 }
 
 /// The generic metrics alone, for a system with no [limits] read.
@@ -190,7 +213,6 @@ fn bad_limits_and_references_are_one_error_naming_the_key() {
     let sys = System::new();
     let error = |sections: &str| sys.load(sections).err().map(|e| e.to_string()).unwrap_or_default();
     let cases = [
-        ("", "key `limits`: a declared system needs [limits]"),
         ("[limits]\nerror_limit = 1.0\nrecovery_band = 0.1\n", "key `limits.of`: name the components"),
         (
             "[limits]\nof = [\"state.q\"]\nerror_limit = 1.0\nrecovery_band = 0.1\n",
@@ -200,7 +222,8 @@ fn bad_limits_and_references_are_one_error_naming_the_key() {
         ("[limits]\nof = [\"state.x\"]\nerror_limit = -1.0\nrecovery_band = 0.1\n", "key `limits.error_limit`"),
         ("[limits]\nof = [\"state.x\"]\nerror_limit = 1.0\nrecovery_band = 0.1\nlost_beyond = 0.5\n", "lost_beyond"),
         (&format!("{LIMITS}[[reference]]\ntrack = \"input.u\"\nexpression = \"t\"\n"), "key `reference[0].track`"),
-        (&format!("{LIMITS}[[reference]]\ntrack = \"state.x\"\n"), "exactly one of expression or table"),
+        (&format!("{LIMITS}[[reference]]\ntrack = \"state.x\"\n"), "key `reference[0]`: give exactly one of"),
+        (&format!("{LIMITS}[reference]\ntrack = \"state.x\"\ntable = []\n"), "key `reference.table`: has no rows"),
         (&format!("{LIMITS}[[reference]]\ntrack = \"state.x\"\nexpression = \"q\"\n"), "key `reference[0].expression`"),
         (
             &format!("{LIMITS}[[reference]]\ntrack = \"state.x\"\nexpression = \"t\"\nbetween = \"hold\"\n"),

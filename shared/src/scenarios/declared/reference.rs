@@ -1,6 +1,8 @@
 //! A declared system's reference: what a named state or output component should follow, given
 //! in the launch file as an expression of t or as a table of (t, value) rows.
 //!
+//! One reference may be written `[reference]`, several `[[reference]]`:
+//!
 //! ```toml
 //! [[reference]]
 //! track = "output.y"                       # state.<name> or output.<name> of [system]
@@ -170,13 +172,17 @@ pub fn locate(path: &str, state: &[String], outputs: &[String]) -> Result<(Part,
 
 /// The `[[reference]]` entries of `c`, checked against the declared state and output names.
 pub fn load(c: &LaunchConfig, state: &[String], outputs: &[String]) -> Result<Vec<Tracked>, LaunchError> {
-    if !c.document.contains_key("reference") {
-        return Ok(Vec::new());
-    }
-    let entries: Vec<ReferenceEntry> = c.section("reference")?;
+    // One entry as [reference], several as [[reference]].
+    let (entries, one): (Vec<ReferenceEntry>, bool) = match c.document.get("reference") {
+        None => return Ok(Vec::new()),
+        Some(toml::Value::Table(t)) if t.is_empty() => return Ok(Vec::new()),
+        Some(toml::Value::Table(_)) => (vec![c.section("reference")?], true),
+        Some(_) => (c.section("reference")?, false),
+    };
     let mut tracked: Vec<Tracked> = Vec::new();
     for (i, entry) in entries.iter().enumerate() {
-        let key = |k: &str| format!("reference[{i}].{k}");
+        let at = if one { "reference".to_owned() } else { format!("reference[{i}]") };
+        let key = |k: &str| format!("{at}.{k}");
         let (part, index) = locate(&entry.track, state, outputs).map_err(|e| c.error(&key("track"), e))?;
         if tracked.iter().any(|t| t.path == entry.track) {
             return Err(c.error(&key("track"), format!("{} has a reference already", entry.track)));
@@ -191,7 +197,7 @@ pub fn load(c: &LaunchConfig, state: &[String], outputs: &[String]) -> Result<Ve
             (None, Some(rows)) => {
                 Signal::table(rows, entry.between.unwrap_or_default()).map_err(|e| c.error(&key("table"), e))?
             }
-            _ => return Err(c.error(&format!("reference[{i}]"), "give exactly one of expression or table")),
+            _ => return Err(c.error(&at, "give exactly one of expression or table")),
         };
         tracked.push(Tracked { path: entry.track.clone(), part, index, signal });
     }

@@ -6,6 +6,10 @@
 //!   (its initial input, else zero), exactly as the plant process calls it, restored to its
 //!   initial state at the end of each run's worth of ticks (so an unstable plant stays in its
 //!   physical range); the median of 5 timed batches, ns per tick.
+//! - **plant tick, five processes**: a lockstep run through the five processes; per loop, from
+//!   the command of tick k reaching the plant to the state of tick k+1 published (the step plus
+//!   the plant's own handling), median, ns. The one figure for a plant that runs in a process of
+//!   its own (a Python plant cannot be stepped in this one).
 //! - **in-process loops/s**: `runtime::in_process` (plant, sensors, estimator, controller called in
 //!   loop order in one thread, no IPC, nothing recorded) on the launch file in lockstep. A file
 //!   whose stages run as processes of their own (`[stages.*] command`) cannot run there and says
@@ -19,8 +23,10 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::config::launch::Override;
+use crate::contract::msg::Stamp;
+use crate::launcher::{Binaries, Outcome};
 use crate::model::catalog::Catalog;
-use crate::runtime::signals::StopFlag;
+use crate::runtime::signals::{Interrupted, StopFlag};
 
 /// A plant the bench measures by default.
 pub struct PlantRow {
@@ -35,7 +41,7 @@ pub struct PlantRow {
 /// The default rows, in order: adding a plant is one line.
 pub const PLANT_ROWS: &[PlantRow] = &[
     PlantRow { label: "built-in Rust pendulum", target: "pendulum", prepare: None },
-    PlantRow { label: "declared linear (launch/system.toml)", target: "launch/system.toml", prepare: None },
+    PlantRow { label: "declared linear (launch/declared.toml)", target: "launch/declared.toml", prepare: None },
 ];
 
 /// One plant's numbers.
@@ -46,8 +52,12 @@ pub struct PlantBench {
     /// What the plant says it is (its title).
     pub title: String,
     pub step_ticks: u64,
-    /// The median of 5 batches, ns per tick.
-    pub step_ns_per_tick: f64,
+    /// The median of 5 batches, ns per tick; None: it cannot be stepped in this process (why).
+    pub step_ns_per_tick: Option<f64>,
+    pub step_refused: Option<String>,
+    /// Five processes, lockstep: command k in to state k+1 out at the plant, median, ns.
+    pub five_process_plant_tick_ns: f64,
+    pub five_process_loops_per_s: f64,
     pub in_process_loops_per_s: Option<f64>,
     /// Why it has no in-process figure.
     pub in_process_refused: Option<String>,
@@ -87,7 +97,7 @@ pub fn step_cost(catalog: &Catalog, target: &str, overrides: &[Override], ticks:
                 plant.restore(&initial);
                 k = 0;
             }
-            plant.step(k as f64 * dt, &input, dt);
+            plant.step(k as f64 * dt, &input, dt)?;
             std::hint::black_box(plant.state());
             k += 1;
         }
@@ -119,9 +129,40 @@ pub fn in_process(
     Ok(Ok(reports.plant.loops as f64 / start.elapsed().as_secs_f64()))
 }
 
+/// A lockstep run of `target` through the five processes over `loops` loops, in `dir`: the
+/// plant's median tick (command k in → state k+1 out, ns) and the loops per second.
+pub fn five_process(
+    catalog: &Catalog,
+    target: &str,
+    overrides: &[Override],
+    loops: u64,
+    binaries: &Binaries,
+    dir: &Path,
+) -> Result<(f64, f64)> {
+    let (probe, _) = catalog.resolve(target, overrides)?;
+    let mut all = overrides.to_vec();
+    all.push(Override::parse("mode=lockstep")?);
+    all.push(Override::parse(&format!("duration_s={}", loops as f64 / probe.rate_hz))?);
+    let (config, scenario) = catalog.resolve(target, &all)?;
+    let dir = crate::launcher::create_run_dir(Some(dir), "bench")?;
+    let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
+    if outcome == Outcome::Interrupted {
+        return Err(Interrupted.into());
+    }
+    let traces = super::traces(&dir)?;
+    let (receive, publish) = (Stamp::PlantReceive as usize, Stamp::PlantPublish as usize);
+    let mut ticks: Vec<u64> = traces.windows(2).map(|w| w[1][publish].saturating_sub(w[0][receive])).collect();
+    if ticks.is_empty() {
+        anyhow::bail!("{target}: the lockstep run recorded fewer than two whole loops");
+    }
+    ticks.sort_unstable();
+    Ok((ticks[ticks.len() / 2] as f64, summary.loops_per_s))
+}
+
 /// Measures `targets` (none: [`PLANT_ROWS`]), prints the table and writes `plants.json` in `out`.
 pub fn run(catalog: &Catalog, targets: &[String], quick: bool, out: &Path, stop: &StopFlag) -> Result<Vec<PlantBench>> {
-    let (ticks, loops) = if quick { (200_000, 50_000) } else { (2_000_000, 500_000) };
+    let (ticks, loops, five_loops) = if quick { (200_000, 50_000, 2_000) } else { (2_000_000, 500_000, 20_000) };
+    let binaries = crate::launcher::locate_binaries()?;
     let rows: Vec<(String, String, Option<fn(&Path) -> Result<Vec<String>, String>>)> = if targets.is_empty() {
         PLANT_ROWS.iter().map(|r| (r.label.to_owned(), r.target.to_owned(), r.prepare)).collect()
     } else {
@@ -129,7 +170,7 @@ pub fn run(catalog: &Catalog, targets: &[String], quick: bool, out: &Path, stop:
     };
     let mut results = Vec::new();
     let mut skipped = Vec::new();
-    for (label, target, prepare) in rows {
+    for (i, (label, target, prepare)) in rows.into_iter().enumerate() {
         let ready = locate(&target).and_then(|path| Ok((path, prepare.map_or(Ok(Vec::new()), |p| p(out))?)));
         let (path, sets) = match ready {
             Ok(ready) => ready,
@@ -139,17 +180,24 @@ pub fn run(catalog: &Catalog, targets: &[String], quick: bool, out: &Path, stop:
             }
         };
         let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
-        let (step_ns_per_tick, title) = step_cost(catalog, &path, &overrides, ticks)?;
+        let title = catalog.resolve(&path, &overrides)?.1.title();
+        // A plant that cannot be built in this process (a Python plant) fails its first step.
+        let step = step_cost(catalog, &path, &overrides, ticks).map(|(ns, _)| ns).map_err(|e| format!("{e:#}"));
+        let (plant_tick, five_rate) =
+            five_process(catalog, &path, &overrides, five_loops, &binaries, &out.join(format!("lockstep-{i}")))?;
         let in_process = in_process(catalog, &path, &overrides, loops, stop)?;
         if stop.requested() {
-            return Err(crate::runtime::signals::Interrupted.into());
+            return Err(Interrupted.into());
         }
         results.push(PlantBench {
             label,
             target,
             title,
             step_ticks: ticks,
-            step_ns_per_tick,
+            step_ns_per_tick: step.as_ref().ok().copied(),
+            step_refused: step.err(),
+            five_process_plant_tick_ns: plant_tick,
+            five_process_loops_per_s: five_rate,
             in_process_loops_per_s: in_process.as_ref().ok().copied(),
             in_process_refused: in_process.err(),
         });
@@ -161,16 +209,23 @@ pub fn run(catalog: &Catalog, targets: &[String], quick: bool, out: &Path, stop:
 
 fn render(rows: &[PlantBench], skipped: &[String]) -> String {
     let mut s = String::new();
-    let _ =
-        writeln!(s, "\n  plants: step cost per tick (Box<dyn Plant>, input held) and lockstep loops/s in one process");
-    let _ = writeln!(s, "    {:<44}{:>14}{:>18}", "plant", "step ns/tick", "in-process loop/s");
+    let _ = writeln!(s, "\n  plants, lockstep: the step alone, the plant's tick in five processes, loops/s");
+    let _ = writeln!(
+        s,
+        "    {:<42}{:>13}{:>16}{:>15}{:>15}",
+        "plant", "step ns/tick", "5-proc tick ns", "5-proc loop/s", "1-proc loop/s"
+    );
     for r in rows {
-        let loops = match (&r.in_process_loops_per_s, &r.in_process_refused) {
-            (Some(rate), _) => format!("{rate:.0}"),
-            (None, Some(_)) => "refused".into(),
-            (None, None) => "-".into(),
-        };
-        let _ = writeln!(s, "    {:<44}{:>14.1}{:>18}", r.label, r.step_ns_per_tick, loops);
+        let step = r.step_ns_per_tick.map_or("-".into(), |ns| format!("{ns:.1}"));
+        let loops = r.in_process_loops_per_s.map_or("refused".into(), |rate| format!("{rate:.0}"));
+        let _ = writeln!(
+            s,
+            "    {:<42}{:>13}{:>16.0}{:>15.0}{:>15}",
+            r.label, step, r.five_process_plant_tick_ns, r.five_process_loops_per_s, loops
+        );
+        if let Some(why) = &r.step_refused {
+            let _ = writeln!(s, "      step alone: {why}");
+        }
         if let Some(why) = &r.in_process_refused {
             let _ = writeln!(s, "      in one process: {why}");
         }
