@@ -33,12 +33,17 @@ pub struct PlantRow {
     pub label: &'static str,
     /// A scenario name or a launch file, relative to the source tree's root.
     pub target: &'static str,
-    /// Builds what the row needs into the bench's folder (an FMU) and returns the `--set`
-    /// overrides that use it, or why it cannot run here.
-    pub prepare: Option<fn(&Path) -> Result<Vec<String>, String>>,
+    /// Builds what the row needs (an FMU) and returns the overrides that use it.
+    pub prepare: Option<Prepare>,
 }
 
-/// The default rows, in order: adding a plant is one line.
+/// Builds what a row needs into the bench's folder; the `--set` overrides that use it, or why not.
+pub type Prepare = fn(&Path) -> Result<Vec<String>, String>;
+
+/// The default rows, in order: adding a plant is one line. An FMU row names a declared pendulum
+/// launch file and a `prepare` that builds the FMU into the bench's folder
+/// (`declared::fmu::build_fmu`) and returns `plant.fmu=<path>`; a Python plant's row names its
+/// launch file alone (it steps only in its own process: the five-process column).
 pub const PLANT_ROWS: &[PlantRow] = &[
     PlantRow { label: "built-in Rust pendulum", target: "pendulum", prepare: None },
     PlantRow { label: "declared linear (launch/declared.toml)", target: "launch/declared.toml", prepare: None },
@@ -159,11 +164,55 @@ pub fn five_process(
     Ok((ticks[ticks.len() / 2] as f64, summary.loops_per_s))
 }
 
+/// How many ticks and loops each measurement takes.
+#[derive(Debug, Clone, Copy)]
+struct Sizes {
+    step_ticks: u64,
+    in_process_loops: u64,
+    five_process_loops: u64,
+}
+
+/// One plant's row; Err: it could not be measured here (a file that does not resolve, a run
+/// that failed), and the table says why.
+fn measure(
+    catalog: &Catalog,
+    (label, target, path): (String, String, String),
+    overrides: &[Override],
+    sizes: Sizes,
+    (binaries, dir): (&Binaries, &Path),
+    stop: &StopFlag,
+) -> Result<PlantBench> {
+    let title = catalog.resolve(&path, overrides)?.1.title();
+    // A plant that cannot be built in this process (a Python plant) fails its first step.
+    let step = step_cost(catalog, &path, overrides, sizes.step_ticks).map(|(ns, _)| ns).map_err(|e| format!("{e:#}"));
+    let (plant_tick, five_rate) = five_process(catalog, &path, overrides, sizes.five_process_loops, binaries, dir)?;
+    let in_process = in_process(catalog, &path, overrides, sizes.in_process_loops, stop)?;
+    if stop.requested() {
+        return Err(Interrupted.into());
+    }
+    Ok(PlantBench {
+        label,
+        target,
+        title,
+        step_ticks: sizes.step_ticks,
+        step_ns_per_tick: step.as_ref().ok().copied(),
+        step_refused: step.err(),
+        five_process_plant_tick_ns: plant_tick,
+        five_process_loops_per_s: five_rate,
+        in_process_loops_per_s: in_process.as_ref().ok().copied(),
+        in_process_refused: in_process.err(),
+    })
+}
+
 /// Measures `targets` (none: [`PLANT_ROWS`]), prints the table and writes `plants.json` in `out`.
 pub fn run(catalog: &Catalog, targets: &[String], quick: bool, out: &Path, stop: &StopFlag) -> Result<Vec<PlantBench>> {
-    let (ticks, loops, five_loops) = if quick { (200_000, 50_000, 2_000) } else { (2_000_000, 500_000, 20_000) };
+    let sizes = if quick {
+        Sizes { step_ticks: 200_000, in_process_loops: 50_000, five_process_loops: 2_000 }
+    } else {
+        Sizes { step_ticks: 2_000_000, in_process_loops: 500_000, five_process_loops: 20_000 }
+    };
     let binaries = crate::launcher::locate_binaries()?;
-    let rows: Vec<(String, String, Option<fn(&Path) -> Result<Vec<String>, String>>)> = if targets.is_empty() {
+    let rows: Vec<(String, String, Option<Prepare>)> = if targets.is_empty() {
         PLANT_ROWS.iter().map(|r| (r.label.to_owned(), r.target.to_owned(), r.prepare)).collect()
     } else {
         targets.iter().map(|t| (t.clone(), t.clone(), None)).collect()
@@ -180,27 +229,12 @@ pub fn run(catalog: &Catalog, targets: &[String], quick: bool, out: &Path, stop:
             }
         };
         let overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;
-        let title = catalog.resolve(&path, &overrides)?.1.title();
-        // A plant that cannot be built in this process (a Python plant) fails its first step.
-        let step = step_cost(catalog, &path, &overrides, ticks).map(|(ns, _)| ns).map_err(|e| format!("{e:#}"));
-        let (plant_tick, five_rate) =
-            five_process(catalog, &path, &overrides, five_loops, &binaries, &out.join(format!("lockstep-{i}")))?;
-        let in_process = in_process(catalog, &path, &overrides, loops, stop)?;
-        if stop.requested() {
-            return Err(Interrupted.into());
+        let dir = out.join(format!("lockstep-{i}"));
+        match measure(catalog, (label.clone(), target, path), &overrides, sizes, (&binaries, &dir), stop) {
+            Ok(row) => results.push(row),
+            Err(e) if e.is::<Interrupted>() => return Err(e),
+            Err(e) => skipped.push(format!("{label}: {e:#}")),
         }
-        results.push(PlantBench {
-            label,
-            target,
-            title,
-            step_ticks: ticks,
-            step_ns_per_tick: step.as_ref().ok().copied(),
-            step_refused: step.err(),
-            five_process_plant_tick_ns: plant_tick,
-            five_process_loops_per_s: five_rate,
-            in_process_loops_per_s: in_process.as_ref().ok().copied(),
-            in_process_refused: in_process.err(),
-        });
     }
     crate::runtime::run_file::write(&out.join("plants.json"), serde_json::to_string_pretty(&results)?.as_bytes())?;
     say_raw!("{}", render(&results, &skipped));
