@@ -170,18 +170,25 @@ pub(super) fn system_section(document: &toml::Table, origins: &Origins) -> Resul
         }
     }
     let sizes = [
-        ("system.state", "the state and the outputs", system.state.len() + system.outputs.len(), MAX_STATE, "state"),
-        ("system.input", "the input", system.input.len(), MAX_INPUT, "command"),
-        ("system.estimate", "the estimate", estimate.len(), MAX_ESTIMATE, "estimate"),
+        (
+            "system.state",
+            "the state and the outputs have",
+            system.state.len() + system.outputs.len(),
+            MAX_STATE,
+            "state",
+        ),
+        ("system.input", "the input has", system.input.len(), MAX_INPUT, "command"),
+        ("system.estimate", "the estimate has", estimate.len(), MAX_ESTIMATE, "estimate"),
     ];
     for (key, what, len, max, message) in sizes {
         if len > max {
-            return Err(origins
-                .error(key, format!("{what} have {len} components, more than the {max} a {message} message carries")));
+            return Err(
+                origins.error(key, format!("{what} {len} components, more than the {max} a {message} message carries"))
+            );
         }
     }
     for (i, c) in system.input.iter().enumerate() {
-        if !(c.min <= c.max) {
+        if c.min > c.max {
             return Err(origins.error(
                 &format!("system.input.{i}.min"),
                 format!("must be at most max ({}), got {} for \"{}\"", c.max, c.min, c.name),

@@ -146,13 +146,6 @@ impl System {
         if !plant.parameters.is_empty() && matches!(source, PlantSource::Linear(_)) {
             return Err(c.error("plant.parameters", "a linear plant has no parameters (its matrices are its model)"));
         }
-        for (key, value) in
-            [("plant.parameters", &plant.parameters)].iter().flat_map(|(k, p)| p.iter().map(move |v| (k, v)))
-        {
-            if !value.1.is_finite() {
-                return Err(c.error(&format!("{key}.{}", value.0), "must be a finite number"));
-            }
-        }
 
         let controller: ControllerSection = c.section("controller")?;
         let estimate = vectors.estimate();
