@@ -1,7 +1,8 @@
 //! What LoopLab says about a declared system's control without knowing the system: per state,
 //! output and input component its final value, max |x| and RMS (`state.theta.rms`,
-//! `input.current.max_abs`; an input's values are what the actuator applied); per `[[reference]]` the tracking error e = component − r(t)
-//! (`tracking.output.y.rms`); and the error that fault reports and the `[limits]` verdict judge:
+//! `input.current.max_abs`; an input's values are what the actuator applied); per
+//! `[[reference]]` the tracking error e = component − r(t) (`tracking.output.y.rms`); and the
+//! error that fault reports and the `[limits]` verdict judge:
 //!
 //! ```toml
 //! [limits]
