@@ -148,7 +148,8 @@ fn metrics_go_on_after_a_freeze_and_thaw_as_if_never_stopped() {
 #[test]
 fn the_error_measure_judges_the_named_components_against_their_references() {
     let sys = System::new();
-    let sections = "[limits]\nof = [\"state.x\", \"state.v\"]\nerror_limit = 0.5\nrecovery_band = 0.1\nlost_beyond = 3.0\n\n\
+    let sections = "[limits]\nof = [\"state.x\", \"state.v\"]\nerror_limit = 0.5\nrecovery_band = 0.1\n\
+                    lost_beyond = 3.0\n\n\
                     [[reference]]\ntrack = \"state.x\"\nexpression = \"2*t\"\n";
     let measure = sys.load(sections).unwrap().error_measure();
     assert_eq!(measure.name, "max of |x − reference| m, |v| m/s");
@@ -171,7 +172,8 @@ fn the_error_measure_judges_the_named_components_against_their_references() {
 #[test]
 fn the_limits_judge_the_tracked_components_by_default() {
     let sys = System::new();
-    let sections = "[limits]\nerror_limit = 1.0\nrecovery_band = 0.1\n\n[[reference]]\ntrack = \"output.y\"\ntable = [[0.0, 1.0]]\n";
+    let sections = "[limits]\nerror_limit = 1.0\nrecovery_band = 0.1\n\n\
+                    [[reference]]\ntrack = \"output.y\"\ntable = [[0.0, 1.0]]\n";
     let measure = sys.load(sections).unwrap().error_measure();
     assert_eq!(measure.name, "|y − reference| N");
     assert_eq!(measure.lost_beyond, None);
