@@ -9,7 +9,8 @@
 //! - `fmu`: an FMU as a `PlantModel`;
 //! - `sensors`: the vectors, each sensor a signal picking what it reads;
 //! - `estimator`, `controller`: the built-in pass-through and state feedback;
-//! - `metrics`: the generic metrics and error measure.
+//! - `metrics`: the generic metrics, tracking errors and the `[limits]` error measure;
+//! - `reference`: `[[reference]]`, what a component tracks (a table or an expression of t).
 
 pub mod controller;
 pub mod estimator;
@@ -17,6 +18,7 @@ pub mod fmu;
 pub mod linear;
 pub mod metrics;
 pub mod plant;
+pub mod reference;
 pub mod sensors;
 pub mod system;
 
@@ -46,7 +48,8 @@ pub fn build(c: &LaunchConfig, check_model: bool) -> Result<Box<dyn Scenario>, L
     let file = std::path::Path::new(&system.spec.file);
     let name = file.file_name().map_or_else(|| system.spec.file.clone(), |f| f.to_string_lossy().into_owned());
     let title = format!("declared system {name}, {}", system.plant_title());
-    Ok(Box::new(Declared { system, vectors, title }))
+    let measures = metrics::DeclaredMeasures::from_system(c, &system.vectors)?;
+    Ok(Box::new(Declared { system, vectors, title, measures }))
 }
 
 /// The plant's model, built from its source.
@@ -71,6 +74,7 @@ pub struct Declared {
     pub system: System,
     vectors: &'static Vectors,
     title: String,
+    measures: metrics::DeclaredMeasures,
 }
 
 impl Scenario for Declared {
@@ -108,10 +112,10 @@ impl ScenarioParts for Declared {
     }
 
     fn metrics(&self) -> Box<dyn Metrics> {
-        metrics::generic(&self.system)
+        self.measures.metrics()
     }
 
     fn error_measure(&self) -> ErrorMeasure {
-        metrics::error_measure(&self.system)
+        self.measures.error_measure()
     }
 }

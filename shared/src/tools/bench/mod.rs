@@ -22,6 +22,7 @@
 pub mod anatomy;
 pub mod own_stage;
 pub mod pingpong;
+pub mod plants;
 pub mod raw_floor;
 pub mod restarts;
 pub mod uds_loop;
@@ -62,6 +63,11 @@ pub struct BenchArgs {
     /// CPU hogs and an fsync loop; p50/p99/max of each step; writes restarts.json
     #[arg(long, value_name = "N")]
     pub restarts: Option<usize>,
+    /// Only measure plants: each one's step cost per tick and its lockstep loops/s in one
+    /// process, for the launch files (or scenario names) given, else the built-in list
+    /// (plants.rs); writes plants.json
+    #[arg(long, value_name = "LAUNCH", num_args = 0..)]
+    pub plants: Option<Vec<String>>,
 }
 
 const MODES: [Strategy; 3] = [Strategy::Block, Strategy::Spin, Strategy::Adaptive];
@@ -466,6 +472,12 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
     if let Some(kills) = args.restarts {
         let out = crate::launcher::create_run_dir(args.out.as_deref(), "bench-restarts")?;
         return restarts::run(kills, &out, &crate::launcher::locate_binaries()?, catalog);
+    }
+    if let Some(targets) = &args.plants {
+        let out = crate::launcher::create_run_dir(args.out.as_deref(), "bench-plants")?;
+        plants::run(catalog, targets, args.quick, &out, &stop)?;
+        say!("  written: {}", out.display());
+        return Ok(());
     }
     let began = Instant::now();
     let quick = args.quick;
