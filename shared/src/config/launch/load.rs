@@ -14,6 +14,7 @@ use crate::config::launch::checks::{
 };
 use crate::config::launch::overrides::{Override, merge, set_dotted};
 use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
+use crate::config::python_plant::{self, PythonPlant};
 use crate::config::realtime::RealtimeSettings;
 use crate::config::schema::ScenarioSchema;
 use crate::config::stages::Stages;
@@ -131,6 +132,9 @@ pub fn resolve_config(
     for (role, stage) in &config.stages.commands {
         stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
     }
+    if let Some(plant) = &config.stages.plant {
+        plant.check().map_err(|message| config.error(python_plant::KEY, message))?;
+    }
     Ok(config)
 }
 
@@ -195,14 +199,16 @@ fn from_document(
     let hosts = Hosts::parse(&common.hosts, |key, message| origins.error(key, message))?;
     let current = std::env::current_dir().unwrap_or_default();
     let launch_folder = launch_folder.map(|f| current.join(f));
-    let stages = Stages::parse(
-        &common.stages,
-        |key| match &launch_folder {
-            Some(folder) if origins.of(key) == origins.file => folder.clone(),
-            _ => current.clone(),
-        },
-        |key, message| origins.error(key, message),
-    )?;
+    let folder_of = |key: &str| match &launch_folder {
+        Some(folder) if origins.of(key) == origins.file => folder.clone(),
+        _ => current.clone(),
+    };
+    let mut stages = Stages::parse(&common.stages, folder_of, |key, message| origins.error(key, message))?;
+    // A built-in scenario's [plant] is its own; only a declared system's may name a Python class.
+    if !document.contains_key("scenario") {
+        stages.plant = PythonPlant::parse(&document, folder_of(python_plant::KEY))
+            .map_err(|message| origins.error(python_plant::KEY, message))?;
+    }
     if let Some(toml::Value::Table(table)) = document.get_mut("stages") {
         stages.write_dirs(table);
     }
