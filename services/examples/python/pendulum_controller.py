@@ -6,7 +6,8 @@ import looplab
 class StateFeedback:
     def __init__(self, stage):
         self.k1, self.k2, self.k3 = stage.config["controller"]["gains"]
-        self.limit = stage.config["model"]["current_limit_a"]
+        config = stage.config  # the model: [model], or a declared system's [parameters.model]
+        self.limit = (config["model"] if "model" in config else config["parameters"]["model"])["current_limit_a"]
 
     def step(self, t, x, u):  # x: the estimate (theta, theta_dot, wheel_speed, bias); u: (current,)
         current = -(self.k1 * x[0] + self.k2 * x[1] + self.k3 * x[2])

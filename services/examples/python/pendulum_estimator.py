@@ -27,21 +27,28 @@ def observer_gains(a, poles):
 
 
 def sensor_of(config, signal):
-    """The name of the sensor that reads `signal`."""
-    return next(name for name, sensor in config["sensors"].items() if sensor["signal"] == signal)
+    """The name of the sensor that reads `signal` (a declared system's sensor: reads = ["state.<signal>"])."""
+    reads = lambda sensor: sensor.get("signal") or sensor["reads"][0].split(".", 1)[1]
+    return next(name for name, sensor in config["sensors"].items() if reads(sensor) == signal)
+
+
+def section(config, name):
+    """The launch file's [name], or a declared system's [parameters.name]."""
+    return config[name] if name in config else config["parameters"][name]
 
 
 class BiasObserver:
     def __init__(self, stage):
         config = stage.config
-        if config["estimator"]["kind"] != "bias-observer":
+        estimator = section(config, "estimator")
+        if estimator["kind"] != "bias-observer":
             raise ValueError("this estimator is the bias observer: set estimator.kind = \"bias-observer\"")
-        m = config["model"]
+        m = section(config, "model")
         j0 = m["j_p"] + m["m_p"] * m["l_p"] * m["l_p"] + m["m_r"] * m["l_r"] * m["l_r"]
         ml = m["m_p"] * m["l_p"] + m["m_r"] * m["l_r"]
         self.a = ml * m["g"] / j0  # gravity's gain, 1/s²
         self.b = -m["torque_constant"] / j0  # the current's gain, rad/(s²·A)
-        observer = config["estimator"]["bias-observer"]
+        observer = estimator["bias-observer"]
         self.l = observer.get("gains") or observer_gains(self.a, observer["poles"])
         # Where the numbers are in the step's input: each sensor's value, valid, fresh, sample_time.
         names = stage.input_names
