@@ -8,10 +8,17 @@ use crate::config::launch::{self, LaunchConfig, LaunchError, Override};
 use crate::config::schema::ScenarioSchema;
 use crate::model::scenario::{Scenario, ScenarioEntry};
 
-/// Scenarios by name, each name once, in the order they were added.
+/// Builds the scenario a declared system's configuration describes (no `scenario`, a
+/// `[system]` table); `check_model`: load the plant's model once to find its errors now (the
+/// launcher resolving a file), not in each loop process.
+pub type DeclaredBuild = fn(&LaunchConfig, bool) -> Result<Box<dyn Scenario>, LaunchError>;
+
+/// Scenarios by name, each name once, in the order they were added, and what builds a declared
+/// system, if this catalog runs them.
 #[derive(Debug, Clone, Default)]
 pub struct Catalog {
     entries: Vec<ScenarioEntry>,
+    declared: Option<DeclaredBuild>,
 }
 
 impl Catalog {
@@ -37,6 +44,12 @@ impl Catalog {
             Some(same_name) => *same_name = entry,
             None => self.entries.push(entry),
         }
+        self
+    }
+
+    /// This catalog, running declared systems with `build`.
+    pub fn with_declared(mut self, build: DeclaredBuild) -> Self {
+        self.declared = Some(build);
         self
     }
 
@@ -66,15 +79,22 @@ impl Catalog {
         target: &str,
         overrides: &[Override],
     ) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
-        self.build(launch::resolve_config(target, overrides, &self.schemas())?)
+        self.build(launch::resolve_config(target, overrides, &self.schemas())?, true)
     }
 
     /// Reads a resolved launch file written by the launcher (what each loop process does).
     pub fn load_resolved(&self, path: &Path) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
-        self.build(launch::load_resolved_config(path, &self.schemas())?)
+        self.build(launch::load_resolved_config(path, &self.schemas())?, false)
     }
 
-    fn build(&self, config: LaunchConfig) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
+    fn build(&self, config: LaunchConfig, check_model: bool) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
+        if config.is_declared() {
+            let build = self.declared.ok_or_else(|| {
+                config.error("system", "this build of LoopLab runs no declared systems (its catalog has no builder)")
+            })?;
+            let scenario = build(&config, check_model)?;
+            return Ok((config, scenario));
+        }
         let entry = self.find(&config.scenario).expect("the configuration names a scenario of the catalog");
         let scenario = entry.build(&config)?;
         Ok((config, scenario))

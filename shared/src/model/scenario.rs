@@ -278,8 +278,9 @@ impl PositionLimits {
 pub trait Plant {
     fn state(&self) -> &[f64];
     /// Advances one loop period from simulation time `t` with the input held constant
-    /// (zero-order hold).
-    fn step(&mut self, t: f64, u: &[f64], dt: f64);
+    /// (zero-order hold). An error (a plant model of the user's own that failed) ends the
+    /// plant's incarnation with its one line.
+    fn step(&mut self, t: f64, u: &[f64], dt: f64) -> anyhow::Result<()>;
     /// Sets the state, for a restarted plant going on from its snapshot.
     fn restore(&mut self, state: &[f64]);
     /// What the actuator applied over the last step, where it differs from the command (a

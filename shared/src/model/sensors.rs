@@ -18,10 +18,10 @@ use rand_distr::{Distribution, StandardNormal};
 use crate::config::launch::LaunchConfig;
 use crate::config::seed::fnv1a;
 use crate::contract::msg::{MAX_SENSOR_DIM, SensorReading};
-use crate::model::vectors::{ReadSignal, Signal};
+use crate::model::vectors::{Read, Signal};
 
 struct EmulatedSensor {
-    read: ReadSignal,
+    read: Read,
     dim: usize,
     period_ticks: u64,
     delay_ticks: u64,
@@ -79,7 +79,7 @@ impl SensorEmulator {
             if k >= sensor.next_sample {
                 sensor.next_sample = (k / sensor.period_ticks + 1) * sensor.period_ticks;
                 let mut value = [0.0; MAX_SENSOR_DIM];
-                (sensor.read)(t, x, u_applied, &mut value[..sensor.dim]);
+                sensor.read.apply(t, x, u_applied, &mut value[..sensor.dim]);
                 for ((v, bias), std) in value.iter_mut().zip(&sensor.bias).zip(&sensor.noise_std) {
                     let noise: f64 = StandardNormal.sample(&mut sensor.rng);
                     let measured = *v + bias + std * noise;
@@ -115,12 +115,12 @@ mod tests {
     const RAD_S: &[Component] = &[Component::new("wheel_speed", "rad/s")];
     /// The pendulum's two signals, and one that reads time and the applied input.
     const SIGNALS: &[Signal] = &[
-        Signal { name: "theta", components: RAD, read: |_, x, _, out| out[0] = x[0] },
-        Signal { name: "wheel_speed", components: RAD_S, read: |_, x, _, out| out[0] = x[2] },
+        Signal { name: "theta", components: RAD, read: Read::Computed(|_, x, _, out| out[0] = x[0]) },
+        Signal { name: "wheel_speed", components: RAD_S, read: Read::Computed(|_, x, _, out| out[0] = x[2]) },
         Signal {
             name: "known_input",
             components: &[Component::new("t", "s"), Component::new("u", "A")],
-            read: |t, _, u, out| out[..2].copy_from_slice(&[t, u[0]]),
+            read: Read::Computed(|t, _, u, out| out[..2].copy_from_slice(&[t, u[0]])),
         },
     ];
 

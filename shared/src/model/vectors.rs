@@ -9,12 +9,45 @@ pub use crate::config::schema::{Component, SignalLayout};
 /// it), into `out` (one value per component). The emulator then adds bias and noise.
 pub type ReadSignal = fn(t: f64, x: &[f64], u_applied: &[f64], out: &mut [f64]);
 
+/// How a signal is read: computed by the scenario's code, or picked component by component
+/// (a declared system's sensor, `reads = ["state.theta", "input.current"]`).
+#[derive(Clone, Copy)]
+pub enum Read {
+    Computed(ReadSignal),
+    Picks(&'static [Pick]),
+}
+
+/// One component a declared sensor reads: of the state message (the state, then the plant's
+/// outputs) or of the applied input, by index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pick {
+    State(usize),
+    Input(usize),
+}
+
+impl Read {
+    /// The signal at `t` from the true state `x` and the applied input, into `out`.
+    pub fn apply(&self, t: f64, x: &[f64], u_applied: &[f64], out: &mut [f64]) {
+        match self {
+            Read::Computed(read) => read(t, x, u_applied, out),
+            Read::Picks(picks) => {
+                for (out, pick) in out.iter_mut().zip(picks.iter()) {
+                    *out = match *pick {
+                        Pick::State(i) => x[i],
+                        Pick::Input(i) => u_applied[i],
+                    };
+                }
+            }
+        }
+    }
+}
+
 /// Something a sensor can measure: named components read from the truth.
 pub struct Signal {
     pub name: &'static str,
     /// One per component; a scalar signal has one.
     pub components: &'static [Component],
-    pub read: ReadSignal,
+    pub read: Read,
 }
 
 impl Signal {

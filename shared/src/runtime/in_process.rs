@@ -89,7 +89,7 @@ pub fn run(
         observe(LoopMessage::Command(command))?;
         let record = plant.accept(&command, now_ns());
         observe(LoopMessage::Loop(record))?;
-        plant.advance();
+        plant.advance()?;
     }
     plant.finish(loops);
     Ok(InProcessReports {

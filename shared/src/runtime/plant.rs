@@ -19,7 +19,7 @@
 use std::collections::{BTreeSet, VecDeque};
 use std::time::{Duration, Instant};
 
-use anyhow::{Result, anyhow};
+use anyhow::{Context as _, Result, anyhow};
 
 use crate::config::faults::OnStale;
 use crate::config::launch::{LaunchConfig, Mode};
@@ -185,7 +185,7 @@ impl PlantCore {
     /// when tick k+1 was due (zero-order hold), or `on_stale` once that command is older than
     /// the timeout. If tick k's state went out and command k was not in by its deadline (at most
     /// one period, so by now), loop k missed it.
-    pub fn advance(&mut self) {
+    pub fn advance(&mut self) -> Result<()> {
         let due = self.due(self.k + 1);
         while let Some(&(arrived, u)) = self.queued.front() {
             if due.is_some_and(|due| arrived > due) {
@@ -207,13 +207,15 @@ impl PlantCore {
                 self.held = [0.0; MAX_INPUT];
             }
         }
-        self.plant.step(self.k as f64 * self.dt, &self.held[..m], self.dt);
+        let t = self.k as f64 * self.dt;
+        self.plant.step(t, &self.held[..m], self.dt).with_context(|| format!("the plant failed at t = {t:.6} s"))?;
         if let Some(applied) = self.plant.applied_input() {
             self.applied[..m].copy_from_slice(applied);
         } else {
             self.applied = self.held;
         }
         self.k += 1;
+        Ok(())
     }
 
     /// Real time: starts the schedule with tick 0 at `now_ns`, unless a restored snapshot holds
@@ -227,28 +229,29 @@ impl PlantCore {
     /// `current`: the system kept moving under the command in effect (or `on_stale`). Every
     /// tick from here to `current` goes without a state, this one too if the last plant died
     /// before publishing it.
-    pub fn catch_up(&mut self, current: u64) {
+    pub fn catch_up(&mut self, current: u64) -> Result<()> {
         if current <= self.k {
-            return;
+            return Ok(());
         }
         let unpublished_now = u64::from(self.published_k != Some(self.k));
         self.counters.skipped_ticks += current - self.k - 1 + unpublished_now;
         while self.k < current {
-            self.advance();
+            self.advance()?;
         }
+        Ok(())
     }
 
     /// Real time: the timer says `expired` periods passed; advances that many ticks, not past
     /// the run's `loops`, and returns how many. Only the newest tick's state goes out: the
     /// ticks passed over count as skipped.
-    pub fn advance_expired(&mut self, expired: u64, loops: u64) -> u64 {
+    pub fn advance_expired(&mut self, expired: u64, loops: u64) -> Result<u64> {
         let mut advanced = 0;
         while advanced < expired && self.k < loops {
-            self.advance();
+            self.advance()?;
             advanced += 1;
         }
         self.counters.skipped_ticks += advanced.saturating_sub(1);
-        advanced
+        Ok(advanced)
     }
 
     /// Completes the report at the end of a run of `loops` loops.
@@ -332,9 +335,10 @@ impl PlantProcess {
         self.loop_out.send(&record)
     }
 
-    fn advance(&mut self) {
-        self.core.advance();
+    fn advance(&mut self) -> Result<()> {
+        self.core.advance()?;
         self.save();
+        Ok(())
     }
 
     fn drain(&mut self, commands: &TopicSubscriber<Command>) -> Result<()> {
@@ -432,7 +436,7 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
                         p.open_loop = true;
                     }
                 }
-                p.advance();
+                p.advance()?;
             }
         }
         Mode::Realtime => {
@@ -443,7 +447,7 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
             let woke = now_ns();
             let current = ((woke - start_ns) / period_ns).min(loops.saturating_sub(1));
             if current > p.k {
-                p.core.catch_up(current);
+                p.core.catch_up(current)?;
                 p.save();
             }
             let timer = TickTimer::new(start_ns + (p.k + 1) * period_ns, period_ns)?;
@@ -472,7 +476,7 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
                 let woke = now_ns();
                 p.drain(&commands)?;
                 let expired = timer.expirations();
-                if p.core.advance_expired(expired, loops) == 0 {
+                if p.core.advance_expired(expired, loops)? == 0 {
                     continue;
                 }
                 // Saved at once: after the run's last tick no state goes out to save it.

@@ -61,7 +61,7 @@ fn a_command_in_before_the_next_tick_takes_effect_at_it() {
     assert_eq!((record.deadline_miss, record.rejected, record.lost, record.sequence), (0, 0, 0, 1));
     assert_eq!(record.header.trace.get(Stamp::PlantReceive), due(0) + PERIOD / 2);
     assert_eq!(record.header.trace.end_to_end_ns(), PERIOD / 2);
-    core.advance();
+    core.advance().unwrap();
     assert_eq!(core.k, 1);
     assert_eq!(applied(&mut core), 1.5);
     assert_eq!(core.counters, PlantCounters::default());
@@ -74,10 +74,10 @@ fn a_command_after_its_deadline_is_a_miss_and_takes_effect_one_period_later() {
     // Command 0 arrives after tick 1 was due; the plant had not integrated tick 1 yet.
     let record = core.accept(&command(0, 2.0), due(1) + 10);
     assert_eq!(record.deadline_miss, 1);
-    core.advance();
+    core.advance().unwrap();
     assert_eq!(core.counters.deadline_misses, 1, "loop 0's state went out and its command was not in");
     assert_eq!(applied(&mut core), 0.0, "tick 1 was integrated with what was held before");
-    core.advance();
+    core.advance().unwrap();
     assert_eq!(applied(&mut core), 2.0, "it took effect at tick 2");
     assert_eq!(core.counters.deadline_misses, 2, "loop 1 got no command either");
 }
@@ -93,7 +93,7 @@ fn a_deadline_shorter_than_a_period_ends_at_the_tick_plus_the_deadline() {
         publish(&mut core);
         let record = core.accept(&command(k, 1.0), due(k) + late_by);
         assert_eq!(record.deadline_miss, miss, "loop {k}, {late_by} ns after its tick");
-        core.advance();
+        core.advance().unwrap();
         assert_eq!(core.counters.deadline_misses, misses, "after loop {k}");
     }
     // A late command still takes effect at the next tick: the deadline only judges it.
@@ -111,17 +111,17 @@ fn the_newest_command_in_by_the_tick_wins() {
     publish(&mut core);
     core.accept(&command(0, 1.0), due(0) + 100);
     core.accept(&command(0, 3.0), due(0) + 200);
-    core.advance();
+    core.advance().unwrap();
     assert_eq!(applied(&mut core), 3.0);
 }
 
 #[test]
 fn a_loop_whose_state_never_went_out_misses_no_deadline() {
     let mut core = realtime();
-    core.advance();
+    core.advance().unwrap();
     assert_eq!(core.counters.deadline_misses, 0);
     publish(&mut core);
-    core.advance();
+    core.advance().unwrap();
     assert_eq!(core.counters.deadline_misses, 1);
 }
 
@@ -130,12 +130,12 @@ fn a_non_finite_or_out_of_range_command_is_rejected_and_the_last_valid_one_held(
     let mut core = realtime();
     publish(&mut core);
     core.accept(&command(0, 1.0), due(0) + 100);
-    core.advance();
+    core.advance().unwrap();
     for (k, u) in [(1, f64::NAN), (2, f64::INFINITY), (3, 5.5), (4, -5.01)] {
         publish(&mut core);
         let record = core.accept(&command(k, u), due(k) + 100);
         assert_eq!((record.rejected, record.deadline_miss), (1, 0), "{u}");
-        core.advance();
+        core.advance().unwrap();
         assert_eq!(core.counters.deadline_misses, 0, "a rejected command was still in time");
     }
     assert_eq!(core.counters.rejected_commands, 4);
@@ -150,13 +150,13 @@ fn a_command_marked_lost_is_counted_and_the_last_held() {
     let mut core = core_with("lockstep", &[]);
     core.state_message(TickTiming::default(), 7);
     core.accept(&command(0, 1.0), 8);
-    core.advance();
+    core.advance().unwrap();
     core.state_message(TickTiming::default(), 9);
     let mut lost = command(1, 4.0);
     lost.header.lost = 1;
     let record = core.accept(&lost, 10);
     assert_eq!((record.lost, record.rejected, record.deadline_miss), (1, 0, 0));
-    core.advance();
+    core.advance().unwrap();
     assert_eq!(core.counters.lost_commands, 1);
     assert_eq!(core.state_message(TickTiming::default(), 11).u_applied[0], 1.0);
 }
@@ -169,7 +169,7 @@ fn lockstep_has_no_deadlines_and_nothing_goes_stale() {
     let record = core.accept(&command(0, 2.0), u64::MAX / 2);
     assert_eq!(record.deadline_miss, 0);
     for _ in 0..100 {
-        core.advance();
+        core.advance().unwrap();
     }
     assert_eq!(core.counters, PlantCounters::default());
     assert_eq!(core.state_message(TickTiming::default(), 2).u_applied[0], 2.0);
@@ -182,7 +182,7 @@ fn stale_after_one_command(on_stale: &str) -> PlantCore {
     publish(&mut core);
     core.accept(&command(0, 1.0), due(0) + PERIOD / 2);
     for _ in 0..25 {
-        core.advance();
+        core.advance().unwrap();
     }
     core
 }
@@ -198,7 +198,7 @@ fn a_command_older_than_the_timeout_is_stale_and_on_stale_applies() {
     assert_eq!(applied(&mut zero), 0.0);
     // A new command ends it.
     zero.accept(&command(25, 3.0), due(25) + 100);
-    zero.advance();
+    zero.advance().unwrap();
     assert_eq!((zero.counters.stale_ticks, applied(&mut zero)), (5, 3.0));
 }
 
@@ -210,10 +210,10 @@ fn the_boundary_of_the_timeout_is_not_stale() {
     publish(&mut core);
     core.accept(&command(0, 1.0), due(1));
     for _ in 0..21 {
-        core.advance();
+        core.advance().unwrap();
     }
     assert_eq!(core.counters.stale_ticks, 0);
-    core.advance();
+    core.advance().unwrap();
     assert_eq!(core.counters.stale_ticks, 1);
 }
 
@@ -221,7 +221,7 @@ fn the_boundary_of_the_timeout_is_not_stale() {
 fn before_any_command_every_tick_is_stale() {
     let mut core = realtime_with(&["supervision.on_stale=\"zero\""]);
     for _ in 0..3 {
-        core.advance();
+        core.advance().unwrap();
     }
     assert_eq!(core.counters.stale_ticks, 3);
 }
@@ -230,14 +230,14 @@ fn before_any_command_every_tick_is_stale() {
 fn ticks_the_timer_passed_over_are_skipped_and_the_run_ends_at_its_last_loop() {
     let mut core = realtime();
     publish(&mut core);
-    assert_eq!(core.advance_expired(0, 10_000), 0);
-    assert_eq!(core.advance_expired(1, 10_000), 1);
+    assert_eq!(core.advance_expired(0, 10_000).unwrap(), 0);
+    assert_eq!(core.advance_expired(1, 10_000).unwrap(), 1);
     assert_eq!(core.counters.skipped_ticks, 0);
-    assert_eq!(core.advance_expired(4, 10_000), 4);
+    assert_eq!(core.advance_expired(4, 10_000).unwrap(), 4);
     assert_eq!((core.k, core.counters.skipped_ticks), (5, 3), "only the newest tick's state goes out");
     // Only loop 0's state went out, so only loop 0 missed its deadline.
     assert_eq!(core.counters.deadline_misses, 1);
-    assert_eq!(core.advance_expired(10, 8), 3, "not past the run's last loop");
+    assert_eq!(core.advance_expired(10, 8).unwrap(), 3, "not past the run's last loop");
     assert_eq!((core.k, core.counters.skipped_ticks), (8, 5));
 }
 
@@ -247,17 +247,17 @@ fn a_restarted_plant_catches_up_and_counts_the_ticks_without_a_state() {
         let mut core = realtime();
         for _ in 0..5 {
             publish(&mut core);
-            core.advance();
+            core.advance().unwrap();
         }
         if published_last {
             publish(&mut core);
         }
         let misses = core.counters.deadline_misses;
-        core.catch_up(9);
+        core.catch_up(9).unwrap();
         assert_eq!(core.k, 9);
         assert_eq!(core.counters.skipped_ticks, skipped, "tick 5 published: {published_last}");
         assert_eq!(core.counters.deadline_misses, misses + u64::from(published_last));
-        core.catch_up(7);
+        core.catch_up(7).unwrap();
         assert_eq!((core.k, core.counters.skipped_ticks), (9, skipped), "never backwards");
     }
 }
@@ -268,7 +268,7 @@ fn a_restored_core_goes_on_exactly_where_the_last_one_stopped() {
     for k in 0..40 {
         publish(&mut first);
         first.accept(&command(k, (k as f64 * 0.3).sin()), due(k) + 100);
-        first.advance();
+        first.advance().unwrap();
     }
     publish(&mut first);
     // The schedule comes from the snapshot: restarting later does not move it.
@@ -278,7 +278,7 @@ fn a_restored_core_goes_on_exactly_where_the_last_one_stopped() {
     for k in 40..60 {
         for core in [&mut first, &mut second] {
             core.accept(&command(k, -0.5), due(k) + 100);
-            core.advance();
+            core.advance().unwrap();
         }
         let (a, b) = (publish(&mut first), publish(&mut second));
         assert_eq!(a.x.map(f64::to_bits), b.x.map(f64::to_bits), "tick {}", k + 1);
@@ -292,7 +292,7 @@ fn the_report_counts_published_and_skipped_ticks_as_loops() {
     let mut core = realtime();
     let state = core.state_message(TickTiming::default(), 555);
     assert_eq!(state.header.incarnations, [0; 4]);
-    core.advance_expired(3, 100);
+    core.advance_expired(3, 100).unwrap();
     core.state_message(TickTiming::default(), 777);
     core.finish(100);
     let report = &core.report;

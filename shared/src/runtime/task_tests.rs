@@ -229,7 +229,7 @@ fn restart_controller(scenario_name: &str, at: u64, after: u64) -> (bool, bool) 
             fresh_same &= bits(&b) == bits(&command);
         }
         plant.accept(&command, 0);
-        plant.advance();
+        plant.advance().unwrap();
     }
     (thawed_same, fresh_same)
 }

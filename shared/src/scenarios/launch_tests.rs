@@ -254,7 +254,7 @@ fn extreme_values_of_every_key_load_or_fail_cleanly() {
                 let mut plant = scenario.plant();
                 let _ = (scenario.estimator(), scenario.controller(), scenario.metrics());
                 let u: Vec<f64> = scenario.input_limits().iter().map(|(lo, hi)| (lo + hi) / 2.0).collect();
-                plant.step(0.0, &u, config.dt());
+                plant.step(0.0, &u, config.dt()).unwrap();
                 let finite = plant.state().iter().all(|x| x.is_finite());
                 assert!(finite, "{}: {text} loads, and the first step gives {:?}", entry.name, plant.state());
             }

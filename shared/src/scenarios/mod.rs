@@ -4,6 +4,7 @@
 //! of their entries; [`builtin`] is the catalog of them that LoopLab's own binaries run, and that
 //! a crate outside this one extends with its own ([`Catalog::with`]).
 
+pub mod declared;
 pub mod fip;
 pub mod pendulum;
 pub mod quadcopter;
@@ -24,9 +25,9 @@ use crate::model::scenario::{Scenario, ScenarioEntry};
 /// The built-in scenarios' entries.
 pub const ALL: &[ScenarioEntry] = &[pendulum::ENTRY, quadcopter::ENTRY, tiltrotor::ENTRY, fip::ENTRY, tethered::ENTRY];
 
-/// The catalog of the built-in scenarios.
+/// The catalog of the built-in scenarios, and of declared systems (`[system]`, no scenario).
 pub fn builtin() -> Catalog {
-    Catalog::new(ALL.iter().cloned())
+    Catalog::new(ALL.iter().cloned()).with_declared(declared::build)
 }
 
 /// [`Catalog::resolve`] in the built-in catalog.

@@ -12,6 +12,7 @@ use crate::config::hosts::Hosts;
 use crate::config::launch::checks::{
     check_common, check_fault, check_finite, check_realtime, check_sensors, check_supervision, check_wait,
 };
+use crate::config::launch::declared;
 use crate::config::launch::overrides::{Override, merge, set_dotted};
 use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
 use crate::config::python_plant::{self, PythonPlant};
@@ -24,6 +25,8 @@ use crate::config::wait::WaitSettings;
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CommonKeys {
+    /// Empty: a declared system.
+    #[serde(default)]
     scenario: String,
     mode: Mode,
     rate_hz: f64,
@@ -76,6 +79,16 @@ pub fn resolve_config(
         let text = std::fs::read_to_string(target)
             .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;
         let user: toml::Table = toml::from_str(&text).map_err(|e| toml_error(target, &text, &e))?;
+        if declared::is_declared(&user) {
+            let mut document: toml::Table = toml::from_str(declared::DECLARED_DEFAULTS).expect("the defaults parse");
+            merge(&mut document, user);
+            let folder = Path::new(target).parent().map(Path::to_path_buf);
+            if !overrides.is_empty() {
+                from_document(document.clone(), target, &[], catalog, folder.as_deref())?;
+            }
+            let config = from_document(document, target, overrides, catalog, folder.as_deref())?;
+            return check_stages(config);
+        }
         let name = match user.get("scenario") {
             Some(toml::Value::String(name)) => name.clone(),
             Some(_) => {
@@ -89,7 +102,10 @@ pub fn resolve_config(
                 return Err(LaunchError::new(
                     target,
                     Some("scenario"),
-                    format!("missing; allowed: {}", scenario_names()),
+                    format!(
+                        "missing; allowed: {} (or no scenario and a [system] table: a system of your own)",
+                        scenario_names()
+                    ),
                 ));
             }
         };
@@ -128,7 +144,11 @@ pub fn resolve_config(
         from_document(document.clone(), &origin, &[], catalog, launch_folder.as_deref())?;
     }
     let config = from_document(document, &origin, overrides, catalog, launch_folder.as_deref())?;
-    // A user's stage that cannot start is bad input, found before anything starts.
+    check_stages(config)
+}
+
+/// A user's stage that cannot start is bad input, found before anything starts.
+fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
     for (role, stage) in &config.stages.commands {
         stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
     }
@@ -166,13 +186,21 @@ fn from_document(
     // (and the physics) can then assume finite numbers.
     document.iter().try_for_each(|(key, value)| check_finite(&origins, key, value))?;
 
-    let scenario_name = match document.get("scenario") {
-        Some(toml::Value::String(s)) => s.clone(),
-        _ => return Err(origins.error("scenario", format!("missing or not a string; allowed: {}", names(catalog)))),
+    let declared_schema;
+    let schema = if declared::is_declared(&document) {
+        declared_schema = declared::declared_schema(&document, &origins)?;
+        &declared_schema
+    } else {
+        let scenario_name = match document.get("scenario") {
+            Some(toml::Value::String(s)) => s.clone(),
+            _ => {
+                return Err(origins.error("scenario", format!("missing or not a string; allowed: {}", names(catalog))));
+            }
+        };
+        find(catalog, &scenario_name).ok_or_else(|| {
+            origins.error("scenario", format!("unknown scenario \"{scenario_name}\"; allowed: {}", names(catalog)))
+        })?
     };
-    let schema = find(catalog, &scenario_name).ok_or_else(|| {
-        origins.error("scenario", format!("unknown scenario \"{scenario_name}\"; allowed: {}", names(catalog)))
-    })?;
     schema.check_fits()?;
 
     // Top-level keys: the shared ones, then the scenario's sections; anything else is a typo.
@@ -212,15 +240,36 @@ fn from_document(
     if let Some(toml::Value::Table(table)) = document.get_mut("stages") {
         stages.write_dirs(table);
     }
+    // A declared plant's model path is relative to the launch file's folder; the loop processes
+    // read the resolved file from the run folder, so the folder is written into it (as a
+    // stage's `dir`).
+    if schema.name == declared::DECLARED
+        && let Some(toml::Value::Table(plant)) = document.get_mut("plant")
+        && !plant.contains_key("folder")
+    {
+        let folder = launch_folder.clone().unwrap_or_else(|| current.clone());
+        plant.insert("folder".into(), toml::Value::String(folder.display().to_string()));
+    }
 
+    let mut sensors: BTreeMap<String, SensorSpec> = common.sensors.into_iter().filter(|(_, s)| s.enabled).collect();
+    for (name, sensor) in &mut sensors {
+        if schema.name == declared::DECLARED {
+            sensor.signal = name.clone();
+        } else if !sensor.reads.is_empty() {
+            return Err(origins.error(
+                &format!("sensors.{name}.reads"),
+                "is for a declared system (no scenario, a [system] table); a scenario's sensor names its signal",
+            ));
+        }
+    }
     let config = LaunchConfig {
-        scenario: common.scenario,
+        scenario: if schema.name == declared::DECLARED { declared::DECLARED.to_owned() } else { common.scenario },
         mode: common.mode,
         rate_hz: common.rate_hz,
         deadline_us: common.deadline_us,
         duration_s: common.duration_s,
         seed: common.seed,
-        sensors: common.sensors.into_iter().filter(|(_, s)| s.enabled).collect(),
+        sensors,
         faults: common.faults,
         supervision: common.supervision,
         wait: common.wait,

@@ -10,6 +10,7 @@
 //! here, so callers name `crate::config::launch::X`.
 
 mod checks;
+pub mod declared;
 mod load;
 mod overrides;
 mod types;

@@ -68,8 +68,14 @@ impl PerComponent {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensorSpec {
-    /// Which of the scenario's signals it measures (for example `theta`).
+    /// Which of the scenario's signals it measures (for example `theta`); a declared system's
+    /// sensor is a signal of its own name (set at load).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub signal: String,
+    /// A declared system's sensor: the components it reads (`"state.theta"`, `"output.y"`,
+    /// `"input.current"`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub reads: Vec<String>,
     /// Sample period in seconds: a whole multiple of the loop period.
     pub period_s: f64,
     /// Standard deviation of the Gaussian noise added at each sample.

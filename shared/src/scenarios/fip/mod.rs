@@ -395,7 +395,7 @@ pub mod closed_loop_tests {
             let t = k as f64 * dt;
             let x = plant.state().to_vec();
             let u = controller.command(t, &perfect_estimate(&x));
-            plant.step(t, &u, dt);
+            plant.step(t, &u, dt).unwrap();
             let v = lyapunov(&g, plant.state(), &mut reference, t + dt);
             // Below 1e-9 of the start the sampling's own error (O(dt²)) is of V₄'s size.
             if v > 1e-9 * initial {

@@ -133,7 +133,7 @@ impl Plant for FipPlant {
         &self.x
     }
 
-    fn step(&mut self, t: f64, u: &[f64], dt: f64) {
+    fn step(&mut self, t: f64, u: &[f64], dt: f64) -> anyhow::Result<()> {
         let command = self.link.through(t, u);
         self.applied = command;
         let thrust = command[0];
@@ -157,6 +157,7 @@ impl Plant for FipPlant {
         write_rotation(&orthonormalise(&(r0 * exp_so3(&(rate * dt)))), &mut self.x[state::ROTATION]);
         self.x[state::DISTURBANCE].copy_from_slice(&b.at(dt));
         self.write_uav();
+        Ok(())
     }
 
     fn restore(&mut self, state: &[f64]) {
@@ -216,7 +217,7 @@ mod tests {
         write_rotation(&r, &mut x[state::ROTATION]);
         p.restore(&x);
         for k in 0..1000 {
-            p.step(k as f64 * 1e-3, &[f.norm(), 0.0, 0.0, 0.0], 1e-3);
+            p.step(k as f64 * 1e-3, &[f.norm(), 0.0, 0.0, 0.0], 1e-3).unwrap();
         }
         let s = p.state();
         for (i, v) in s[..12].iter().enumerate() {
@@ -240,7 +241,7 @@ mod tests {
         let n = 1571;
         let dt = std::f64::consts::FRAC_PI_2 / n as f64;
         for k in 0..n {
-            p.step(k as f64 * dt, &[1.0, 0.0, 0.0, 1.0], dt);
+            p.step(k as f64 * dt, &[1.0, 0.0, 0.0, 1.0], dt).unwrap();
         }
         let s = p.state();
         let q = Vector3::from_column_slice(&s[state::DIRECTION]);

@@ -4,28 +4,28 @@
 //! estimator forms q from the two positions and the filter estimates ω.
 
 use super::{LOAD_POSITION, ROTATION, UAV_POSITION, UAV_VELOCITY, state};
-use crate::model::vectors::Signal;
+use crate::model::vectors::{Read, Signal};
 
 pub const SIGNALS: &[Signal] = &[
     Signal {
         name: "load_position",
         components: &LOAD_POSITION,
-        read: |_, x, _, out| out[..3].copy_from_slice(&x[state::LOAD_POSITION]),
+        read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[state::LOAD_POSITION])),
     },
     Signal {
         name: "uav_position",
         components: &UAV_POSITION,
-        read: |_, x, _, out| out[..3].copy_from_slice(&x[state::UAV_POSITION]),
+        read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[state::UAV_POSITION])),
     },
     // R, row-major.
     Signal {
         name: "attitude",
         components: &ROTATION,
-        read: |_, x, _, out| out[..9].copy_from_slice(&x[state::ROTATION]),
+        read: Read::Computed(|_, x, _, out| out[..9].copy_from_slice(&x[state::ROTATION])),
     },
     Signal {
         name: "uav_velocity",
         components: &UAV_VELOCITY,
-        read: |_, x, _, out| out[..3].copy_from_slice(&x[state::UAV_VELOCITY]),
+        read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[state::UAV_VELOCITY])),
     },
 ];

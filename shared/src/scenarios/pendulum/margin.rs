@@ -448,7 +448,7 @@ mod tests {
             controller.update(t, &estimate, &mut command);
             pending.push_back(command[0]);
             applied = pending.pop_front().unwrap();
-            plant.step(0.0, &[applied], p.dt);
+            plant.step(0.0, &[applied], p.dt).unwrap();
             out.push(Recorded {
                 x,
                 xhat: Vector3::new(estimate[0], estimate[1], estimate[3]),

@@ -30,9 +30,10 @@ impl Plant for PendulumPlant {
         self.x = Vector3::from_column_slice(state);
     }
 
-    fn step(&mut self, _t: f64, u: &[f64], dt: f64) {
+    fn step(&mut self, _t: f64, u: &[f64], dt: f64) -> anyhow::Result<()> {
         let current = u[0];
         self.x = rk4(&|x: &Vector3<f64>| self.model.derivative(x, current), &self.x, dt, self.substeps);
+        Ok(())
     }
 }
 
@@ -49,7 +50,7 @@ mod tests {
         let e0 = m.energy(&Vector3::from_column_slice(plant.state()));
         let mut worst: f64 = 0.0;
         for _ in 0..1000 {
-            plant.step(0.0, &[0.0], 1e-3);
+            plant.step(0.0, &[0.0], 1e-3).unwrap();
             let e = m.energy(&Vector3::from_column_slice(plant.state()));
             worst = worst.max((e - e0).abs() / e0.abs());
         }

@@ -119,7 +119,7 @@ impl Plant for QuadcopterPlant {
         &self.x
     }
 
-    fn step(&mut self, t: f64, u: &[f64], dt: f64) {
+    fn step(&mut self, t: f64, u: &[f64], dt: f64) -> anyhow::Result<()> {
         let command = self.link.through(t, u);
         self.applied = command;
         let thrust = command[0];
@@ -147,6 +147,7 @@ impl Plant for QuadcopterPlant {
         }
         self.x[..18].copy_from_slice(x.as_slice());
         self.x[18] = self.section.mass_at(&self.model, t + dt);
+        Ok(())
     }
 
     fn restore(&mut self, state: &[f64]) {
@@ -205,7 +206,7 @@ mod tests {
         // Hover thrust so that the translational part stays tame.
         let u = [0.2 * 9.8, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         for k in 0..5000 {
-            plant.step(k as f64 * 1e-3, &u, 1e-3);
+            plant.step(k as f64 * 1e-3, &u, 1e-3).unwrap();
         }
         let x = plant.state();
         assert!((momentum(x) - l0).norm() < 1e-8 * l0.norm(), "momentum drifted to {}", momentum(x));
@@ -223,7 +224,7 @@ mod tests {
         let mut taken = Vec::new();
         for k in 0..200u64 {
             let u = [1.96, 0.0, 0.0, 0.0, 0.0, 0.0, k as f64];
-            plant.step(k as f64 * dt, &u, dt);
+            plant.step(k as f64 * dt, &u, dt).unwrap();
             taken.push(plant.applied_input().unwrap()[6]);
         }
         // 45 ms is 54 ticks at 1200 Hz: the link takes the commands of ticks 0, 54, 108, 162.
@@ -234,7 +235,7 @@ mod tests {
         // 54(1 − e^{−0.045/0.05}).
         let mut plant = QuadcopterPlant::new(self::model(Actuation::RateLoop), section(), 1);
         for k in 0..54u64 {
-            plant.step(k as f64 * dt, &[1.96, 0.0, 0.0, 0.0, 0.0, 0.0, 54.0], dt);
+            plant.step(k as f64 * dt, &[1.96, 0.0, 0.0, 0.0, 0.0, 0.0, 54.0], dt).unwrap();
         }
         let expected = 54.0 * (1.0 - (-0.045f64 / 0.05).exp());
         assert!((plant.state()[17] - expected).abs() < 1e-8, "{} vs {expected}", plant.state()[17]);

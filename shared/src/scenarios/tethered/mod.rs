@@ -367,14 +367,14 @@ mod closed_loop_tests {
             let x = plant.state().to_vec();
             let mut readings = [SensorReading::default(); 2];
             for (reading, signal) in readings.iter_mut().zip(sensors::SIGNALS) {
-                (signal.read)(t, &x, &applied, &mut reading.value);
+                signal.read.apply(t, &x, &applied, &mut reading.value);
                 (reading.sample_time, reading.seq, reading.fresh, reading.valid) = (t, k, 1, 1);
             }
             // The launch file's sensors sort by name: accelerometer, gyro.
             assert_eq!((s.inputs.accelerometer, s.inputs.gyro), (0, 1));
             estimator.update(t, &readings, &applied, &mut estimate);
             controller.update(t, &estimate, &mut command);
-            plant.step(t, &command, dt);
+            plant.step(t, &command, dt).unwrap();
             applied = command;
             lost |= !(plant.state()[state::PHI] > 0.0 && plant.state()[state::PHI] < std::f64::consts::PI);
         }

@@ -201,7 +201,7 @@ impl Plant for TetheredPlant {
     }
 
     /// u = [f_R, τ_R, ḟ_R]: the plant takes the first two (the rate is for the estimator).
-    fn step(&mut self, _t: f64, u: &[f64], dt: f64) {
+    fn step(&mut self, _t: f64, u: &[f64], dt: f64) -> anyhow::Result<()> {
         let (thrust0, torque0) = (self.x[state::THRUST], self.x[state::TORQUE]);
         // y = [ϕ, ϕ̇, ϑ, ϑ̇, s]: s, the time into the step, gives the motors' exact lag.
         let f = |y: &SVector<f64, 5>| {
@@ -219,6 +219,7 @@ impl Plant for TetheredPlant {
         self.x[state::THRUST] = thrust;
         self.x[state::TORQUE] = torque;
         self.write_outputs();
+        Ok(())
     }
 
     fn restore(&mut self, state: &[f64]) {
@@ -337,7 +338,7 @@ mod tests {
         let start = energy(plant.state());
         let mut swing: f64 = 0.0;
         for k in 0..3000 {
-            plant.step(k as f64 * 1e-3, &[0.0, 0.0, 0.0], 1e-3);
+            plant.step(k as f64 * 1e-3, &[0.0, 0.0, 0.0], 1e-3).unwrap();
             swing = swing.max((plant.state()[state::PHI] - 1.0).abs());
         }
         assert!(swing > 0.5, "it hardly moved ({swing} rad)");
@@ -361,7 +362,7 @@ mod tests {
         };
         let mut plant = TetheredPlant::new(ideal(), &section, 0.5, 0.0, 10.0);
         for k in 0..50 {
-            plant.step(k as f64 * 1e-3, &[12.0, 1.0, 0.0], 1e-3);
+            plant.step(k as f64 * 1e-3, &[12.0, 1.0, 0.0], 1e-3).unwrap();
         }
         let x = plant.state();
         let lagged = 1.0 - (-1.0f64).exp();

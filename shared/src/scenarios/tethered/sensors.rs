@@ -4,13 +4,13 @@
 //! file; the paper's simulation is continuous-time and has no multi-rate structure.
 
 use super::{ACCEL, GYRO, state};
-use crate::model::vectors::Signal;
+use crate::model::vectors::{Read, Signal};
 
 pub const SIGNALS: &[Signal] = &[
     Signal {
         name: "accelerometer",
         components: &ACCEL,
-        read: |_, x, _, out| out[..2].copy_from_slice(&x[state::ACCEL]),
+        read: Read::Computed(|_, x, _, out| out[..2].copy_from_slice(&x[state::ACCEL])),
     },
-    Signal { name: "gyro", components: &GYRO, read: |_, x, _, out| out[0] = x[state::THETA_DOT] },
+    Signal { name: "gyro", components: &GYRO, read: Read::Computed(|_, x, _, out| out[0] = x[state::THETA_DOT]) },
 ];

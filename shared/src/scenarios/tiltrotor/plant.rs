@@ -78,7 +78,7 @@ impl Plant for TiltrotorPlant {
         &self.x
     }
 
-    fn step(&mut self, t: f64, u: &[f64], dt: f64) {
+    fn step(&mut self, t: f64, u: &[f64], dt: f64) -> anyhow::Result<()> {
         let input = [u[0], u[1], u[2], u[3]];
         let h = dt / f64::from(self.substeps);
         let mut x = SVector::<f64, STATE_LEN>::from_column_slice(&self.x);
@@ -96,6 +96,7 @@ impl Plant for TiltrotorPlant {
             x += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (h / 6.0);
         }
         self.x.copy_from_slice(x.as_slice());
+        Ok(())
     }
 
     fn restore(&mut self, state: &[f64]) {

@@ -6,7 +6,7 @@ use super::dynamics::{rotation, thrust_directions};
 use super::params::BETA;
 use super::{ATTITUDE_SIGNAL, FORCE, POSITION, VELOCITY, state};
 use crate::model::autodiff::mat_vec;
-use crate::model::vectors::Signal;
+use crate::model::vectors::{Read, Signal};
 
 /// The thrusters' force in F, R_B^F (r_R f_R + r_L f_L) of (21), from the attitude, the tilt
 /// angles and the thrusts. This is a simple form of the "known" force T^F:
@@ -22,24 +22,24 @@ pub const SIGNALS: &[Signal] = &[
     Signal {
         name: "position",
         components: &POSITION,
-        read: |_, x, _, out| out[..3].copy_from_slice(&x[state::POSITION]),
+        read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[state::POSITION])),
     },
     Signal {
         name: "velocity",
         components: &VELOCITY,
-        read: |_, x, _, out| out[..3].copy_from_slice(&x[state::VELOCITY]),
+        read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[state::VELOCITY])),
     },
     Signal {
         name: "attitude",
         components: &ATTITUDE_SIGNAL,
-        read: |_, x, _, out| {
+        read: Read::Computed(|_, x, _, out| {
             out[..7].copy_from_slice(&x[state::ANGLES]);
             out[7..14].copy_from_slice(&x[state::ANGLE_RATES]);
-        },
+        }),
     },
     Signal {
         name: "thrust_force",
         components: &FORCE,
-        read: |_, x, u, out| out[..3].copy_from_slice(&thrust_force(&x[state::ANGLES], [u[0], u[1]])),
+        read: Read::Computed(|_, x, u, out| out[..3].copy_from_slice(&thrust_force(&x[state::ANGLES], [u[0], u[1]]))),
     },
 ];

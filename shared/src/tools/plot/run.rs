@@ -296,7 +296,7 @@ fn sensors_figure(data: &RunData) -> Figure {
             let applied: Vec<f64> = applied(row).into_iter().map(|u| if u.is_finite() { u } else { 0.0 }).collect();
             let x = state(row);
             if x.iter().all(|v| v.is_finite()) {
-                (signal.read)(at, &x, &applied, &mut out);
+                signal.read.apply(at, &x, &applied, &mut out);
                 truth.iter_mut().zip(&out).for_each(|(series, v)| series.push((at, *v)));
             }
         }

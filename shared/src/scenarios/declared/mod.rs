@@ -1,0 +1,117 @@
+//! A system declared in its launch file, no Rust: a launch file with no `scenario` and a
+//! `[system]` table (its vectors), a `[plant]` (a built-in linear model, an FMU or a Python
+//! class), `[sensors.<name>] reads = [...]`, and its estimator and controller as stages of the
+//! user's own or built in (the pass-through estimator, state feedback).
+//!
+//! - `system`: the description read from the file (plant source, model spec, checks);
+//! - `plant`: [`plant::DeclaredPlant`], a `Plant` over a `PlantModel`;
+//! - `linear`: the built-in `[plant.linear]` model;
+//! - `fmu`: an FMU as a `PlantModel`;
+//! - `sensors`: the vectors, each sensor a signal picking what it reads;
+//! - `estimator`, `controller`: the built-in pass-through and state feedback;
+//! - `metrics`: the generic metrics and error measure.
+
+pub mod controller;
+pub mod estimator;
+pub mod fmu;
+pub mod linear;
+pub mod metrics;
+pub mod plant;
+pub mod sensors;
+pub mod system;
+
+use self::controller::{NoController, StateFeedback};
+use self::estimator::PassThrough;
+use self::linear::LinearModel;
+use self::plant::{DeclaredPlant, FailedPlant};
+use self::system::{PlantSource, System};
+use crate::config::launch::{LaunchConfig, LaunchError};
+use crate::model::plant_model::PlantModel;
+use crate::model::scenario::{Controller, ErrorMeasure, Estimator, Metrics, Plant, Scenario, ScenarioParts};
+use crate::model::vectors::Vectors;
+
+/// The scenario a declared system's configuration describes (`Catalog::with_declared`).
+/// `check_model`: build the plant's model once now, so that a bad model is an error at resolve
+/// time (the launcher), not in the plant process.
+pub fn build(c: &LaunchConfig, check_model: bool) -> Result<Box<dyn Scenario>, LaunchError> {
+    let system = System::from_config(c)?;
+    let vectors = sensors::vectors(c, &system)?;
+    if check_model && !matches!(system.source, PlantSource::Python { .. }) {
+        let key = match system.source {
+            PlantSource::Linear(_) => "plant.linear",
+            _ => "plant.fmu",
+        };
+        declared_plant(&system).map_err(|message| c.error(key, message))?;
+    }
+    let file = std::path::Path::new(&system.spec.file);
+    let name = file.file_name().map_or_else(|| system.spec.file.clone(), |f| f.to_string_lossy().into_owned());
+    let title = format!("declared system {name}, {}", system.plant_title());
+    Ok(Box::new(Declared { system, vectors, title }))
+}
+
+/// The plant's model, built from its source.
+pub fn model(system: &System) -> Result<Box<dyn PlantModel>, String> {
+    match &system.source {
+        PlantSource::Linear(linear) => Ok(Box::new(LinearModel::new(linear.clone(), &system.spec))),
+        PlantSource::Fmu(path) => fmu::load(&system.spec, path),
+        PlantSource::Python { .. } => {
+            Err("a Python plant runs as its own python3 process; it cannot be built in this one".to_owned())
+        }
+    }
+}
+
+/// The plant over its model, at its initial state.
+pub fn declared_plant(system: &System) -> Result<DeclaredPlant, String> {
+    let model = model(system)?;
+    DeclaredPlant::new(model, system.vectors.outputs.len(), system.vectors.input.len(), system.substeps)
+        .map_err(|e| format!("{e:#}"))
+}
+
+pub struct Declared {
+    pub system: System,
+    vectors: &'static Vectors,
+    title: String,
+}
+
+impl Scenario for Declared {
+    fn vectors(&self) -> &'static Vectors {
+        self.vectors
+    }
+}
+
+impl ScenarioParts for Declared {
+    fn title(&self) -> String {
+        self.title.clone()
+    }
+
+    fn input_limits(&self) -> Vec<(f64, f64)> {
+        self.system.input_limits.clone()
+    }
+
+    fn plant(&self) -> Box<dyn Plant> {
+        match declared_plant(&self.system) {
+            Ok(plant) => Box::new(plant),
+            Err(error) => Box::new(FailedPlant { x: vec![0.0; self.vectors.state.len()], error }),
+        }
+    }
+
+    fn estimator(&self) -> Box<dyn Estimator> {
+        // With [stages.estimator] the user's runs and this one is never asked for an update.
+        Box::new(PassThrough { picks: self.system.pass_through.clone().unwrap_or_default() })
+    }
+
+    fn controller(&self) -> Box<dyn Controller> {
+        match &self.system.gains {
+            Some(gains) => Box::new(StateFeedback { gains: gains.clone(), limits: self.system.input_limits.clone() }),
+            None => Box::new(NoController),
+        }
+    }
+
+    fn metrics(&self) -> Box<dyn Metrics> {
+        metrics::generic(&self.system)
+    }
+
+    fn error_measure(&self) -> ErrorMeasure {
+        metrics::error_measure(&self.system)
+    }
+}
