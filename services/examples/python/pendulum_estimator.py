@@ -34,7 +34,7 @@ def sensor_of(config, signal):
 
 def section(config, name):
     """The launch file's [name], or a declared system's [parameters.name]."""
-    return config[name] if name in config else config["parameters"][name]
+    return config["parameters"][name] if name in config.get("parameters", {}) else config[name]
 
 
 class BiasObserver:

@@ -61,8 +61,8 @@ impl Plant {
 }
 
 /// Runs one plant step with the GIL held (see [`looplab_shared::runtime::user_plant::Hold`]).
-pub fn hold(step: &mut dyn FnMut()) {
-    Python::attach(|_| step());
+pub fn hold(step: &mut dyn FnMut() -> Result<()>) -> Result<()> {
+    Python::attach(|_| step())
 }
 
 pub struct PyPlantModel {

@@ -16,8 +16,9 @@ use crate::contract::protocol::{ProcessArgs, stage_env};
 use crate::contract::role::Role;
 use crate::model::plant_model::{ModelSpec, PlantModel};
 use crate::model::scenario::Plant;
-use crate::runtime::child::Context;
 use crate::runtime::user_stage::run_stage;
+use crate::scenarios::declared::plant::DeclaredPlant;
+use crate::scenarios::declared::system::System;
 
 /// What a user's plant model is told when it starts.
 pub struct PlantInfo<'a> {
@@ -32,11 +33,21 @@ pub struct PlantInfo<'a> {
 
 /// Runs each plant step: a model that must hold something while it is called (a Python model:
 /// the GIL, once per step rather than once per derivative) takes it here.
-pub type Hold = fn(&mut dyn FnMut());
+pub type Hold = fn(&mut dyn FnMut() -> Result<()>) -> Result<()>;
 
 /// Runs the plant the launcher started with `make`'s model.
 pub fn run_plant(make: impl FnOnce(&PlantInfo) -> Result<Box<dyn PlantModel>>) -> ExitCode {
     run_plant_holding(make, |step| step())
+}
+
+/// `f`'s value, made inside `hold`.
+fn hold_result<T>(hold: Hold, f: &mut dyn FnMut() -> Result<T>) -> Result<T> {
+    let mut value = None;
+    hold(&mut || {
+        value = Some(f()?);
+        Ok(())
+    })?;
+    Ok(value.expect("hold ran the call"))
 }
 
 /// [`run_plant`] with each plant step run inside `hold`.
@@ -51,29 +62,22 @@ pub fn run_plant_holding(make: impl FnOnce(&PlantInfo) -> Result<Box<dyn PlantMo
         return ExitCode::from(2);
     }
     run_stage(&[Role::Plant], layout_fingerprint(), |context, _| {
-        let spec = model_spec(context)?;
-        let info = PlantInfo { config: &context.config, spec: &spec, incarnation: context.incarnation };
+        let system = System::from_config(&context.config)?;
+        let info = PlantInfo { config: &context.config, spec: &system.spec, incarnation: context.incarnation };
         let model = make(&info).context("the plant's constructor failed")?;
-        let plant = declared_plant(model, &spec)?;
+        let (outputs, inputs) = (system.spec.outputs.len(), system.spec.input.len());
+        // Its initial state and outputs come from the model: with the GIL, as every later call.
+        let mut model = Some(model);
+        let plant = hold_result(hold, &mut || {
+            DeclaredPlant::new(model.take().expect("built once"), outputs, inputs, system.substeps)
+        })?;
         crate::runtime::plant::run_with(context, Box::new(Held { plant, hold }))
     })
 }
 
-/// The declared system's model spec for the run's launch file.
-fn model_spec(_context: &Context) -> Result<ModelSpec> {
-    // Wired to the declared system (scenarios::declared) at merge.
-    anyhow::bail!("a declared system's plant needs scenarios::declared")
-}
-
-/// The declared system's plant over `model`.
-fn declared_plant(_model: Box<dyn PlantModel>, _spec: &ModelSpec) -> Result<Box<dyn Plant>> {
-    // Wired to the declared system's DeclaredPlant at merge.
-    anyhow::bail!("a declared system's plant needs scenarios::declared")
-}
-
 /// A plant whose every step runs inside `hold`.
 struct Held {
-    plant: Box<dyn Plant>,
+    plant: DeclaredPlant,
     hold: Hold,
 }
 
@@ -81,13 +85,17 @@ impl Plant for Held {
     fn state(&self) -> &[f64] {
         self.plant.state()
     }
-    fn step(&mut self, t: f64, u: &[f64], dt: f64) {
+    fn step(&mut self, t: f64, u: &[f64], dt: f64) -> Result<()> {
         let plant = &mut self.plant;
-        (self.hold)(&mut || plant.step(t, u, dt));
+        (self.hold)(&mut || plant.step(t, u, dt))
     }
     fn restore(&mut self, state: &[f64]) {
         let plant = &mut self.plant;
-        (self.hold)(&mut || plant.restore(state));
+        // `restore` cannot fail: a model that refuses the state says so at the next step.
+        let _ = (self.hold)(&mut || {
+            plant.restore(state);
+            Ok(())
+        });
     }
     fn applied_input(&self) -> Option<&[f64]> {
         self.plant.applied_input()

@@ -2,7 +2,7 @@
 //! [`LaunchConfig`]; and the resolved file each loop process reads back.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
@@ -227,16 +227,14 @@ fn from_document(
     let hosts = Hosts::parse(&common.hosts, |key, message| origins.error(key, message))?;
     let current = std::env::current_dir().unwrap_or_default();
     let launch_folder = launch_folder.map(|f| current.join(f));
-    let folder_of = |key: &str| match &launch_folder {
-        Some(folder) if origins.of(key) == origins.file => folder.clone(),
-        _ => current.clone(),
-    };
-    let mut stages = Stages::parse(&common.stages, folder_of, |key, message| origins.error(key, message))?;
-    // A built-in scenario's [plant] is its own; only a declared system's may name a Python class.
-    if !document.contains_key("scenario") {
-        stages.plant = PythonPlant::parse(&document, folder_of(python_plant::KEY))
-            .map_err(|message| origins.error(python_plant::KEY, message))?;
-    }
+    let mut stages = Stages::parse(
+        &common.stages,
+        |key| match &launch_folder {
+            Some(folder) if origins.of(key) == origins.file => folder.clone(),
+            _ => current.clone(),
+        },
+        |key, message| origins.error(key, message),
+    )?;
     if let Some(toml::Value::Table(table)) = document.get_mut("stages") {
         stages.write_dirs(table);
     }
@@ -249,6 +247,13 @@ fn from_document(
     {
         let folder = launch_folder.clone().unwrap_or_else(|| current.clone());
         plant.insert("folder".into(), toml::Value::String(folder.display().to_string()));
+    }
+    // A built-in scenario's [plant] is its own; only a declared system's may name a Python class,
+    // found in the plant's folder, and the launcher starts it there.
+    if schema.name == declared::DECLARED {
+        let folder = document.get("plant").and_then(|p| p.get("folder")).and_then(|f| f.as_str()).map(PathBuf::from);
+        stages.plant = PythonPlant::parse(&document, folder.unwrap_or_else(|| current.clone()))
+            .map_err(|message| origins.error(python_plant::KEY, message))?;
     }
 
     let mut sensors: BTreeMap<String, SensorSpec> = common.sensors.into_iter().filter(|(_, s)| s.enabled).collect();
