@@ -141,6 +141,14 @@ fn check_plant(py: Python<'_>, spec: &str) -> u8 {
     }
 }
 
+/// What one plant step of the declared system `launch`'s Python plant costs, in ns: `ticks`
+/// steps as the plant process takes them (LoopLab's RK4, the GIL once per step), zero input.
+#[pyfunction]
+#[pyo3(signature = (launch, ticks = 20000))]
+fn plant_step_ns(py: Python<'_>, launch: &str, ticks: u64) -> PyResult<f64> {
+    plant::step_ns(py, launch, ticks).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("{e:#}")))
+}
+
 /// Runs the stage the launcher started with an instance of `cls` as its computation: returns
 /// when the run ends, or raises SystemExit with the stage's exit code if it failed (the reason
 /// is on stderr already).
@@ -157,6 +165,7 @@ fn looplab(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(run_plant, m)?)?;
     m.add_function(wrap_pyfunction!(check_plant, m)?)?;
+    m.add_function(wrap_pyfunction!(plant_step_ns, m)?)?;
     m.add("MAX_FROZEN_BYTES", looplab_shared::runtime::user_stage::MAX_FROZEN_BYTES)?;
     Ok(())
 }

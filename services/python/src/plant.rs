@@ -238,3 +238,29 @@ pub fn load_class<'py>(py: Python<'py>, spec: &str) -> std::result::Result<Bound
     }
     Ok(cls)
 }
+
+/// What one plant step of the declared system `launch`'s Python plant costs, in ns: the model
+/// stepped `ticks` times from its initial state with a zero input, by the plant process's own
+/// [`DeclaredPlant`], the GIL taken once per step as there (`looplab bench` and the report).
+pub fn step_ns(py: Python<'_>, launch: &str, ticks: u64) -> Result<f64> {
+    use looplab_shared::model::scenario::Plant as _;
+    use looplab_shared::scenarios::declared::{plant::DeclaredPlant, system::PlantSource, system::System};
+    let (config, _) = looplab_shared::scenarios::resolve(launch, &[]).map_err(|e| anyhow!("{e}"))?;
+    let system = System::from_config(&config).map_err(|e| anyhow!("{e}"))?;
+    let PlantSource::Python { file, class } = &system.source else {
+        bail!("{launch}: its plant is not a Python class")
+    };
+    let cls = load_class(py, &format!("{}:{class}", file.display())).map_err(|e| anyhow!(e))?;
+    let info = PlantInfo { config: &config, spec: &system.spec, incarnation: 0 };
+    let model = PyPlantModel::make(py, &cls, &info)?;
+    let (inputs, dt) = (system.spec.input.len(), system.spec.dt);
+    let mut plant = DeclaredPlant::new(model, system.spec.outputs.len(), inputs, system.substeps)?;
+    let u = vec![0.0; inputs];
+    py.detach(move || {
+        let start = std::time::Instant::now();
+        for k in 0..ticks {
+            hold(&mut || plant.step(k as f64 * dt, &u, dt))?;
+        }
+        Ok(start.elapsed().as_nanos() as f64 / ticks.max(1) as f64)
+    })
+}

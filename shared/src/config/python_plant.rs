@@ -25,81 +25,73 @@ pub const CHECK_PLANT: &str = "import sys, looplab; sys.exit(looplab.check_plant
 /// The dotted key of a Python plant in a launch file.
 pub const KEY: &str = "plant.python";
 
-/// `[plant] python`, checked for its form.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct PythonPlant {
-    /// `file.py:Class`, as written.
-    pub spec: String,
-    /// The command the launcher starts as the plant, in the launch file's folder.
-    pub command: StageCommand,
+/// `[plant] python` of `document`, if it has one: the command the launcher starts as the plant,
+/// in `dir` (the folder the file is found in, the launch file's). Err: what is wrong with its
+/// form, in words.
+pub fn parse(document: &toml::Table, dir: PathBuf) -> Result<Option<StageCommand>, String> {
+    let Some(value) = document.get("plant").and_then(|plant| plant.get("python")) else { return Ok(None) };
+    let spec = value.as_str().ok_or_else(|| {
+        format!("must be a string, the file and its class: \"my_plant.py:Pendulum\", got a {}", value.type_str())
+    })?;
+    let (file, class) = spec
+        .rsplit_once(':')
+        .ok_or_else(|| format!("\"{spec}\" names no class; write the file and its class: \"my_plant.py:Pendulum\""))?;
+    if !file.ends_with(".py") || file.len() == 3 {
+        return Err(format!("\"{spec}\": {file:?} is not a Python file (.py)"));
+    }
+    let identifier = class.chars().next().is_some_and(|c| c.is_alphabetic() || c == '_')
+        && class.chars().all(|c| c.is_alphanumeric() || c == '_');
+    if !identifier {
+        return Err(format!("\"{spec}\": {class:?} is not a Python class name"));
+    }
+    let command = ["python3", "-c", RUN_PLANT, spec].map(str::to_owned).to_vec();
+    Ok(Some(StageCommand { command, dir }))
 }
 
-impl PythonPlant {
-    /// `[plant] python` of `document`, if it has one. `dir`: the folder the file is found in (the
-    /// launch file's). Err: what is wrong with its form, in words.
-    pub fn parse(document: &toml::Table, dir: PathBuf) -> Result<Option<Self>, String> {
-        let Some(value) = document.get("plant").and_then(|plant| plant.get("python")) else { return Ok(None) };
-        let spec = value.as_str().ok_or_else(|| {
-            format!("must be a string, the file and its class: \"my_plant.py:Pendulum\", got a {}", value.type_str())
-        })?;
-        let (file, class) = spec.rsplit_once(':').ok_or_else(|| {
-            format!("\"{spec}\" names no class; write the file and its class: \"my_plant.py:Pendulum\"")
-        })?;
-        if !file.ends_with(".py") || file.len() == 3 {
-            return Err(format!("\"{spec}\": {file:?} is not a Python file (.py)"));
-        }
-        let identifier = class.chars().next().is_some_and(|c| c.is_alphabetic() || c == '_')
-            && class.chars().all(|c| c.is_alphanumeric() || c == '_');
-        if !identifier {
-            return Err(format!("\"{spec}\": {class:?} is not a Python class name"));
-        }
-        let command = ["python3", "-c", RUN_PLANT, spec].map(str::to_owned).to_vec();
-        Ok(Some(Self { spec: spec.to_owned(), command: StageCommand { command, dir } }))
-    }
+/// `file.py:Class` of a Python plant's command (what [`parse`] made).
+pub fn spec(plant: &StageCommand) -> &str {
+    plant.command.last().map_or("", String::as_str)
+}
 
-    /// The file, as written.
-    pub fn file(&self) -> &str {
-        self.spec.rsplit_once(':').map_or(&self.spec, |(file, _)| file)
+/// Checks, before anything starts, that the plant `parse` made can start: the file exists,
+/// python3 imports LoopLab's module, and the file's class has `derivative`. Err: what is wrong,
+/// one line.
+pub fn check(plant: &StageCommand) -> Result<(), String> {
+    let (spec, dir) = (spec(plant), &plant.dir);
+    let file = spec.rsplit_once(':').map_or(spec, |(file, _)| file);
+    if !dir.join(file).is_file() {
+        return Err(format!("{file} is not found in {}", dir.display()));
     }
-
-    /// Checks, before anything starts, that the plant can start: the file exists, python3 imports
-    /// LoopLab's module, and the file's class has `derivative`. Err: what is wrong, one line.
-    pub fn check(&self) -> Result<(), String> {
-        let dir = &self.command.dir;
-        if !dir.join(self.file()).is_file() {
-            return Err(format!("{} is not found in {}", self.file(), dir.display()));
-        }
-        self.command.check()?;
-        let program = self.command.program()?;
-        let checked = std::process::Command::new(&program)
-            .args(["-c", CHECK_PLANT, &self.spec])
-            .current_dir(dir)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .output()
-            .map_err(|e| format!("cannot run {}: {e}", program.display()))?;
-        if checked.status.success() {
-            return Ok(());
-        }
-        let why = String::from_utf8_lossy(&checked.stderr);
-        Err(why.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("its check failed").trim().to_owned())
+    plant.check()?;
+    let program = plant.program()?;
+    let checked = std::process::Command::new(&program)
+        .args(["-c", CHECK_PLANT, spec])
+        .current_dir(dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", program.display()))?;
+    if checked.status.success() {
+        return Ok(());
     }
+    let why = String::from_utf8_lossy(&checked.stderr);
+    Err(why.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("its check failed").trim().to_owned())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn parse(text: &str) -> Result<Option<PythonPlant>, String> {
-        PythonPlant::parse(&toml::from_str(text).unwrap(), PathBuf::from("/launch"))
+    fn parse(text: &str) -> Result<Option<StageCommand>, String> {
+        super::parse(&toml::from_str(text).unwrap(), PathBuf::from("/launch"))
     }
 
     #[test]
     fn a_python_plant_is_its_file_and_class_run_by_the_module_in_the_launch_folder() {
         let plant = parse("[plant]\npython = \"sub/my_plant.py:Pendulum\"\n").unwrap().unwrap();
-        assert_eq!(plant.file(), "sub/my_plant.py");
-        assert_eq!(plant.command.command, ["python3", "-c", RUN_PLANT, "sub/my_plant.py:Pendulum"]);
-        assert_eq!(plant.command.dir, PathBuf::from("/launch"));
+        assert_eq!(spec(&plant), "sub/my_plant.py:Pendulum");
+        assert_eq!(plant.command, ["python3", "-c", RUN_PLANT, "sub/my_plant.py:Pendulum"]);
+        assert_eq!(plant.dir, PathBuf::from("/launch"));
         assert_eq!(parse("[plant]\nlinear = {}\n").unwrap(), None);
         assert_eq!(parse("x = 1\n").unwrap(), None);
     }

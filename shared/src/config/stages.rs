@@ -32,8 +32,9 @@ pub struct StageCommand {
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Stages {
     pub commands: BTreeMap<Role, StageCommand>,
-    /// `[plant] python`: the plant as a Python class, started as the plant's command.
-    pub plant: Option<crate::config::python_plant::PythonPlant>,
+    /// `[plant] python`: the plant as a Python class, started as the plant's command
+    /// (`config::python_plant`).
+    pub plant: Option<StageCommand>,
 }
 
 impl Stages {
@@ -98,7 +99,7 @@ impl Stages {
     /// The command `role` starts as, if the launch file gives one (a Python plant's for the plant).
     pub fn command(&self, role: Role) -> Option<&StageCommand> {
         match role {
-            Role::Plant => self.plant.as_ref().map(|plant| &plant.command),
+            Role::Plant => self.plant.as_ref(),
             _ => self.commands.get(&role),
         }
     }

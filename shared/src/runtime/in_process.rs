@@ -41,7 +41,7 @@ pub fn refusal(config: &LaunchConfig) -> Option<String> {
     if let Some(plant) = &config.stages.plant {
         return Some(format!(
             "plant.python runs the plant as a Python process of its own (`{}`); run it as five processes",
-            plant.spec
+            crate::config::python_plant::spec(plant)
         ));
     }
     if let Some((role, stage)) = config.stages.commands.iter().next() {

@@ -15,7 +15,7 @@ use crate::config::launch::checks::{
 use crate::config::launch::declared;
 use crate::config::launch::overrides::{Override, merge, set_dotted};
 use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
-use crate::config::python_plant::{self, PythonPlant};
+use crate::config::python_plant;
 use crate::config::realtime::RealtimeSettings;
 use crate::config::schema::ScenarioSchema;
 use crate::config::stages::Stages;
@@ -153,7 +153,7 @@ fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
         stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
     }
     if let Some(plant) = &config.stages.plant {
-        plant.check().map_err(|message| config.error(python_plant::KEY, message))?;
+        python_plant::check(plant).map_err(|message| config.error(python_plant::KEY, message))?;
     }
     Ok(config)
 }
@@ -252,7 +252,7 @@ fn from_document(
     // found in the plant's folder, and the launcher starts it there.
     if schema.name == declared::DECLARED {
         let folder = document.get("plant").and_then(|p| p.get("folder")).and_then(|f| f.as_str()).map(PathBuf::from);
-        stages.plant = PythonPlant::parse(&document, folder.unwrap_or_else(|| current.clone()))
+        stages.plant = python_plant::parse(&document, folder.unwrap_or_else(|| current.clone()))
             .map_err(|message| origins.error(python_plant::KEY, message))?;
     }
 
