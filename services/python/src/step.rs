@@ -78,7 +78,7 @@ impl Step for PyStep {
 
 /// Prints the exception's traceback on stderr (the stage's log) and returns its last line
 /// (`ValueError: boom`) as the error, which the report and the timeline show.
-fn python_error(py: Python<'_>, err: PyErr) -> anyhow::Error {
+pub(crate) fn python_error(py: Python<'_>, err: PyErr) -> anyhow::Error {
     // traceback, not PyErr_Print: that one ends the process at once on a SystemExit, before
     // the runner has said goodbye.
     let formatted = (|| -> PyResult<(String, String)> {
@@ -105,14 +105,14 @@ const PYBUF_WRITE: std::ffi::c_int = 0x200;
 
 /// A run of f64s that Python sees as a float64 memoryview (format 'd'), made once: numpy
 /// (`numpy.asarray(x)`) wraps it without copying.
-struct Numbers {
+pub(crate) struct Numbers {
     data: NonNull<f64>,
     len: usize,
-    view: Py<PyAny>,
+    pub(crate) view: Py<PyAny>,
 }
 
 impl Numbers {
-    fn new(py: Python<'_>, len: usize, writable: bool) -> PyResult<Self> {
+    pub(crate) fn new(py: Python<'_>, len: usize, writable: bool) -> PyResult<Self> {
         // Leaked on purpose: a few numbers per process, and a view the user keeps (self.x = x)
         // must never point at freed memory, whenever Python lets go of it.
         let data = NonNull::from(Box::leak(vec![0.0f64; len].into_boxed_slice())).cast::<f64>();
@@ -126,12 +126,12 @@ impl Numbers {
         Ok(Self { data, len, view })
     }
 
-    fn set(&mut self, from: &[f64]) {
+    pub(crate) fn set(&mut self, from: &[f64]) {
         // SAFETY: `len` f64s, ours; Python touches them only while it runs the step.
         unsafe { std::slice::from_raw_parts_mut(self.data.as_ptr(), self.len) }.copy_from_slice(from);
     }
 
-    fn get(&self, into: &mut [f64]) {
+    pub(crate) fn get(&self, into: &mut [f64]) {
         // SAFETY: as in `set`.
         into.copy_from_slice(unsafe { std::slice::from_raw_parts(self.data.as_ptr(), self.len) });
     }

@@ -5,6 +5,7 @@ pub mod error;
 pub mod faults;
 pub mod hosts;
 pub mod launch;
+pub mod python_plant;
 pub mod realtime;
 pub mod schema;
 pub mod seed;

@@ -32,6 +32,9 @@ pub struct StageCommand {
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Stages {
     pub commands: BTreeMap<Role, StageCommand>,
+    /// `[plant] python`: the plant as a Python class, started as the plant's command
+    /// (`config::python_plant`).
+    pub plant: Option<StageCommand>,
 }
 
 impl Stages {
@@ -93,8 +96,12 @@ impl Stages {
         Ok(stages)
     }
 
+    /// The command `role` starts as, if the launch file gives one (a Python plant's for the plant).
     pub fn command(&self, role: Role) -> Option<&StageCommand> {
-        self.commands.get(&role)
+        match role {
+            Role::Plant => self.plant.as_ref(),
+            _ => self.commands.get(&role),
+        }
     }
 
     /// Writes each stage's folder into `table` (the document's `[stages]`), so that the resolved

@@ -38,6 +38,12 @@ pub fn refusal(config: &LaunchConfig) -> Option<String> {
             "[realtime] sets the priority of the loop's processes, and one process has none of its own".into(),
         );
     }
+    if let Some(plant) = &config.stages.plant {
+        return Some(format!(
+            "plant.python runs the plant as a Python process of its own (`{}`); run it as five processes",
+            crate::config::python_plant::spec(plant)
+        ));
+    }
     if let Some((role, stage)) = config.stages.commands.iter().next() {
         return Some(format!("stages.{role}.command runs the {role} as a process of its own (`{}`)", stage.text()));
     }

@@ -18,5 +18,6 @@ pub mod shm_secret;
 pub mod signals;
 pub mod snapshot;
 pub mod task;
+pub mod user_plant;
 pub mod user_stage;
 pub mod wait;

@@ -79,8 +79,17 @@ pub struct PlantCore {
 
 impl PlantCore {
     pub fn new(config: &LaunchConfig, scenario: &dyn Scenario, incarnation: u32) -> Self {
+        Self::with_plant(config, scenario, scenario.plant(), incarnation)
+    }
+
+    /// [`PlantCore::new`] with `plant` in place of the scenario's (a plant model of the user's own).
+    pub fn with_plant(
+        config: &LaunchConfig,
+        scenario: &dyn Scenario,
+        plant: Box<dyn crate::model::scenario::Plant>,
+        incarnation: u32,
+    ) -> Self {
         let supervision = &config.supervision;
-        let plant = scenario.plant();
         let mut held = [0.0; MAX_INPUT];
         if let Some(u) = plant.initial_input() {
             held[..u.len()].copy_from_slice(u);
@@ -377,12 +386,17 @@ impl PlantProcess {
 }
 
 pub fn run(context: &Context) -> Result<ChildEvent> {
+    run_with(context, context.scenario.plant())
+}
+
+/// The plant process with `plant` in place of the scenario's (`runtime::user_plant`).
+pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>) -> Result<ChildEvent> {
     let (wait_settings, realtime) = (&context.config.wait, context.config.mode == Mode::Realtime);
     let listens = reader_blocks(wait_settings, Topic::Command, realtime);
     let commands: TopicSubscriber<Command> = context.ipc.stage_subscriber(Topic::Command, listens)?;
     let supervision = &context.config.supervision;
     let mut p = PlantProcess {
-        core: PlantCore::new(&context.config, context.scenario.as_ref(), context.incarnation),
+        core: PlantCore::with_plant(&context.config, context.scenario.as_ref(), plant, context.incarnation),
         state_out: context.ipc.publisher(Topic::State, writer_wakes(&context.config, Topic::State))?,
         loop_out: context.ipc.publisher(Topic::Loop, false)?,
         snapshot: Snapshot::open(&context.run_id, Role::Plant.name())?,

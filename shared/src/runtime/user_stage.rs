@@ -102,7 +102,11 @@ pub fn run_estimator(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Estimator>>
 }
 
 /// The process of a user's stage: the role and run from the environment, then `body`.
-fn run_stage(roles: &[Role], layout: &str, body: impl FnOnce(&Context, Role) -> Result<ChildEvent>) -> ExitCode {
+pub(crate) fn run_stage(
+    roles: &[Role],
+    layout: &str,
+    body: impl FnOnce(&Context, Role) -> Result<ChildEvent>,
+) -> ExitCode {
     let names = || roles.iter().map(|r| r.name()).collect::<Vec<_>>().join(", ");
     let Some((role_name, args)) = ProcessArgs::from_env() else {
         eprintln!(

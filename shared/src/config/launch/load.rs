@@ -2,7 +2,7 @@
 //! [`LaunchConfig`]; and the resolved file each loop process reads back.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
@@ -15,6 +15,7 @@ use crate::config::launch::checks::{
 use crate::config::launch::declared;
 use crate::config::launch::overrides::{Override, merge, set_dotted};
 use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
+use crate::config::python_plant;
 use crate::config::realtime::RealtimeSettings;
 use crate::config::schema::ScenarioSchema;
 use crate::config::stages::Stages;
@@ -151,6 +152,9 @@ fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
     for (role, stage) in &config.stages.commands {
         stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
     }
+    if let Some(plant) = &config.stages.plant {
+        python_plant::check(plant).map_err(|message| config.error(python_plant::KEY, message))?;
+    }
     Ok(config)
 }
 
@@ -223,7 +227,7 @@ fn from_document(
     let hosts = Hosts::parse(&common.hosts, |key, message| origins.error(key, message))?;
     let current = std::env::current_dir().unwrap_or_default();
     let launch_folder = launch_folder.map(|f| current.join(f));
-    let stages = Stages::parse(
+    let mut stages = Stages::parse(
         &common.stages,
         |key| match &launch_folder {
             Some(folder) if origins.of(key) == origins.file => folder.clone(),
@@ -243,6 +247,13 @@ fn from_document(
     {
         let folder = launch_folder.clone().unwrap_or_else(|| current.clone());
         plant.insert("folder".into(), toml::Value::String(folder.display().to_string()));
+    }
+    // A built-in scenario's [plant] is its own; only a declared system's may name a Python class,
+    // found in the plant's folder, and the launcher starts it there.
+    if schema.name == declared::DECLARED {
+        let folder = document.get("plant").and_then(|p| p.get("folder")).and_then(|f| f.as_str()).map(PathBuf::from);
+        stages.plant = python_plant::parse(&document, folder.unwrap_or_else(|| current.clone()))
+            .map_err(|message| origins.error(python_plant::KEY, message))?;
     }
 
     let mut sensors: BTreeMap<String, SensorSpec> = common.sensors.into_iter().filter(|(_, s)| s.enabled).collect();
