@@ -79,7 +79,9 @@ impl Catalog {
         target: &str,
         overrides: &[Override],
     ) -> Result<(LaunchConfig, Box<dyn Scenario>), LaunchError> {
-        self.build(launch::resolve_config(target, overrides, &self.schemas())?, true)
+        let (config, scenario) = self.build(launch::resolve_config(target, overrides, &self.schemas())?, true)?;
+        launch::check_python_plant(&config)?;
+        Ok((config, scenario))
     }
 
     /// Reads a resolved launch file written by the launcher (what each loop process does).

@@ -152,10 +152,16 @@ fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
     for (role, stage) in &config.stages.commands {
         stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
     }
-    if let Some(plant) = &config.stages.plant {
-        python_plant::check(plant).map_err(|message| config.error(python_plant::KEY, message))?;
-    }
     Ok(config)
+}
+
+/// A Python plant that cannot start is bad input, found before anything starts. Checked once the
+/// scenario is built, so that what is wrong with the rest of `[plant]` is said first.
+pub fn check_python_plant(config: &LaunchConfig) -> Result<(), LaunchError> {
+    match &config.stages.plant {
+        Some(plant) => python_plant::check(plant).map_err(|message| config.error(python_plant::KEY, message)),
+        None => Ok(()),
+    }
 }
 
 /// Reads a resolved launch file written by the launcher (what each loop process does).

@@ -16,6 +16,6 @@ mod overrides;
 mod types;
 
 pub use crate::config::error::{COMMON_KEYS, LaunchError};
-pub use load::{load_resolved_config, resolve_config};
+pub use load::{check_python_plant, load_resolved_config, resolve_config};
 pub use overrides::{Override, merge};
 pub use types::{LaunchConfig, MAX_DURATION_S, MAX_LOOPS, MAX_RATE_HZ, Mode, PerComponent, SensorSpec};
