@@ -83,6 +83,8 @@ gains = [[0.0, 0.0]]
     assert_eq!(s.restarts[&Role::Plant], 1);
     assert_eq!(s.faults[0].detected_by, Some(DetectedBy::ProcessExited), "{:?}", s.faults[0]);
     assert!(s.faults[0].restarted_after_ms.is_some(), "{:?}", s.faults[0]);
+    // The linear model has no state of its own beyond the vector, and the report says what it went on from.
+    assert!(s.notes.iter().any(|n| n.contains("went on from the state vector alone")), "{:?}", s.notes);
     assert_nothing_left(s);
     // Loops the dead plant never published have empty cells: only the rows with a state count.
     let text = std::fs::read_to_string(r.dir.join("trajectory.csv")).unwrap();

@@ -183,6 +183,10 @@ pub struct PlantReport {
     pub counters: crate::contract::msg::PlantCounters,
     /// A restarted plant: the tick its snapshot held.
     pub restored_at: Option<u64>,
+    /// A restarted plant of the user's own model that went on from the state vector alone (its
+    /// model does not serialise itself), in words for the report.
+    #[serde(default)]
+    pub resumed_note: Option<String>,
     /// Lockstep: the loop whose command never came (`supervision.lockstep_stall_s`).
     pub stalled_at: Option<u64>,
     /// CLOCK_MONOTONIC of the first and last state published.

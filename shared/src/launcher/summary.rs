@@ -477,7 +477,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
             dropped_for_monitor: plant.dropped + stage_total(|r| r.dropped),
         },
         metrics: monitor.metrics.clone(),
-        notes: monitor.notes.clone(),
+        notes: monitor.notes.iter().chain(&plant.resumed_note).cloned().collect(),
         diverged_at_loop: monitor.diverged_at,
         error_measure: scenario.error_measure().describe(),
         limits: verdict::judge(&monitor.limits, &scenario.error_measure().describe()),

@@ -405,6 +405,13 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
     let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.core.restore(&s)).is_some();
     p.open_model_snapshot(&context.run_id, restored.then_some(p.k))?;
     p.report.restored_at = restored.then_some(p.k);
+    if restored && p.model_snapshot.is_none() && context.config.is_declared() {
+        p.report.resumed_note = Some(format!(
+            "the plant restarted at loop {} went on from the state vector alone: its model does not serialise its \
+             own state, so any internal state beyond the declared one started again from its initial values",
+            p.k
+        ));
+    }
     let ws = waitset()?;
     let _wake = commands.attach_to(&ws)?;
     commands.connect(&context.stop)?;

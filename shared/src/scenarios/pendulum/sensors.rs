@@ -5,7 +5,11 @@ use crate::model::vectors::{Component, Read, Signal};
 
 pub const SIGNALS: &[Signal] = &[
     // The incremental encoder on the pivot: the pendulum angle.
-    Signal { name: "theta", components: &[Component::new("theta", "rad")], read: Read::Computed(|_, x, _, out| out[0] = x[0]) },
+    Signal {
+        name: "theta",
+        components: &[Component::new("theta", "rad")],
+        read: Read::Computed(|_, x, _, out| out[0] = x[0]),
+    },
     // The motor controller's speed measurement: wheel speed relative to the pendulum.
     Signal {
         name: "wheel_speed",

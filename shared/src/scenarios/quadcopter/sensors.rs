@@ -7,9 +7,21 @@ use crate::model::vectors::{Read, Signal};
 
 pub const SIGNALS: &[Signal] = &[
     // Motion capture: position in {I} and the rotation matrix, row-major.
-    Signal { name: "pose", components: &POSE, read: Read::Computed(|_, x, _, out| out[..12].copy_from_slice(&x[..12])) },
+    Signal {
+        name: "pose",
+        components: &POSE,
+        read: Read::Computed(|_, x, _, out| out[..12].copy_from_slice(&x[..12])),
+    },
     // Linear velocity in the body frame.
-    Signal { name: "velocity", components: &VELOCITY, read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[12..15])) },
+    Signal {
+        name: "velocity",
+        components: &VELOCITY,
+        read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[12..15])),
+    },
     // Body angular velocity.
-    Signal { name: "angular_rate", components: &RATE, read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[15..18])) },
+    Signal {
+        name: "angular_rate",
+        components: &RATE,
+        read: Read::Computed(|_, x, _, out| out[..3].copy_from_slice(&x[15..18])),
+    },
 ];

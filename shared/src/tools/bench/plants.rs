@@ -17,12 +17,13 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use serde::Serialize;
 
 use crate::config::launch::Override;
+use crate::config::stages::StageCommand;
 use crate::contract::msg::Stamp;
 use crate::launcher::{Binaries, Outcome};
 use crate::model::catalog::Catalog;
@@ -47,7 +48,33 @@ pub type Prepare = fn(&Path) -> Result<Vec<String>, String>;
 pub const PLANT_ROWS: &[PlantRow] = &[
     PlantRow { label: "built-in Rust pendulum", target: "pendulum", prepare: None },
     PlantRow { label: "declared linear (launch/declared.toml)", target: "launch/declared.toml", prepare: None },
+    PlantRow { label: "FMU pendulum, FMI 2.0 Model Exchange", target: FMU_PENDULUM, prepare: Some(fmu_model_exchange) },
+    PlantRow { label: "FMU pendulum, FMI 2.0 Co-Simulation", target: FMU_PENDULUM, prepare: Some(fmu_co_simulation) },
+    PlantRow { label: "Python pendulum", target: "services/examples/python/pendulum_plant.toml", prepare: None },
 ];
+
+/// The FMU pendulum with the built-in estimator and controller, so the rows differ in the plant only.
+const FMU_PENDULUM: &str = "services/examples/fmu/pendulum_fmu_state_feedback.toml";
+
+fn fmu_model_exchange(out: &Path) -> Result<Vec<String>, String> {
+    fmu_pendulum(out, "model-exchange")
+}
+
+fn fmu_co_simulation(out: &Path) -> Result<Vec<String>, String> {
+    fmu_pendulum(out, "co-simulation")
+}
+
+/// Builds the project's pendulum FMU (FMI 2.0) into `out` and selects its `interface`.
+fn fmu_pendulum(out: &Path, interface: &str) -> Result<Vec<String>, String> {
+    use crate::scenarios::declared::fmu::{Version, build_fmu, pendulum_source};
+    let fmu = out.join("pendulum.fmu");
+    if !fmu.exists() {
+        std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+        build_fmu(&pendulum_source(), Version::Fmi2, &fmu)?;
+    }
+    let path = toml::Value::String(fmu.display().to_string());
+    Ok(vec![format!("plant.fmu={path}"), format!("plant.fmu_interface=\"{interface}\"")])
+}
 
 /// One plant's numbers.
 #[derive(Debug, Clone, Serialize)]
@@ -85,8 +112,10 @@ fn locate(target: &str) -> Result<String, String> {
 /// Steps `target`'s plant `ticks` times; ns per tick (median of 5 batches) and its title.
 pub fn step_cost(catalog: &Catalog, target: &str, overrides: &[Override], ticks: u64) -> Result<(f64, String)> {
     let (config, scenario) = catalog.resolve(target, overrides)?;
+    if let Some(plant) = &config.stages.plant {
+        return Ok((python_step_cost(plant, target, overrides, ticks)?, scenario.title()));
+    }
     let mut plant = scenario.plant();
-    let initial = plant.state().to_vec();
     let input = match plant.initial_input() {
         Some(u) => u.to_vec(),
         None => vec![0.0; scenario.input_names().len()],
@@ -96,20 +125,47 @@ pub fn step_cost(catalog: &Catalog, target: &str, overrides: &[Override], ticks:
     let mut k: u64 = 0;
     let mut per_tick = Vec::with_capacity(5);
     for _ in 0..5 {
-        let start = Instant::now();
+        let mut elapsed = Duration::ZERO;
+        let mut start = Instant::now();
         for _ in 0..batch {
             if k == run_ticks {
-                plant.restore(&initial);
+                // A fresh plant for the next run, built off the clock (a co-simulation FMU cannot
+                // be set back to its initial state).
+                elapsed += start.elapsed();
+                plant = scenario.plant();
                 k = 0;
+                start = Instant::now();
             }
             plant.step(k as f64 * dt, &input, dt)?;
             std::hint::black_box(plant.state());
             k += 1;
         }
-        per_tick.push(start.elapsed().as_nanos() as f64 / batch as f64);
+        elapsed += start.elapsed();
+        per_tick.push(elapsed.as_nanos() as f64 / batch as f64);
     }
     per_tick.sort_by(f64::total_cmp);
     Ok((per_tick[2], scenario.title()))
+}
+
+/// A Python plant steps only in a python3 process with the `looplab` module: there, as its plant
+/// process steps it (`looplab.plant_step_ns`). Overrides are not passed on: it measures the file.
+fn python_step_cost(plant: &StageCommand, target: &str, overrides: &[Override], ticks: u64) -> Result<f64> {
+    anyhow::ensure!(
+        overrides.is_empty(),
+        "a Python plant's step is measured from its launch file alone, without --set"
+    );
+    let launch = std::fs::canonicalize(target).with_context(|| format!("{target}: cannot find it"))?;
+    let output = std::process::Command::new(&plant.command[0])
+        .args(["-c", "import sys, looplab; print(looplab.plant_step_ns(sys.argv[1], int(sys.argv[2])))"])
+        .arg(&launch)
+        .arg(ticks.min(200_000).to_string())
+        .current_dir(&plant.dir)
+        .output()
+        .with_context(|| format!("cannot start {}", plant.command[0]))?;
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    anyhow::ensure!(output.status.success(), "python3: {}", stderr.trim().lines().last().unwrap_or("failed"));
+    let text = String::from_utf8_lossy(&output.stdout);
+    text.trim().parse().with_context(|| format!("python3 printed {text:?}, not a number of ns"))
 }
 
 /// Lockstep loops per second of `target` in one process over `loops` loops; Err(why) where the

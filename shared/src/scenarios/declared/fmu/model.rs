@@ -160,7 +160,8 @@ impl PlantModel for FmuModel {
             FmiKind::CoSimulation => {
                 let _ = x;
                 bail!(
-                    "{}: a Co-Simulation FMU's state cannot be set from outside; it does not serialise its state",
+                    "{}: a Co-Simulation FMU's state cannot be set from a state vector, and no saved FMU state \
+                     was found (it does not serialise its state, or its state is over the snapshot's 1 MiB)",
                     self.describe
                 )
             }
