@@ -117,6 +117,12 @@ pub(super) fn check_sensors(c: &LaunchConfig) -> Result<(), LaunchError> {
     for (name, s) in &c.sensors {
         let Some(signal) = c.schema.signal(&s.signal) else {
             let names: Vec<_> = c.schema.signals.iter().map(|sig| sig.name).collect();
+            if s.signal.is_empty() {
+                return Err(c.error(
+                    &format!("sensors.{name}"),
+                    format!("has no `signal`: which one it measures; allowed: {}", names.join(", ")),
+                ));
+            }
             return Err(c.error(
                 &format!("sensors.{name}.signal"),
                 format!("unknown signal \"{}\"; allowed: {}", s.signal, names.join(", ")),
