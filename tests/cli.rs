@@ -54,7 +54,11 @@ fn bad_input_is_one_clear_error_with_exit_code_2() {
     );
     rejects(
         &["pendulum", "--set", "sensors.gyro.period_s=0.01"],
-        &["--set sensors.gyro.period_s=0.01", "key `sensors.gyro`", "has no `signal`: which one it measures; allowed: theta, wheel_speed"],
+        &[
+            "--set sensors.gyro.period_s=0.01",
+            "key `sensors.gyro`",
+            "has no `signal`: which one it measures; allowed: theta, wheel_speed",
+        ],
     );
     rejects(&["pendulum", "--set", "estimator.kind=kalman"], &["key `estimator.kind`", "bias-observer", "no-bias"]);
     rejects(&["pendulum", "--rate", "0"], &["key `rate_hz`", "positive"]);

@@ -6,7 +6,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use common::*;
@@ -14,32 +14,8 @@ use looplab_shared::scenarios::declared::fmu::{Version, build_fmu, pendulum_sour
 
 const LAUNCH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/fmu/pendulum_fmu.toml");
 
-/// The Python stages' `looplab` module: this build's, linked where the stages import it from.
-fn module_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let target = Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher's folder");
-        if let Some(cargo) = std::env::var_os("CARGO") {
-            let mut build = std::process::Command::new(cargo);
-            build.args(["build", "--quiet", "-p", "looplab-python"]).current_dir(env!("CARGO_MANIFEST_DIR"));
-            if target.file_name().is_some_and(|name| name == "release") {
-                build.arg("--release");
-            }
-            assert!(build.status().expect("start cargo").success(), "cargo build -p looplab-python failed");
-        }
-        let dir = target.join("python-module-fmu");
-        std::fs::create_dir_all(&dir).unwrap();
-        let module = dir.join("looplab.so");
-        let _ = std::fs::remove_file(&module);
-        std::os::unix::fs::symlink(target.join("liblooplab.so"), &module).unwrap();
-        dir
-    })
-}
-
 fn launcher() -> std::process::Command {
-    let mut command = looplab();
-    command.env("PYTHONPATH", module_dir());
-    command
+    python_launcher("python-module-fmu")
 }
 
 /// The pendulum FMU of `version`, built once per test process.

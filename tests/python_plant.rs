@@ -6,45 +6,14 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use common::*;
 use looplab_shared::contract::role::Role;
 
 const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/python");
 
-/// A folder from which Python imports the `looplab` module that cargo builds: the workspace's
-/// `liblooplab.so` under the name Python looks for (as tests/python_stage.rs makes it, in a
-/// folder of its own so that the two test binaries never race on one link).
-fn module_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let target = Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher's folder");
-        if let Some(cargo) = std::env::var_os("CARGO") {
-            let mut build = std::process::Command::new(cargo);
-            build.args(["build", "--quiet", "-p", "looplab-python"]).current_dir(env!("CARGO_MANIFEST_DIR"));
-            if target.file_name().is_some_and(|name| name == "release") {
-                build.arg("--release");
-            }
-            let status = build.status().expect("start cargo");
-            assert!(status.success(), "cargo build -p looplab-python failed: {status}");
-        }
-        let built = target.join("liblooplab.so");
-        assert!(built.exists(), "{} is missing: build the workspace first", built.display());
-        let dir = target.join("python-module-plant");
-        std::fs::create_dir_all(&dir).unwrap();
-        let module = dir.join("looplab.so");
-        let _ = std::fs::remove_file(&module);
-        std::os::unix::fs::symlink(&built, &module).unwrap();
-        dir
-    })
-}
-
-/// The launcher, with the module importable by the plant and stages it starts.
 fn launcher() -> std::process::Command {
-    let mut command = looplab();
-    command.env("PYTHONPATH", module_dir());
-    command
+    python_launcher("python-module-plant")
 }
 
 fn example(file: &str) -> String {

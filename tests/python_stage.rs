@@ -4,9 +4,6 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
-
 use common::*;
 
 const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/python");
@@ -14,43 +11,8 @@ const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/p
 /// Gains other than the defaults that still hold the pendulum up.
 const OTHER_GAINS: &str = "controller.gains=[-450.0, -65.0, -1.2]";
 
-/// A folder from which Python imports the `looplab` module that cargo builds: the workspace's
-/// `liblooplab.so` under the name Python looks for, `looplab.so` (no maturin needed).
-fn module_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let target = Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher's folder");
-        // The module is not a dependency of these tests, so cargo may not have built it (or not
-        // since the last change): build it, a no-op when it is fresh.
-        if let Some(cargo) = std::env::var_os("CARGO") {
-            let mut build = std::process::Command::new(cargo);
-            build.args(["build", "--quiet", "-p", "looplab-python"]).current_dir(env!("CARGO_MANIFEST_DIR"));
-            if target.file_name().is_some_and(|name| name == "release") {
-                build.arg("--release");
-            }
-            let status = build.status().expect("start cargo");
-            assert!(status.success(), "cargo build -p looplab-python failed: {status}");
-        }
-        let built = target.join("liblooplab.so");
-        assert!(
-            built.exists(),
-            "{} is missing: build the workspace first (`cargo build --release --workspace`)",
-            built.display()
-        );
-        let dir = target.join("python-module");
-        std::fs::create_dir_all(&dir).unwrap();
-        let module = dir.join("looplab.so");
-        let _ = std::fs::remove_file(&module);
-        std::os::unix::fs::symlink(&built, &module).unwrap();
-        dir
-    })
-}
-
-/// The launcher, with the module importable by the stages it starts.
 fn launcher() -> std::process::Command {
-    let mut command = looplab();
-    command.env("PYTHONPATH", module_dir());
-    command
+    python_launcher("python-module")
 }
 
 fn example(file: &str) -> String {

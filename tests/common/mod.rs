@@ -28,6 +28,38 @@ pub fn looplab() -> Command {
     command
 }
 
+/// The launcher, with the `looplab` Python module that cargo builds importable by the stages and
+/// plants it starts: the workspace's `liblooplab.so` linked as `looplab.so` into `target/<folder>`
+/// (a folder per test binary, so that two binaries never race on one link).
+pub fn python_launcher(folder: &str) -> Command {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    let dir = DIR.get_or_init(|| {
+        let target = Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher's folder");
+        // The module is not a dependency of the tests, so cargo may not have built it (or not
+        // since the last change): build it, a no-op when it is fresh.
+        if let Some(cargo) = std::env::var_os("CARGO") {
+            let mut build = Command::new(cargo);
+            build.args(["build", "--quiet", "-p", "looplab-python"]).current_dir(env!("CARGO_MANIFEST_DIR"));
+            if target.file_name().is_some_and(|name| name == "release") {
+                build.arg("--release");
+            }
+            let status = build.status().expect("start cargo");
+            assert!(status.success(), "cargo build -p looplab-python failed: {status}");
+        }
+        let built = target.join("liblooplab.so");
+        assert!(built.exists(), "{} is missing: build the workspace first", built.display());
+        let dir = target.join(folder);
+        std::fs::create_dir_all(&dir).unwrap();
+        let module = dir.join("looplab.so");
+        let _ = std::fs::remove_file(&module);
+        std::os::unix::fs::symlink(&built, &module).unwrap();
+        dir
+    });
+    let mut command = looplab();
+    command.env("PYTHONPATH", dir);
+    command
+}
+
 /// Nothing of the run is left: the launcher found its shared memory clean, no file of it is in
 /// /dev/shm, and none of its processes is alive.
 pub fn assert_nothing_left(s: &Summary) {
