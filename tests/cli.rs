@@ -27,6 +27,7 @@ fn help_explains_the_commands_and_options() {
 fn list_names_the_scenarios_and_show_prints_their_keys() {
     let list = stdout_of(&["list"]);
     assert!(list.contains("pendulum") && list.contains("launch/pendulum.toml"), "{list}");
+    assert!(list.contains("[system]") && list.contains("launch/declared.toml"), "a system of your own: {list}");
     let show = stdout_of(&["show", "pendulum"]);
     assert_eq!(show, std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/launch/pendulum.toml")).unwrap());
 }

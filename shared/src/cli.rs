@@ -383,6 +383,10 @@ fn list(catalog: &Catalog) {
     for s in catalog.entries() {
         say!("  {:<12} {}  [{}]", s.name, s.description, s.file);
     }
+    say!(
+        "A system of your own: a launch file with a [system] table and no `scenario` (its plant linear, an FMU or \
+         Python; every key in launch/declared.toml): looplab run my_system.toml"
+    );
 }
 
 fn bad_input(message: impl std::fmt::Display) -> ExitCode {
