@@ -82,10 +82,32 @@ fn a_bad_fmu_is_one_line_and_exit_2() {
     std::fs::create_dir_all(&dir).unwrap();
     let corrupt = dir.join("corrupt.fmu");
     std::fs::write(&corrupt, b"not a zip").unwrap();
-    let cases: [(String, &str); 4] = [
+    // The same FMU as if built for Windows only: its binary moved to binaries/win64.
+    let windows = dir.join("windows.fmu");
+    let moved = std::process::Command::new("python3")
+        .args([
+            "-c",
+            "import sys, zipfile\nsrc, dst = zipfile.ZipFile(sys.argv[1]), zipfile.ZipFile(sys.argv[2], 'w')\n\
+                      for i in src.infolist(): dst.writestr(i.filename.replace('linux64', 'win64'), src.read(i))\n\
+                      dst.close()",
+        ])
+        .arg(fmu(Version::Fmi2))
+        .arg(&windows)
+        .status()
+        .unwrap();
+    assert!(moved.success());
+    let cases: [(String, &str); 6] = [
         (format!("plant.fmu=\"{}\"", dir.join("missing.fmu").display()), "missing.fmu: cannot open the FMU"),
         (format!("plant.fmu=\"{}\"", corrupt.display()), "corrupt.fmu: not an FMU (a zip archive)"),
+        (
+            format!("plant.fmu=\"{}\"", windows.display()),
+            "windows.fmu: no binary for this platform (linux64); the FMU has binaries for: win64",
+        ),
         ("plant.parameters.mass=1.0".into(), "has no parameter \"mass\" ([plant.parameters]); its parameters: m_p"),
+        (
+            "system.outputs=[{ name = \"power\", unit = \"W\" }]".into(),
+            "has no output \"power\" ([system] outputs); its outputs: energy",
+        ),
         ("plant.fmu_interface=\"scheduled\"".into(), "\"scheduled\": one of model-exchange, co-simulation"),
     ];
     for (set, expected) in cases {
@@ -99,6 +121,7 @@ fn a_bad_fmu_is_one_line_and_exit_2() {
         assert_eq!(output.status.code(), Some(2), "{set}: {stderr}");
         assert!(stderr.contains(expected), "{set}: {stderr}\n  should say: {expected}");
         assert_eq!(stderr.trim().lines().count(), 1, "{set}: {stderr}");
+        assert!(!dir.join("run").exists(), "{set}: nothing starts, so no run folder and no shared memory");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
