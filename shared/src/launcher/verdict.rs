@@ -113,6 +113,10 @@ impl LimitsVerdict {
             |t: f64| format!("limits exceeded at t = {} s ({} = {})", number(t), self.limit_key, number(self.limit));
         match self.verdict {
             Verdict::NotJudged => "not judged: the monitor recorded no state of the plant".into(),
+            // A declared system without [limits] has no limit to stay within (the largest f64).
+            Verdict::WithinLimits if self.limit >= f64::MAX => {
+                format!("no limit set (the launch file has no [limits]); {}: {worst}", self.measure)
+            }
             Verdict::WithinLimits => format!(
                 "within limits: {} stayed within {} ({}); {worst}",
                 self.measure,
@@ -190,6 +194,15 @@ mod tests {
         );
         assert_eq!(limits_failure(&v), None);
         assert_eq!(judge(&LimitsWatch::default(), &pendulum()).verdict, Verdict::NotJudged);
+        // A declared system without [limits]: no limit, and the line says so rather than "within inf".
+        let unlimited = ErrorMeasureInfo { limit: f64::MAX, recovery_band: f64::MAX, lost_beyond: None, ..pendulum() };
+        let mut watch = LimitsWatch::default();
+        for (k, e) in [0.05, 43.7].into_iter().enumerate() {
+            watch.observe(k as f64 / 1000.0, e, f64::MAX, None);
+        }
+        let v = judge(&watch, &unlimited);
+        assert_eq!(v.verdict, Verdict::WithinLimits);
+        assert_eq!(v.line(), "no limit set (the launch file has no [limits]); |theta| rad: worst 43.7 at t = 0.001 s");
     }
 
     #[test]
