@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use common::{fresh_dir, looplab, run};
-use looplab_shared::monitor::layout::column_name;
+use looplab_shared::model::layout::column_name;
 use serde_json::Value;
 
 const TOPICS: [&str; 7] = ["/state", "/measurements", "/estimate", "/command", "/loop", "/latency", "/faults"];

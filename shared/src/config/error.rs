@@ -4,7 +4,7 @@
 use std::fmt;
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-pub const COMMON_KEYS: [&str; 13] = [
+pub const COMMON_KEYS: [&str; 14] = [
     "scenario",
     "mode",
     "rate_hz",
@@ -18,6 +18,7 @@ pub const COMMON_KEYS: [&str; 13] = [
     "realtime",
     "hosts",
     "stages",
+    "replay",
 ];
 
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -7,6 +7,7 @@ pub mod hosts;
 pub mod launch;
 pub mod python_plant;
 pub mod realtime;
+pub mod replay;
 pub mod schema;
 pub mod seed;
 pub mod stages;

@@ -6,6 +6,7 @@ pub mod catalog;
 pub mod command_link;
 pub mod figure;
 pub mod integrate;
+pub mod layout;
 pub mod mean;
 pub mod plant_model;
 pub mod poly;

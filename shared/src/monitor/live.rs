@@ -7,8 +7,8 @@ use std::collections::VecDeque;
 use crate::config::schema::Component;
 use crate::contract::protocol::{LiveLatency, LiveStatus, SignalPoint};
 use crate::contract::report::HOPS;
+use crate::model::layout::Layout;
 use crate::monitor::join::LoopParts;
-use crate::monitor::layout::Layout;
 use crate::monitor::stats::{Distribution, LoopStats};
 
 /// Points of the key signals per second of simulation time.

@@ -19,7 +19,6 @@ pub mod fault_effect;
 pub mod fault_phases;
 pub mod injections;
 pub mod join;
-pub mod layout;
 pub mod live;
 pub mod process;
 pub mod recording;

@@ -12,12 +12,12 @@ use crate::contract::msg::{Command, Estimate, MONITOR_BUFFER, Measurements, Plan
 use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::role::Role;
+use crate::model::layout::Layout;
 use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 use crate::monitor::crossing::Crossing;
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::injections::{self, Injection};
 use crate::monitor::join::{Joiner, LoopParts, Sample};
-use crate::monitor::layout::Layout;
 use crate::monitor::live::Live;
 use crate::monitor::resume::{self, Frozen, Thawed};
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};

@@ -63,8 +63,8 @@ pub fn read(path: &Path) -> Result<Option<Thawed>> {
 mod tests {
     use crate::config::launch::Override;
     use crate::contract::msg::SensorReading;
+    use crate::model::layout::Layout;
     use crate::model::scenario::{Metrics, Row};
-    use crate::monitor::layout::Layout;
     use crate::scenarios::{builtin, resolve};
 
     /// Loop k of a made-up trajectory: every value moving, each differently.

@@ -10,6 +10,7 @@ pub mod plant;
 pub mod private_file;
 pub mod reader_state;
 pub mod realtime;
+pub mod recorded;
 pub mod relay;
 pub mod run_file;
 pub mod run_storage;

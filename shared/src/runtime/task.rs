@@ -39,6 +39,12 @@ pub trait Task {
     }
     /// Replaces the output by a corrupt value (`corrupt` faults, which target the command).
     fn corrupt(&self, _output: &mut Self::Out, _value: CorruptValue) {}
+    /// Whether this task has no output for loop k (a playback whose recording has none, or
+    /// whose replayed stage skipped it): the runner sends the loop on marked lost, as a drop
+    /// fault does in lockstep, so that the stages after it skip it too.
+    fn withheld(&self, _k: u64) -> bool {
+        false
+    }
 }
 
 /// The sensors: every sensor's held reading at the plant's tick.
@@ -251,7 +257,9 @@ impl<T: Task> StageRunner<T> {
         }
         *out.header_mut() = header;
         out.header_mut().set_incarnation(self.role, self.incarnation);
-        if self.faults.drops(k) {
+        if self.task.withheld(k) {
+            out.header_mut().lost = 1;
+        } else if self.faults.drops(k) {
             self.report.dropped_by_fault += 1;
             if !self.drop_sends_lost {
                 return Ok(Handled { hold, output: None });

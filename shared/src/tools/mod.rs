@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod compare;
+pub mod diff;
 pub mod export;
 pub mod plot;
 pub mod run_folder;

@@ -17,6 +17,7 @@ use crate::config::launch::overrides::{Override, merge, set_dotted};
 use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
 use crate::config::python_plant;
 use crate::config::realtime::RealtimeSettings;
+use crate::config::replay::ReplaySpec;
 use crate::config::schema::ScenarioSchema;
 use crate::config::stages::Stages;
 use crate::config::wait::WaitSettings;
@@ -51,6 +52,8 @@ struct CommonKeys {
     /// Read by `Stages::parse`, likewise.
     #[serde(default)]
     stages: toml::Table,
+    #[serde(default)]
+    replay: Option<ReplaySpec>,
 }
 
 /// The names of the scenarios of `catalog`, for error messages.
@@ -287,6 +290,7 @@ fn from_document(
         realtime: common.realtime,
         hosts,
         stages,
+        replay: common.replay,
         document,
         schema: schema.clone(),
         origins,
@@ -296,6 +300,9 @@ fn from_document(
     check_supervision(&config.supervision, &config)?;
     check_wait(&config.wait, &config)?;
     check_realtime(&config)?;
+    if let Some(replay) = &config.replay {
+        replay.check().map_err(|(key, message)| config.error(&key, message))?;
+    }
     for (i, fault) in config.faults.iter().enumerate() {
         check_fault(fault, &config, &format!("faults.{i}"))?;
     }

@@ -10,6 +10,7 @@ use crate::config::error::LaunchError;
 use crate::config::faults::{FaultSpec, Supervision};
 use crate::config::hosts::Hosts;
 use crate::config::realtime::RealtimeSettings;
+use crate::config::replay::ReplaySpec;
 use crate::config::schema::{ScenarioSchema, SignalLayout};
 use crate::config::stages::Stages;
 use crate::config::wait::WaitSettings;
@@ -125,6 +126,8 @@ pub struct LaunchConfig {
     pub hosts: Hosts,
     /// Stages of the user's own, run in place of the built-in ones.
     pub stages: Stages,
+    /// A replay of a recorded run into one stage (`looplab replay`).
+    pub replay: Option<ReplaySpec>,
     /// The whole resolved document, as written to the run folder.
     pub document: toml::Table,
     /// The scenario it was checked against.

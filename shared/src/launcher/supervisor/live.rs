@@ -11,8 +11,8 @@ use crate::config::launch::LaunchConfig;
 use crate::contract::protocol::MonitorStatus;
 use crate::launcher::dashboard::{self, Dashboard, ProcessRow, Update};
 use crate::launcher::summary::TimelineEntry;
+use crate::model::layout::Layout;
 use crate::model::scenario::Scenario;
-use crate::monitor::layout::Layout;
 use crate::monitor::live::{Truth, key_signals};
 
 /// What the user sees while a run goes on.

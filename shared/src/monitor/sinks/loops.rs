@@ -11,7 +11,7 @@ use anyhow::Result;
 
 use crate::config::launch::Mode;
 use crate::contract::msg::LoopTrace;
-use crate::monitor::layout::column_name;
+use crate::model::layout::column_name;
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 
 pub struct LoopsCsv {

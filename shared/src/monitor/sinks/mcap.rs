@@ -17,7 +17,7 @@ use crate::config::schema::Component;
 use crate::contract::msg::Header;
 use crate::contract::report::{FaultEffect, HOPS, MonitorReport};
 use crate::contract::role::Role;
-use crate::monitor::layout::Layout;
+use crate::model::layout::Layout;
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup};
 
 /// The first monitor's recording. An MCAP file cannot be appended to, so a restarted monitor

@@ -15,8 +15,8 @@ use anyhow::{Context as _, Result};
 use crate::config::launch::LaunchConfig;
 use crate::contract::msg::TickTiming;
 use crate::contract::report::MonitorReport;
+use crate::model::layout::Layout;
 use crate::monitor::join::LoopParts;
-use crate::monitor::layout::Layout;
 use crate::runtime::run_file::{self, Existing};
 
 /// What a sink is opened with.

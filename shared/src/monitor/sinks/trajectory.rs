@@ -74,8 +74,8 @@ mod tests {
     use super::*;
     use crate::contract::msg::{Command, Estimate, Measurements, PlantState};
     use crate::contract::report::MonitorReport;
+    use crate::model::layout::Layout;
     use crate::monitor::join::LoopParts;
-    use crate::monitor::layout::Layout;
 
     fn layout() -> Layout {
         Layout::example()

@@ -1,4 +1,4 @@
-//! The run's vectors as the recorder reads them: names, units and sizes of the state, each
+//! The run's vectors as the recorder and the replay read them: names, units and sizes of the state, each
 //! sensor's reading, the estimate and the input, taken once from the launch file and the
 //! scenario; and the column names of `trajectory.csv` made from them.
 

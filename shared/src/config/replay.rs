@@ -1,0 +1,61 @@
+//! `[replay]`: a run that plays a recorded run back into one stage (`looplab replay`, which
+//! writes this table into the replay's launch file).
+//!
+//! ```toml
+//! [replay]
+//! recording = "/home/me/runs/golden"   # the recorded run folder (its run.mcap)
+//! stage = "estimator"                  # the stage that runs; sensors | estimator | controller
+//! closed_loop = false                  # true: only a note, every process runs
+//! ```
+//!
+//! Open loop, every other process of the loop plays its recorded messages back, loop by loop:
+//! the plant its recorded states, each stage its recorded outputs. Closed loop, everything
+//! downstream of the stage runs (which, in a loop, is every process): the run is an ordinary
+//! lockstep run of the recording's launch file with the stage changed.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::contract::role::Role;
+
+/// The top-level key.
+pub const KEY: &str = "replay";
+
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReplaySpec {
+    /// The recorded run folder.
+    pub recording: PathBuf,
+    /// The stage that runs: sensors, estimator or controller.
+    pub stage: String,
+    #[serde(default)]
+    pub closed_loop: bool,
+}
+
+impl ReplaySpec {
+    /// The stage that runs (checked at load).
+    pub fn role(&self) -> Role {
+        self.stage.parse().expect("checked at load")
+    }
+
+    /// Whether `role` plays its recorded messages back in this replay.
+    pub fn plays_back(&self, role: Role) -> bool {
+        !self.closed_loop && role.in_loop() && role != self.role()
+    }
+
+    /// What is wrong with it, if anything: (key, message).
+    pub fn check(&self) -> Result<(), (String, String)> {
+        let allowed = Role::STAGES.iter().map(|r| r.name()).collect::<Vec<_>>().join(", ");
+        if !self.stage.parse::<Role>().is_ok_and(|r| Role::STAGES.contains(&r)) {
+            return Err((format!("{KEY}.stage"), format!("unknown stage \"{}\"; allowed: {allowed}", self.stage)));
+        }
+        if !self.recording.join("launch.toml").is_file() {
+            return Err((
+                format!("{KEY}.recording"),
+                format!("{} is not a run folder (it has no launch.toml)", self.recording.display()),
+            ));
+        }
+        Ok(())
+    }
+}
