@@ -13,7 +13,7 @@ use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::model::catalog::Catalog;
 use crate::runtime::ipc;
 use crate::scenarios;
-use crate::tools::{ToolError, bench, compare, export, plot, sweep};
+use crate::tools::{ToolError, bench, compare, diff, export, plot, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -70,6 +70,18 @@ looplab run --set wait.strategy=adaptive --out runs/adaptive\n  looplab compare 
         #[arg(long, value_name = "PATH")]
         out: Option<PathBuf>,
     },
+    /// Compare two runs of one scenario field by field, loop by loop: state, measurements,
+    /// estimate, command, applied input and metrics, with the largest difference, the RMS and the
+    /// first loop over tolerance; latency as distributions (p50, p99, max ratios). Draws B − A over
+    /// time and writes diff.json. Exit 0 within tolerance, 1 beyond, 2 bad input
+    #[command(after_help = "Examples:\n  looplab diff runs/golden runs/latest\n  \
+looplab diff runs/golden runs/latest --tolerance est=1e-9 --tolerance cmd.current_A=1e-6 --rtol 1e-9\n  \
+looplab diff runs/golden runs/latest --tolerance latency=2 --no-figure\n\
+A value is over tolerance when |B − A| > ABS + R·|A| (ABS: the field's own --tolerance, else its group's, else 0, \
+exact). NaN equals NaN; a cell empty in one run only (a part that did not arrive) is over tolerance. \
+Latency is judged only with --tolerance latency=R: each ratio B ÷ A within [1/R, R]. \
+Runs of other scenarios, rates, durations, loop counts or columns cannot be compared (exit 2).")]
+    Diff(DiffCli),
     /// Print a shell completion script: `looplab completions bash > /etc/bash_completion.d/looplab`
     Completions {
         /// bash, zsh, fish, elvish or powershell
@@ -125,6 +137,31 @@ against the stochastic b)."
     /// (internal) one stage of the bench's Unix-socket baseline loop
     #[command(hide = true)]
     BenchUdsStage(bench::uds_loop::StageArgs),
+}
+
+#[derive(Debug, Args)]
+struct DiffCli {
+    /// The reference run folder
+    #[arg(value_name = "RUN_A")]
+    a: PathBuf,
+    /// The run folder compared against it
+    #[arg(value_name = "RUN_B")]
+    b: PathBuf,
+    /// An absolute tolerance: FIELD=ABS for a column of trajectory.csv (est.theta_rad), a group
+    /// (state, meas, est, cmd, applied, metrics) or a metric of summary.json; latency=R judges
+    /// the latency's ratios. Repeatable
+    #[arg(long = "tolerance", value_name = "FIELD=ABS")]
+    tolerances: Vec<String>,
+    /// A relative tolerance on top of the absolute one, against RUN_A's value
+    #[arg(long, value_name = "R", default_value_t = 0.0, allow_negative_numbers = true)]
+    rtol: f64,
+    /// Where to draw B − A over time, a .png (default: RUN_B/diff.png); diff.json goes beside it
+    /// with the same name
+    #[arg(long, value_name = "PATH", conflicts_with = "no_figure")]
+    figure: Option<PathBuf>,
+    /// Draw no figure (diff.json still goes to RUN_B/diff.json)
+    #[arg(long)]
+    no_figure: bool,
 }
 
 #[derive(Debug, Args)]
@@ -322,9 +359,35 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
             Err(ToolError::BadInput(why)) => bad_input(why),
             Err(ToolError::Failed(e)) => report_failure(Err(e)),
         },
+        Some(Command::Diff(args)) => run_diff(args),
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default(), catalog),
+    }
+}
+
+/// `looplab diff`: the table and the verdict; exit 0 within tolerance, 1 beyond, 2 bad input.
+fn run_diff(args: DiffCli) -> ExitCode {
+    let tolerances = match args.tolerances.iter().map(|t| diff::parse_tolerance(t)).collect() {
+        Ok(t) => t,
+        Err(e) => return bad_input(e),
+    };
+    let figure = (!args.no_figure).then(|| args.figure.clone().unwrap_or_else(|| args.b.join("diff.png")));
+    let json = figure.as_ref().map_or_else(|| args.b.join("diff.json"), |f| f.with_extension("json"));
+    let options = diff::DiffOptions { tolerances, rtol: args.rtol, figure, json: Some(json) };
+    match diff::diff_runs(&args.a, &args.b, &options) {
+        Ok(result) => {
+            say_raw!("{}", result.render());
+            if let Some(figure) = &result.figure {
+                say!("figure: {}", figure.display());
+            }
+            if let Some(json) = &result.json {
+                say!("diff.json: {}", json.display());
+            }
+            if result.within_tolerance() { ExitCode::SUCCESS } else { ExitCode::FAILURE }
+        }
+        Err(ToolError::BadInput(why)) => bad_input(why),
+        Err(ToolError::Failed(e)) => report_failure(Err(e)),
     }
 }
 

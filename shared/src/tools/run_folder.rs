@@ -99,6 +99,11 @@ impl Table {
         Ok(Table { place: place.to_string(), header, rows })
     }
 
+    /// The column names, in the file's order.
+    pub fn header(&self) -> impl Iterator<Item = &str> {
+        self.header.iter()
+    }
+
     /// The number of rows (the header not counted).
     pub fn len(&self) -> usize {
         self.rows.len()
