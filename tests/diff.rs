@@ -34,7 +34,8 @@ fn stderr(output: &Output) -> String {
 /// The last line printed before the files' paths: the verdict.
 fn verdict(output: &Output) -> String {
     let text = stdout(output);
-    let lines: Vec<&str> = text.lines().filter(|l| !l.starts_with("figure: ") && !l.starts_with("diff.json: ")).collect();
+    let lines: Vec<&str> =
+        text.lines().filter(|l| !l.starts_with("figure: ") && !l.starts_with("diff.json: ")).collect();
     lines.last().expect("a verdict").to_string()
 }
 
@@ -98,7 +99,13 @@ fn a_changed_observer_gain_moves_the_estimate_from_the_first_loop() {
     assert_eq!(verdict(&out), format!("{over} fields over tolerance; first: est.theta_rad at loop 1 (t = 0.001 s)"));
     assert_eq!(json["within_tolerance"], false);
     let field = |name: &str| -> serde_json::Value {
-        json["fields"].as_array().unwrap().iter().find(|f| f["name"] == name).unwrap_or_else(|| panic!("{name}")).clone()
+        json["fields"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|f| f["name"] == name)
+            .unwrap_or_else(|| panic!("{name}"))
+            .clone()
     };
     for name in ["est.theta_rad", "est.theta_dot_rad_per_s", "est.bias_rad"] {
         assert_eq!(field(name)["first_over"]["k"], 1, "{name}");
@@ -110,7 +117,8 @@ fn a_changed_observer_gain_moves_the_estimate_from_the_first_loop() {
     }
     // The command moves only once the estimate has moved it, the plant a loop later.
     let (cmd, applied) = (field("cmd.current_A"), field("applied.current_A"));
-    let (first_cmd, first_applied) = (cmd["first_over"]["k"].as_u64().unwrap(), applied["first_over"]["k"].as_u64().unwrap());
+    let (first_cmd, first_applied) =
+        (cmd["first_over"]["k"].as_u64().unwrap(), applied["first_over"]["k"].as_u64().unwrap());
     assert!(first_cmd > 1, "{cmd}");
     assert_eq!(first_applied, first_cmd + 1, "what the actuator applied follows the command by a loop");
     assert_eq!(field("theta_rad")["first_over"]["k"], first_applied);

@@ -81,7 +81,8 @@ impl Group {
 
     /// The group of a trajectory.csv column by its prefix; None for the loop's `k` and `t_s`.
     pub fn of_column(name: &str) -> Option<Group> {
-        let prefixed = [("meas.", Group::Meas), ("est.", Group::Est), ("cmd.", Group::Cmd), ("applied.", Group::Applied)];
+        let prefixed =
+            [("meas.", Group::Meas), ("est.", Group::Est), ("cmd.", Group::Cmd), ("applied.", Group::Applied)];
         match prefixed.iter().find(|(prefix, _)| name.starts_with(prefix)) {
             Some((_, group)) => Some(*group),
             None if name == "k" || name == "t_s" => None,
@@ -146,7 +147,10 @@ pub enum CellDiff {
     /// Equal (NaN equals NaN).
     Same,
     /// B − A, finite, and whether it is over tolerance.
-    Finite { delta: f64, over: bool },
+    Finite {
+        delta: f64,
+        over: bool,
+    },
     /// One is NaN or infinite and they are not the same.
     NonFinite,
 }
@@ -458,7 +462,8 @@ impl RunDiff {
             })
             .collect();
         if panels.is_empty() {
-            let zero = Curve::new(DELTA_LABEL, vec![(span.start, 0.0), (span.end, 0.0)], Colour::Series(0), Line::Solid(2));
+            let zero =
+                Curve::new(DELTA_LABEL, vec![(span.start, 0.0), (span.end, 0.0)], Colour::Series(0), Line::Solid(2));
             panels.push(Panel::new("no difference: B − A = 0 in every field and loop", "B − A", vec![zero]));
         }
         Figure {
@@ -520,7 +525,16 @@ fn field_row(f: &FieldDiff) -> Vec<String> {
         (a, b) => format!("{a}/{b}"),
     };
     let at_loop = f.max_at.map_or("-".into(), |at| at.k.to_string());
-    vec![f.name.clone(), max, at_loop, metric_text(f.rms), tolerance_text(f.tolerance), f.over.to_string(), first, empty]
+    vec![
+        f.name.clone(),
+        max,
+        at_loop,
+        metric_text(f.rms),
+        tolerance_text(f.tolerance),
+        f.over.to_string(),
+        first,
+        empty,
+    ]
 }
 
 /// A metric's row.
@@ -630,7 +644,7 @@ fn check_tolerances(tolerances: &[(String, f64)], columns: &[String], metrics: &
         let known = name == LATENCY
             || Group::ALL.iter().any(|g| g.name() == name)
             || columns.iter().any(|c| c == name && Group::of_column(c).is_some())
-            || metrics.iter().any(|m| *m == name);
+            || metrics.contains(&name);
         if !known {
             let example = columns.iter().find(|c| c.starts_with("est.")).map_or("est.theta_rad", |c| c.as_str());
             return Err(ToolError::BadInput(format!(
@@ -706,7 +720,8 @@ pub fn diff_runs(a: &Path, b: &Path, options: &DiffOptions) -> Result<RunDiff, T
     for name in metric_names {
         let (va, vb) = (sa.metrics.get(name).copied(), sb.metrics.get(name).copied());
         let tolerance = tolerance_for(name, Group::Metrics, &options.tolerances);
-        let mut field = compare_field(name, Group::Metrics, &[LoopAt { k: 0, t_s: 0.0 }], &[va], &[vb], tolerance, options.rtol);
+        let mut field =
+            compare_field(name, Group::Metrics, &[LoopAt { k: 0, t_s: 0.0 }], &[va], &[vb], tolerance, options.rtol);
         // A metric is of the whole run: no loop.
         field.max_at = None;
         field.first_over = None;
@@ -717,7 +732,8 @@ pub fn diff_runs(a: &Path, b: &Path, options: &DiffOptions) -> Result<RunDiff, T
 
     let latency_tolerance = options.tolerances.iter().rev().find(|(n, _)| n == LATENCY).map(|(_, r)| *r);
     let (la, lb) = (&sa.latency_ns, &sb.latency_ns);
-    let mut latency = vec![LatencyRatio::of("end to end", Some(&la.end_to_end), Some(&lb.end_to_end), latency_tolerance)];
+    let mut latency =
+        vec![LatencyRatio::of("end to end", Some(&la.end_to_end), Some(&lb.end_to_end), latency_tolerance)];
     let mut hops: Vec<&String> = la.hops.keys().chain(lb.hops.keys()).collect();
     hops.sort();
     hops.dedup();
@@ -781,7 +797,10 @@ mod tests {
         assert_eq!(compare_cells(Some(NAN), None, 0.0, 0.0), CellDiff::EmptyOnlyInB);
         // The smallest difference there is, at tolerance 0.
         let next = f64::from_bits(1.0f64.to_bits() + 1);
-        assert_eq!(compare_cells(Some(1.0), Some(next), 0.0, 0.0), CellDiff::Finite { delta: f64::EPSILON, over: true });
+        assert_eq!(
+            compare_cells(Some(1.0), Some(next), 0.0, 0.0),
+            CellDiff::Finite { delta: f64::EPSILON, over: true }
+        );
     }
 
     #[test]
@@ -823,8 +842,15 @@ mod tests {
     fn columns_group_by_prefix() {
         let groups = ["k", "t_s", "theta_rad", "meas.imu.x_m", "est.bias_rad", "cmd.current_A", "applied.current_A"]
             .map(Group::of_column);
-        let expected =
-            [None, None, Some(Group::State), Some(Group::Meas), Some(Group::Est), Some(Group::Cmd), Some(Group::Applied)];
+        let expected = [
+            None,
+            None,
+            Some(Group::State),
+            Some(Group::Meas),
+            Some(Group::Est),
+            Some(Group::Cmd),
+            Some(Group::Applied),
+        ];
         assert_eq!(groups, expected);
     }
 
@@ -850,7 +876,10 @@ mod tests {
         assert_eq!(why("est=abc"), "--tolerance est=abc: \"abc\" is not a number");
         assert_eq!(why("est=-1"), "--tolerance est=-1: a tolerance is a finite number, 0 or more");
         assert_eq!(why("est=inf"), "--tolerance est=inf: a tolerance is a finite number, 0 or more");
-        assert_eq!(why("latency=0.5"), "--tolerance latency=0.5: latency=R takes a ratio of 1 or more (2: B within half to twice A)");
+        assert_eq!(
+            why("latency=0.5"),
+            "--tolerance latency=0.5: latency=R takes a ratio of 1 or more (2: B within half to twice A)"
+        );
     }
 
     fn stats(p50: u64, p99: u64, max: u64) -> Stats {
@@ -889,7 +918,8 @@ mod tests {
         assert!(run_diff(vec![same.clone()]).within_tolerance());
         assert_eq!(run_diff(vec![same.clone()]).verdict(), "identical in every loop");
 
-        let diff = run_diff(vec![same.clone(), field("cmd.u", Group::Cmd, 450, 0.0), field("est.x", Group::Est, 412, 0.0)]);
+        let diff =
+            run_diff(vec![same.clone(), field("cmd.u", Group::Cmd, 450, 0.0), field("est.x", Group::Est, 412, 0.0)]);
         assert!(!diff.within_tolerance());
         assert_eq!(diff.verdict(), "2 fields over tolerance; first: est.x at loop 412 (t = 0.412 s)");
         let text = diff.render();
