@@ -26,6 +26,7 @@ pub struct Playback {
     loops: Vec<RecordedLoop>,
     replay: ReplaySpec,
     state_len: usize,
+    input_len: usize,
 }
 
 impl Playback {
@@ -37,7 +38,7 @@ impl Playback {
         if loops.iter().all(|l| l.state.is_none()) {
             bail!("{}: the recording holds no state of any loop", replay.recording.display());
         }
-        Ok(Some(Self { loops, replay, state_len: layout.state.len() }))
+        Ok(Some(Self { loops, replay, state_len: layout.state.len(), input_len: layout.input.len() }))
     }
 
     /// Whether `role` plays back in this replay.
@@ -48,7 +49,7 @@ impl Playback {
     /// The plant that sends the recorded states.
     pub fn plant(&self) -> Box<dyn Plant> {
         let states: Vec<Option<PlantState>> = self.loops.iter().map(|l| l.state).collect();
-        Box::new(RecordedPlant::new(states, self.state_len))
+        Box::new(RecordedPlant::new(states, self.state_len, self.input_len))
     }
 
     /// Whether the process of `role` withholds loop k (see the module's documentation).
@@ -127,9 +128,10 @@ pub struct RecordedPlant {
 }
 
 impl RecordedPlant {
-    fn new(states: Vec<Option<PlantState>>, state_len: usize) -> Self {
+    fn new(states: Vec<Option<PlantState>>, state_len: usize, input_len: usize) -> Self {
         let first = states.iter().flatten().next().copied().unwrap_or_else(|| unreachable!("checked at load"));
-        let mut plant = Self { states, k: 0, x: first.x[..state_len].to_vec(), applied: first.u_applied.to_vec() };
+        let mut plant =
+            Self { states, k: 0, x: first.x[..state_len].to_vec(), applied: first.u_applied[..input_len].to_vec() };
         plant.take(0);
         plant
     }
@@ -138,9 +140,9 @@ impl RecordedPlant {
     fn take(&mut self, k: usize) {
         self.k = k;
         if let Some(state) = self.states.get(k).copied().flatten() {
-            let n = self.x.len();
+            let (n, m) = (self.x.len(), self.applied.len());
             self.x.copy_from_slice(&state.x[..n]);
-            self.applied.copy_from_slice(&state.u_applied);
+            self.applied.copy_from_slice(&state.u_applied[..m]);
         }
     }
 }

@@ -144,12 +144,20 @@ fn refuse_export(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// A component named like a field of the message itself would be read as that field.
 fn check_names(path: &Path, layout: &Layout) -> Result<()> {
-    let vectors = [("state", &layout.state, &["applied"][..]), ("estimate", &layout.estimate, &[]), ("input", &layout.input, &[])];
+    let vectors = [
+        ("state", &layout.state, &["applied"][..]),
+        ("estimate", &layout.estimate, &[]),
+        ("input", &layout.input, &[]),
+    ];
     let sensors = layout.sensors.iter().map(|(name, _)| ("sensor", name.as_str(), &["applied"][..]));
-    let components = vectors.iter().flat_map(|(what, components, also)| components.iter().map(move |c| (*what, c.name, *also)));
+    let components =
+        vectors.iter().flat_map(|(what, components, also)| components.iter().map(move |c| (*what, c.name, *also)));
     for (what, name, also) in components.chain(sensors) {
         if ["k", "t", "lost"].contains(&name) || also.contains(&name) {
-            bail!("{}: the {what} {name:?} has the name of a field every message has; replay cannot tell them apart", path.display());
+            bail!(
+                "{}: the {what} {name:?} has the name of a field every message has; replay cannot tell them apart",
+                path.display()
+            );
         }
     }
     Ok(())
@@ -290,4 +298,3 @@ fn fill_incarnations(recorded: &mut [RecordedLoop]) {
         }
     }
 }
-

@@ -90,6 +90,8 @@ pub struct ReplayReport {
     pub delayed: Vec<[u64; 2]>,
     /// The stage's outputs against the recording's.
     pub outputs: OutputComparison,
+    /// Closed loop: the plant's state against the recording's.
+    pub state: Option<OutputComparison>,
     pub outcome: String,
 }
 
@@ -195,7 +197,11 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         skipped_in_replay: replayed_stage.skipped,
         restarts: seen.restarts.clone(),
         delayed: seen.delayed.clone(),
-        outputs: compare_outputs(role, &layout, &loops, &replayed),
+        outputs: compare(output_columns(role, &layout), |l| output_values(role, &layout, l), &loops, &replayed),
+        state: args.closed_loop.then(|| {
+            let columns = layout.trajectory_columns()[2..2 + layout.state.len()].to_vec();
+            compare(columns, |l| l.state.map(|s| s.x[..layout.state.len()].to_vec()), &loops, &replayed)
+        }),
         outcome: match &outcome {
             Outcome::Completed => "completed".into(),
             other => format!("{other:?}"),
@@ -353,17 +359,18 @@ fn output_columns(role: Role, layout: &Layout) -> Vec<String> {
     layout.trajectory_columns().into_iter().filter(|c| c.starts_with(prefix)).collect()
 }
 
-fn compare_outputs(
-    role: Role,
-    layout: &Layout,
+/// The values `values` picks from each loop (in the order of `columns`), recorded against
+/// replayed, over the loops where both have them.
+fn compare(
+    columns: Vec<String>,
+    values: impl Fn(&RecordedLoop) -> Option<Vec<f64>>,
     recorded: &[RecordedLoop],
     replayed: &[RecordedLoop],
 ) -> OutputComparison {
-    let columns = output_columns(role, layout);
     let mut largest = vec![0.0f64; columns.len()];
     let mut comparison = OutputComparison::default();
     for (k, (a, b)) in recorded.iter().zip(replayed).enumerate() {
-        let (Some(a), Some(b)) = (output_values(role, layout, a), output_values(role, layout, b)) else { continue };
+        let (Some(a), Some(b)) = (values(a), values(b)) else { continue };
         comparison.compared += 1;
         let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()));
         if same {
@@ -404,6 +411,23 @@ fn ranges_text(ranges: &[[u64; 2]]) -> String {
 
 fn count(ranges: &[[u64; 2]]) -> u64 {
     ranges.iter().map(|[a, b]| b - a + 1).sum()
+}
+
+/// One line: `what` against the recording's.
+fn compared(out: &mut String, what: &str, o: &OutputComparison) {
+    use std::fmt::Write as _;
+    let _ = match o.first_difference {
+        None => {
+            writeln!(out, "  {what}: identical to the recording's, bit for bit, in all {} loops both have", o.compared)
+        }
+        Some(first) => writeln!(
+            out,
+            "  {what}: {} of {} loops differ from the recording's, the first at loop {first}; largest |difference|: {}",
+            o.compared - o.identical,
+            o.compared,
+            o.largest.iter().map(|(c, d)| format!("{c} {d:.3e}")).collect::<Vec<_>>().join(", ")
+        ),
+    };
 }
 
 /// What `looplab replay` prints.
@@ -462,27 +486,12 @@ pub fn render(r: &ReplayReport) -> String {
         };
         let _ = writeln!(out, "  delayed: loops {} {what}", ranges_text(&r.delayed));
     }
-    let o = &r.outputs;
-    match o.first_difference {
-        None => {
-            let _ = writeln!(
-                out,
-                "  outputs: identical to the recording's, bit for bit, in all {} loops both computed",
-                o.compared
-            );
-        }
-        Some(first) => {
-            let _ = writeln!(
-                out,
-                "  outputs: {} of {} loops differ from the recording's, the first at loop {first}; largest |difference|: {}",
-                o.compared - o.identical,
-                o.compared,
-                o.largest.iter().map(|(c, d)| format!("{c} {d:.3e}")).collect::<Vec<_>>().join(", ")
-            );
-        }
+    compared(&mut out, "outputs", &r.outputs);
+    if let Some(state) = &r.state {
+        compared(&mut out, "state", state);
     }
     let _ = writeln!(out, "  run folder: {} (replay.json)", r.run_dir.display());
-    let _ = write!(out, "  compare: looplab diff {} {}", r.recording.display(), r.run_dir.display());
+    let _ = writeln!(out, "  compare: looplab diff {} {}", r.recording.display(), r.run_dir.display());
     out
 }
 
