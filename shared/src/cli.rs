@@ -13,7 +13,7 @@ use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::model::catalog::Catalog;
 use crate::runtime::ipc;
 use crate::scenarios;
-use crate::tools::{ToolError, bench, compare, diff, export, plot, sweep};
+use crate::tools::{ToolError, bench, compare, diff, export, plot, replay, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -131,6 +131,10 @@ against the stochastic b)."
         #[arg(long, value_name = "DIR", requires = "paper")]
         out: Option<PathBuf>,
     },
+    /// Run one stage on the inputs recorded in a run folder, loop by loop in lockstep, as processes
+    /// over shared memory (or --in-process), and write a new run folder with its outputs beside the
+    /// recorded rest; `looplab diff` then compares the two
+    Replay(replay::ReplayArgs),
     /// (internal) the far end of the bench's ping-pong
     #[command(hide = true)]
     BenchEcho(bench::pingpong::EchoArgs),
@@ -360,6 +364,17 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
             Err(ToolError::Failed(e)) => report_failure(Err(e)),
         },
         Some(Command::Diff(args)) => run_diff(args),
+        Some(Command::Replay(args)) => match replay::replay(&args, catalog) {
+            Ok(done) => {
+                say_raw!("{}", replay::render(&done));
+                ExitCode::SUCCESS
+            }
+            Err(ToolError::BadInput(why)) => bad_input(why),
+            Err(e) => {
+                tell!("error: {e}");
+                ExitCode::FAILURE
+            }
+        },
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default(), catalog),

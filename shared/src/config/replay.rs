@@ -6,6 +6,7 @@
 //! recording = "/home/me/runs/golden"   # the recorded run folder (its run.mcap)
 //! stage = "estimator"                  # the stage that runs; sensors | estimator | controller
 //! closed_loop = false                  # true: only a note, every process runs
+//! skipped = [[2000, 2149]]             # loops the recorded stage did not compute
 //! ```
 //!
 //! Open loop, every other process of the loop plays its recorded messages back, loop by loop:
@@ -31,6 +32,10 @@ pub struct ReplaySpec {
     pub stage: String,
     #[serde(default)]
     pub closed_loop: bool,
+    /// The loops the recorded stage did not compute (from, to; inclusive): the process before it
+    /// withholds them, so that the stage skips them again.
+    #[serde(default)]
+    pub skipped: Vec<[u64; 2]>,
 }
 
 impl ReplaySpec {
@@ -42,6 +47,11 @@ impl ReplaySpec {
     /// Whether `role` plays its recorded messages back in this replay.
     pub fn plays_back(&self, role: Role) -> bool {
         !self.closed_loop && role.in_loop() && role != self.role()
+    }
+
+    /// Whether the recorded stage skipped loop k.
+    pub fn skipped(&self, k: u64) -> bool {
+        self.skipped.iter().any(|[from, to]| (*from..=*to).contains(&k))
     }
 
     /// What is wrong with it, if anything: (key, message).

@@ -124,6 +124,16 @@ impl Topic {
     pub fn name(self) -> &'static str {
         self.into()
     }
+
+    /// The loop process that writes it.
+    pub fn writer(self) -> Role {
+        match self {
+            Topic::State | Topic::Loop => Role::Plant,
+            Topic::Measurements => Role::Sensors,
+            Topic::Estimate => Role::Estimator,
+            Topic::Command => Role::Controller,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -148,6 +158,7 @@ mod tests {
         for topic in [Topic::State, Topic::Measurements, Topic::Estimate, Topic::Command] {
             assert_eq!(Role::ALL.iter().filter(|r| r.output() == Some(topic)).count(), 1, "{topic}");
             assert_eq!(Role::ALL.iter().filter(|r| r.input() == Some(topic)).count(), 1, "{topic}");
+            assert_eq!(topic.writer().output(), Some(topic));
         }
         let slots: Vec<_> = Role::ALL.iter().filter_map(|r| r.slot()).collect();
         assert_eq!(slots, [0, 1, 2, 3]);

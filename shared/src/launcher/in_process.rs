@@ -8,7 +8,6 @@ use std::path::Path;
 use anyhow::Result;
 
 use crate::config::launch::LaunchConfig;
-use crate::contract::role::Role;
 use crate::launcher::outcome::Outcome;
 use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
@@ -26,11 +25,7 @@ pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &
     let outcome = if stop.requested() { Outcome::Interrupted } else { Outcome::Completed };
     let reports = Reports {
         plant: Some(ran.plant),
-        stages: BTreeMap::from([
-            (Role::Sensors, BTreeMap::from([(0, ran.sensors)])),
-            (Role::Estimator, BTreeMap::from([(0, ran.estimator)])),
-            (Role::Controller, BTreeMap::from([(0, ran.controller)])),
-        ]),
+        stages: ran.stages,
         monitor: Some(recording.finish()?),
         bridges: BTreeMap::new(),
     };

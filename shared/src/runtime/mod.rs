@@ -7,6 +7,7 @@ pub mod faults;
 pub mod in_process;
 pub mod ipc;
 pub mod plant;
+pub mod playback;
 pub mod private_file;
 pub mod reader_state;
 pub mod realtime;

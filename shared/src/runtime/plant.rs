@@ -386,7 +386,10 @@ impl PlantProcess {
 }
 
 pub fn run(context: &Context) -> Result<ChildEvent> {
-    run_with(context, context.scenario.plant())
+    match crate::runtime::relay::playback(context, Role::Plant)? {
+        Some(playback) => run_with(context, playback.plant()),
+        None => run_with(context, context.scenario.plant()),
+    }
 }
 
 /// The plant process with `plant` in place of the scenario's (`runtime::user_plant`).

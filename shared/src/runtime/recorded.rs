@@ -11,10 +11,17 @@
 
 use std::path::Path;
 
-use anyhow::Result;
+use anyhow::{Context as _, Result, anyhow, bail};
+use serde_json::{Map, Value};
 
-use crate::contract::msg::{Command, Estimate, LoopRecord, Measurements, PlantState};
+use crate::config::schema::Component;
+use crate::contract::msg::{Command, Estimate, Header, LoopRecord, Measurements, PlantState};
+use crate::contract::role::Role;
 use crate::model::layout::Layout;
+
+/// The first monitor's recording (`monitor::sinks::mcap::FILE`, a layer above); a restarted
+/// monitor's is `run.<n>.mcap`, n = 1, 2, ….
+const FILE: &str = "run.mcap";
 
 /// One loop of a recording: each message the monitor received for it (None: none came).
 /// Headers hold k, t, `lost` and the incarnations; the loop trace is zero.
@@ -33,6 +40,261 @@ pub struct RecordedLoop {
 /// `run.mcap`, when it was written by `looplab export` (no sample times or flags), or by a
 /// version of LoopLab that did not record a field a stage reads.
 pub fn load(run_dir: &Path, layout: &Layout, loops: u64) -> Result<Vec<RecordedLoop>> {
-    let _ = (run_dir, layout, loops);
-    todo!("read run.mcap and run.<n>.mcap")
+    let first = run_dir.join(FILE);
+    if std::fs::symlink_metadata(&first).is_err() {
+        bail!("{} has no {FILE}; replay needs the recording a run writes", run_dir.display());
+    }
+    let loops = usize::try_from(loops).context("more loops than this machine can index")?;
+    let mut recorded = vec![RecordedLoop::default(); loops];
+    let restarted = (1..).map(|n| run_dir.join(format!("run.{n}.mcap"))).take_while(|p| p.exists());
+    for path in std::iter::once(first).chain(restarted) {
+        read_file(&path, layout, &mut recorded)?;
+    }
+    fill_incarnations(&mut recorded);
+    Ok(recorded)
+}
+
+/// The topics a stage reads back, as the recording names them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Topic {
+    State,
+    Measurements,
+    Estimate,
+    Command,
+    Loop,
+}
+
+impl Topic {
+    fn of(topic: &str) -> Option<Self> {
+        Some(match topic {
+            "/state" => Topic::State,
+            "/measurements" => Topic::Measurements,
+            "/estimate" => Topic::Estimate,
+            "/command" => Topic::Command,
+            "/loop" => Topic::Loop,
+            _ => return None,
+        })
+    }
+}
+
+/// Adds one recording file's messages to `recorded`, where no earlier file (or message) has one
+/// for that topic and loop.
+fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Result<()> {
+    let bytes = std::fs::read(path).with_context(|| format!("read {}", path.display()))?;
+    refuse_export(path, &bytes)?;
+    check_names(path, layout)?;
+    let stream = mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
+        .map_err(|e| anyhow!("{}: not an MCAP recording ({e})", path.display()))?;
+    for message in stream {
+        let message = match message {
+            Ok(message) => message,
+            // A killed monitor's file ends where it last flushed: what came before is whole.
+            Err(mcap::McapError::UnexpectedEof | mcap::McapError::UnexpectedEoc) => break,
+            Err(e) => bail!("{}: unreadable ({e})", path.display()),
+        };
+        let Some(topic) = Topic::of(&message.channel.topic) else { continue };
+        let json: Value = serde_json::from_slice(&message.data)
+            .map_err(|e| anyhow!("{}: a {} message is not JSON ({e})", path.display(), message.channel.topic))?;
+        let Value::Object(fields) = &json else {
+            bail!("{}: a {} message is not a JSON object", path.display(), message.channel.topic);
+        };
+        let mut at = At { path, topic: &message.channel.topic, k: None };
+        let k = at.unsigned(fields, "k")?;
+        at.k = Some(k);
+        let Some(slot) = usize::try_from(k).ok().and_then(|k| recorded.get_mut(k)) else { continue };
+        let t = at.float(fields, "t")?;
+        let header = Header { k, t, lost: at.lost(fields)?, ..Header::default() };
+        match topic {
+            Topic::State if slot.state.is_none() => slot.state = Some(at.state(fields, header, layout)?),
+            Topic::Measurements if slot.measurements.is_none() => {
+                slot.measurements = Some(at.measurements(fields, header, layout)?)
+            }
+            Topic::Estimate if slot.estimate.is_none() => {
+                let mut estimate = Estimate { header, ..Estimate::default() };
+                at.floats(fields, &layout.estimate, &mut estimate.x)?;
+                slot.estimate = Some(estimate);
+            }
+            Topic::Command if slot.command.is_none() => {
+                let mut command = Command { header, ..Command::default() };
+                at.floats(fields, &layout.input, &mut command.u)?;
+                slot.command = Some(command);
+            }
+            Topic::Loop if slot.record.is_none() => slot.record = Some(at.record(fields, header)?),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// `looplab export` writes its recording through the same sink from the run folder's files,
+/// which keep no sensor sample times, flags or incarnations (its schemas leave them out). Its
+/// file is always finished, so its summary names the channels.
+fn refuse_export(path: &Path, bytes: &[u8]) -> Result<()> {
+    let Ok(Some(summary)) = mcap::Summary::read(bytes) else { return Ok(()) };
+    let loop_schema = summary.channels.values().find(|c| c.topic == "/loop").and_then(|c| c.schema.as_ref());
+    let Some(schema) = loop_schema.and_then(|s| serde_json::from_slice::<Value>(&s.data).ok()) else { return Ok(()) };
+    if schema["properties"].get("incarnations").is_none() {
+        bail!(
+            "{}: written by `looplab export`, which keeps no sample times or flags: record the run again",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// A component named like a field of the message itself would be read as that field.
+fn check_names(path: &Path, layout: &Layout) -> Result<()> {
+    let vectors = [
+        ("state", &layout.state, &["applied"][..]),
+        ("estimate", &layout.estimate, &[]),
+        ("input", &layout.input, &[]),
+    ];
+    let sensors = layout.sensors.iter().map(|(name, _)| ("sensor", name.as_str(), &["applied"][..]));
+    let components =
+        vectors.iter().flat_map(|(what, components, also)| components.iter().map(move |c| (*what, c.name, *also)));
+    for (what, name, also) in components.chain(sensors) {
+        if ["k", "t", "lost"].contains(&name) || also.contains(&name) {
+            bail!(
+                "{}: the {what} {name:?} has the name of a field every message has; replay cannot tell them apart",
+                path.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Where a value is read from, for the one line an error is.
+struct At<'a> {
+    path: &'a Path,
+    topic: &'a str,
+    k: Option<u64>,
+}
+
+impl At<'_> {
+    fn place(&self) -> String {
+        match self.k {
+            Some(k) => format!("{}: {} of loop {k}", self.path.display(), self.topic),
+            None => format!("{}: a {} message", self.path.display(), self.topic),
+        }
+    }
+
+    fn get<'v>(&self, fields: &'v Map<String, Value>, key: &str) -> Result<&'v Value> {
+        fields.get(key).ok_or_else(|| {
+            anyhow!(
+                "{} has no \"{key}\": recorded by an older LoopLab, which left out fields a stage reads; record it \
+                 again with this version",
+                self.place()
+            )
+        })
+    }
+
+    fn bad(&self, key: &str, what: &str) -> anyhow::Error {
+        anyhow!("{}: \"{key}\" is not {what}", self.place())
+    }
+
+    /// A float; null (what the writer makes of a non-finite value) is NaN.
+    fn float(&self, fields: &Map<String, Value>, key: &str) -> Result<f64> {
+        match self.get(fields, key)? {
+            Value::Null => Ok(f64::NAN),
+            // With serde_json's float_roundtrip the number is the one written, bit for bit.
+            Value::Number(n) => n.as_f64().ok_or_else(|| self.bad(key, "a number")),
+            _ => Err(self.bad(key, "a number")),
+        }
+    }
+
+    fn unsigned(&self, fields: &Map<String, Value>, key: &str) -> Result<u64> {
+        self.get(fields, key)?.as_u64().ok_or_else(|| self.bad(key, "a whole number"))
+    }
+
+    fn flag(&self, fields: &Map<String, Value>, key: &str) -> Result<u32> {
+        self.get(fields, key)?.as_bool().map(u32::from).ok_or_else(|| self.bad(key, "true or false"))
+    }
+
+    fn object<'v>(&self, fields: &'v Map<String, Value>, key: &str) -> Result<&'v Map<String, Value>> {
+        self.get(fields, key)?.as_object().ok_or_else(|| self.bad(key, "an object"))
+    }
+
+    /// `"lost":true` is written only on a lost message.
+    fn lost(&self, fields: &Map<String, Value>) -> Result<u32> {
+        match fields.get("lost") {
+            None => Ok(0),
+            Some(_) => self.flag(fields, "lost"),
+        }
+    }
+
+    /// The components of a vector into the front of `out`.
+    fn floats(&self, fields: &Map<String, Value>, components: &[Component], out: &mut [f64]) -> Result<()> {
+        for (component, value) in components.iter().zip(out.iter_mut()) {
+            *value = self.float(fields, component.name)?;
+        }
+        Ok(())
+    }
+
+    fn state(&self, fields: &Map<String, Value>, header: Header, layout: &Layout) -> Result<PlantState> {
+        let mut state = PlantState { header, ..PlantState::default() };
+        self.floats(fields, &layout.state, &mut state.x)?;
+        self.floats(self.object(fields, "applied")?, &layout.input, &mut state.u_applied)?;
+        Ok(state)
+    }
+
+    fn measurements(&self, fields: &Map<String, Value>, header: Header, layout: &Layout) -> Result<Measurements> {
+        let mut m = Measurements { header, ..Measurements::default() };
+        for ((name, components), reading) in layout.sensors.iter().zip(m.readings.iter_mut()) {
+            let sensor = self.object(fields, name)?;
+            self.floats(self.object(sensor, "value")?, components, &mut reading.value)?;
+            reading.sample_time = self.float(sensor, "sample_time")?;
+            reading.seq = self.unsigned(sensor, "seq")?;
+            reading.fresh = self.flag(sensor, "fresh")?;
+            reading.valid = self.flag(sensor, "valid")?;
+        }
+        self.floats(self.object(fields, "applied")?, &layout.input, &mut m.u_applied)?;
+        Ok(m)
+    }
+
+    /// The loop record: its flags and the incarnations that handled the loop (its header's,
+    /// the command's); its `lost` is the command's.
+    fn record(&self, fields: &Map<String, Value>, mut header: Header) -> Result<LoopRecord> {
+        let lost = self.flag(fields, "lost")?;
+        header.lost = lost;
+        let incarnations = self.object(fields, "incarnations")?;
+        for role in Role::LOOP {
+            let value = self.unsigned(incarnations, role.name())?;
+            let slot = role.slot().expect("a loop process has a slot");
+            header.incarnations[slot] = u32::try_from(value).map_err(|_| self.bad(role.name(), "an incarnation"))?;
+        }
+        Ok(LoopRecord {
+            header,
+            deadline_miss: self.flag(fields, "deadline_miss")?,
+            rejected: self.flag(fields, "rejected")?,
+            lost,
+            ..LoopRecord::default()
+        })
+    }
+}
+
+/// Each message's incarnations, from its loop's record (or the nearest earlier loop's, when
+/// none came), masked to the processes it had passed: the state the plant's, the measurements
+/// the plant's and the sensors', the estimate up to the estimator's, the command all four.
+fn fill_incarnations(recorded: &mut [RecordedLoop]) {
+    let mut incarnations = [0; 4];
+    for recorded in recorded {
+        if let Some(record) = &recorded.record {
+            incarnations = record.header.incarnations;
+        }
+        let passed = |header: &mut Header, processes: usize| {
+            header.incarnations[..processes].copy_from_slice(&incarnations[..processes]);
+        };
+        if let Some(m) = &mut recorded.state {
+            passed(&mut m.header, 1);
+        }
+        if let Some(m) = &mut recorded.measurements {
+            passed(&mut m.header, 2);
+        }
+        if let Some(m) = &mut recorded.estimate {
+            passed(&mut m.header, 3);
+        }
+        if let Some(m) = &mut recorded.command {
+            passed(&mut m.header, 4);
+        }
+    }
 }

@@ -13,6 +13,7 @@ use crate::model::scenario::Calibration;
 use crate::runtime::child::emit;
 use crate::runtime::child::{Context, WAIT_SLICE, wait, waitset};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
+use crate::runtime::playback::Playback;
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
@@ -130,13 +131,30 @@ fn keep<T: Task>(kept: &mut Option<Snapshot<Calibration>>, task: &T) -> Result<(
 }
 
 pub fn sensors(context: &Context) -> Result<ChildEvent> {
-    relay(context, Role::Sensors, SensorsTask::new(&context.config, context.scenario.as_ref()))
+    match playback(context, Role::Sensors)? {
+        Some(playback) => relay(context, Role::Sensors, playback.sensors()),
+        None => relay(context, Role::Sensors, SensorsTask::new(&context.config, context.scenario.as_ref())),
+    }
 }
 
 pub fn estimator(context: &Context) -> Result<ChildEvent> {
-    relay(context, Role::Estimator, EstimatorTask::new(&context.config, context.scenario.as_ref()))
+    match playback(context, Role::Estimator)? {
+        Some(playback) => relay(context, Role::Estimator, playback.estimator()),
+        None => relay(context, Role::Estimator, EstimatorTask::new(&context.config, context.scenario.as_ref())),
+    }
 }
 
 pub fn controller(context: &Context) -> Result<ChildEvent> {
-    relay(context, Role::Controller, ControllerTask::new(context.scenario.as_ref()))
+    match playback(context, Role::Controller)? {
+        Some(playback) => relay(context, Role::Controller, playback.controller()),
+        None => relay(context, Role::Controller, ControllerTask::new(context.scenario.as_ref())),
+    }
+}
+
+/// The recording `role` plays back, when it does (an open-loop replay's other processes).
+pub fn playback(context: &Context, role: Role) -> Result<Option<Playback>> {
+    if !context.config.replay.as_ref().is_some_and(|r| r.plays_back(role)) {
+        return Ok(None);
+    }
+    Playback::load(&context.config, context.scenario.as_ref())
 }

@@ -6,6 +6,7 @@ pub mod compare;
 pub mod diff;
 pub mod export;
 pub mod plot;
+pub mod replay;
 pub mod run_folder;
 pub mod sweep;
 

@@ -216,6 +216,24 @@ impl McapRecording {
         number(&mut self.buf, t);
     }
 
+    /// Marks the message in the buffer lost, when its header says so (a live recording only:
+    /// the run folder's files keep no lost flags).
+    fn lost(&mut self, header: &Header) {
+        if self.detail == Detail::Live && header.lost != 0 {
+            self.buf.extend_from_slice(br#","lost":true"#);
+        }
+    }
+
+    /// `,"applied":{"u":1,…}`: the input the actuator applied (a live recording only: the files
+    /// keep it once, in trajectory.csv's `applied.*`, which export puts nowhere).
+    fn applied(&mut self, u_applied: &[f64]) {
+        if self.detail == Detail::Live {
+            self.buf.extend_from_slice(br#","applied":{"#);
+            fields(&mut self.buf, &self.keys.input, u_applied, false);
+            self.buf.push(b'}');
+        }
+    }
+
     /// Ends the message in the buffer and writes it. Publish time: when the message's stage
     /// published it in real time; the log time in lockstep, where wall-clock stamps mean nothing.
     fn put(&mut self, channel: Channel, log_time: u64, published: u64) -> Result<()> {
@@ -312,6 +330,8 @@ impl RunSink for McapRecording {
         if let Some(state) = &parts.state {
             self.begin(k, t);
             fields(&mut self.buf, &self.keys.state, &state.x, true);
+            self.applied(&state.u_applied);
+            self.lost(&state.header);
             self.put(Channel::State, self.log_time(k, &state.header), state.header.trace.plant_publish)?;
         }
         if let Some(m) = &parts.measurements {
@@ -324,21 +344,29 @@ impl RunSink for McapRecording {
                 if self.detail == Detail::Live {
                     self.buf.extend_from_slice(br#","sample_time":"#);
                     number(&mut self.buf, reading.sample_time);
+                    self.buf.extend_from_slice(br#","seq":"#);
+                    number(&mut self.buf, reading.seq);
                     self.buf.extend_from_slice(br#","fresh":"#);
                     boolean(&mut self.buf, reading.fresh != 0);
+                    self.buf.extend_from_slice(br#","valid":"#);
+                    boolean(&mut self.buf, reading.valid != 0);
                 }
                 self.buf.push(b'}');
             }
+            self.applied(&m.u_applied);
+            self.lost(&m.header);
             self.put(Channel::Measurements, self.log_time(k, &m.header), m.header.trace.sensors_publish)?;
         }
         if let Some(estimate) = &parts.estimate {
             self.begin(k, t);
             fields(&mut self.buf, &self.keys.estimate, &estimate.x, true);
+            self.lost(&estimate.header);
             self.put(Channel::Estimate, self.log_time(k, &estimate.header), estimate.header.trace.estimator_publish)?;
         }
         if let Some(command) = &parts.command {
             self.begin(k, t);
             fields(&mut self.buf, &self.keys.input, &command.u, true);
+            self.lost(&command.header);
             self.put(Channel::Command, self.log_time(k, &command.header), command.header.trace.controller_publish)?;
         }
         if let (Some(record), Some(end_to_end), Some(hops)) = (&parts.record, parts.end_to_end_ns(), parts.hops_ns()) {
@@ -424,6 +452,20 @@ fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
         object(title, properties)
     };
     let live = detail == Detail::Live;
+    let applied = || {
+        let description = "the input the actuator applied over the last interval";
+        let mut applied = object("looplab.Applied", layout.input.iter().map(component).collect());
+        applied["description"] = description.into();
+        ("applied".to_string(), applied)
+    };
+    // Only on a message whose header says an upstream stage dropped the loop's output.
+    let lost = boolean("an upstream stage dropped this loop's output (lockstep drop fault); absent: not lost");
+    let with_lost = |mut schema: Value| {
+        if live {
+            schema["properties"]["lost"] = lost.clone();
+        }
+        schema
+    };
 
     let mut measurements = loop_fields();
     for (name, components) in &layout.sensors {
@@ -432,10 +474,20 @@ fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
         if live {
             sensor.extend([
                 ("sample_time".into(), json!({"type": "number", "description": "when the truth behind the value was sampled (simulation time), s"})),
+                ("seq".into(), integer("samples this sensor delivered before this one")),
                 ("fresh".into(), boolean("delivered at this tick (else held)")),
+                ("valid".into(), boolean("the sensor's first sample has arrived")),
             ]);
         }
         measurements.push((name.clone(), object(&format!("looplab.Reading.{name}"), sensor)));
+    }
+    if live {
+        measurements.push(applied());
+    }
+    let mut state = loop_fields();
+    state.extend(layout.state.iter().map(component));
+    if live {
+        state.push(applied());
     }
 
     let ns = |description: &str| json!({"type": "integer", "description": format!("{description}, ns")});
@@ -477,10 +529,10 @@ fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
     }
 
     vec![
-        vector("looplab.State", &layout.state),
-        object("looplab.Measurements", measurements),
-        vector("looplab.Estimate", &layout.estimate),
-        vector("looplab.Command", &layout.input),
+        with_lost(object("looplab.State", state)),
+        with_lost(object("looplab.Measurements", measurements)),
+        with_lost(vector("looplab.Estimate", &layout.estimate)),
+        with_lost(vector("looplab.Command", &layout.input)),
         object("looplab.Loop", record),
         latency,
         faults_schema,
