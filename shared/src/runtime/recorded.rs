@@ -90,6 +90,7 @@ fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Res
             Ok(message) => message,
             // A killed monitor's file ends where it last flushed: what came before is whole.
             Err(mcap::McapError::UnexpectedEof | mcap::McapError::UnexpectedEoc) => break,
+            Err(e @ mcap::McapError::BadMagic) => bail!("{}: not an MCAP recording ({e})", path.display()),
             Err(e) => bail!("{}: unreadable ({e})", path.display()),
         };
         let Some(topic) = Topic::of(&message.channel.topic) else { continue };
@@ -144,12 +145,20 @@ fn refuse_export(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// A component named like a field of the message itself would be read as that field.
 fn check_names(path: &Path, layout: &Layout) -> Result<()> {
-    let vectors = [("state", &layout.state, &["applied"][..]), ("estimate", &layout.estimate, &[]), ("input", &layout.input, &[])];
+    let vectors = [
+        ("state", &layout.state, &["applied"][..]),
+        ("estimate", &layout.estimate, &[]),
+        ("input", &layout.input, &[]),
+    ];
     let sensors = layout.sensors.iter().map(|(name, _)| ("sensor", name.as_str(), &["applied"][..]));
-    let components = vectors.iter().flat_map(|(what, components, also)| components.iter().map(move |c| (*what, c.name, *also)));
+    let components =
+        vectors.iter().flat_map(|(what, components, also)| components.iter().map(move |c| (*what, c.name, *also)));
     for (what, name, also) in components.chain(sensors) {
         if ["k", "t", "lost"].contains(&name) || also.contains(&name) {
-            bail!("{}: the {what} {name:?} has the name of a field every message has; replay cannot tell them apart", path.display());
+            bail!(
+                "{}: the {what} {name:?} has the name of a field every message has; replay cannot tell them apart",
+                path.display()
+            );
         }
     }
     Ok(())
@@ -290,4 +299,3 @@ fn fill_incarnations(recorded: &mut [RecordedLoop]) {
         }
     }
 }
-
