@@ -1,15 +1,13 @@
 //! `runtime::recorded::load` against what this sink writes: every field a stage reads comes
 //! back bit for bit. Here, a layer above the reader, because the tests write with the monitor's
-//! own sink and run the loop in one process.
+//! own sink (tests/recorded.rs reads back real runs).
 
 use std::path::Path;
 
-use crate::config::faults::parse_fault;
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::msg::{Command, Estimate, Header, LoopRecord, Measurements, PlantState, SensorReading};
 use crate::model::layout::Layout;
 use crate::monitor::join::LoopParts;
-use crate::monitor::recording::Recording;
 use crate::monitor::sinks::mcap::{Detail, McapRecording};
 use crate::monitor::sinks::{JoinedLoop, RunSink};
 use crate::runtime::recorded::{RecordedLoop, load};
@@ -71,7 +69,7 @@ fn awkward_loop(k: u64, layout: &Layout, shift: usize) -> LoopParts {
         *reading = SensorReading {
             sample_time: awkward(n + s + 5),
             seq: k * 7 + s as u64 + u64::from(s == 1) * (u64::MAX - 100),
-            fresh: u32::from((k + s as u64) % 2 == 0),
+            fresh: u32::from((k + s as u64).is_multiple_of(2)),
             valid: u32::from(k > 0),
             ..SensorReading::default()
         };
@@ -84,8 +82,8 @@ fn awkward_loop(k: u64, layout: &Layout, shift: usize) -> LoopParts {
     command.u.iter_mut().enumerate().for_each(|(i, u)| *u = awkward(n + 7 + i));
     let record = LoopRecord {
         header,
-        deadline_miss: u32::from(k % 4 == 0),
-        rejected: u32::from(k % 5 == 0),
+        deadline_miss: u32::from(k.is_multiple_of(4)),
+        rejected: u32::from(k.is_multiple_of(5)),
         lost: header.lost,
         ..LoopRecord::default()
     };
@@ -284,54 +282,4 @@ fn what_replay_cannot_play_back_is_one_line_naming_the_file() {
     std::fs::write(&path, "not a recording").unwrap();
     let message = error(dir.path());
     assert!(message.starts_with(&format!("{}: not an MCAP recording", path.display())), "{message}");
-}
-
-/// A real lockstep run, with a drop fault so that some messages are lost: what the reader
-/// gives back is trajectory.csv's numbers exactly, and the lost flags are the loop records'.
-#[test]
-fn a_lockstep_run_reads_back_as_its_trajectory() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut config = lockstep_pendulum(0.5);
-    config.faults.push(parse_fault("drop estimator 50% at 0.1s for 0.1s").unwrap());
-    let (_, scenario) = crate::scenarios::resolve("pendulum", &[]).unwrap();
-    let stop = crate::runtime::signals::StopFlag::install().unwrap();
-    let mut recording = Recording::new(&config, scenario.as_ref(), dir.path(), 0, None).unwrap();
-    crate::runtime::in_process::run(&config, scenario.as_ref(), &stop, |message| recording.take(message)).unwrap();
-    recording.finish().unwrap();
-
-    let layout = Layout::new(&config, scenario.as_ref());
-    let recorded = load(dir.path(), &layout, config.loops()).unwrap();
-    let text = std::fs::read_to_string(dir.path().join("trajectory.csv")).unwrap();
-    let mut lines = text.lines();
-    assert_eq!(lines.next().unwrap().split(',').collect::<Vec<_>>(), layout.trajectory_columns());
-    let rows: Vec<Vec<&str>> = lines.map(|line| line.split(',').collect()).collect();
-    assert_eq!(rows.len() as u64, config.loops());
-    assert_eq!(recorded.len(), rows.len());
-    for (row, got) in rows.iter().zip(&recorded) {
-        let k: u64 = row[0].parse().unwrap();
-        let state = got.state.unwrap();
-        assert_eq!((state.header.k, state.header.t.to_string()), (k, row[1].to_string()));
-        // The cells in trajectory.csv's order: state, each sensor, estimate, command, applied.
-        let mut values: Vec<f64> = state.x[..layout.state.len()].to_vec();
-        let m = got.measurements.unwrap();
-        for (s, (_, components)) in layout.sensors.iter().enumerate() {
-            values.extend(&m.readings[s].value[..components.len()]);
-        }
-        values.extend(&got.estimate.unwrap().x[..layout.estimate.len()]);
-        values.extend(&got.command.unwrap().u[..layout.input.len()]);
-        values.extend(&state.u_applied[..layout.input.len()]);
-        let cells: Vec<f64> = row[2..].iter().map(|cell| cell.parse().unwrap()).collect();
-        assert_same(&values, &cells, &format!("loop {k}"));
-        assert_eq!(m.u_applied[..layout.input.len()], state.u_applied[..layout.input.len()], "loop {k}");
-    }
-    // The dropped estimates: marked lost on the estimate and the command, as the plant saw them.
-    let lost_estimates = recorded.iter().filter(|l| l.estimate.unwrap().header.lost != 0).count();
-    let lost_records = recorded.iter().filter(|l| l.record.unwrap().lost != 0).count();
-    assert!(lost_estimates > 10, "{lost_estimates} lost estimates");
-    assert_eq!(lost_records, lost_estimates);
-    assert!(recorded.iter().all(|l| l.command.unwrap().header.lost == l.record.unwrap().lost));
-    assert!(recorded.iter().all(|l| l.state.unwrap().header.lost == 0));
-    // Every sensor delivered and was valid once its first sample had come.
-    let last = recorded.last().unwrap().measurements.unwrap();
-    assert!(last.readings[..layout.sensors.len()].iter().all(|r| r.valid == 1 && r.seq > 0));
 }
