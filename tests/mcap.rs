@@ -70,14 +70,15 @@ fn csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
 
 /// Where each column of trajectory.csv is in the recording, from the channels' schemas: a field
 /// keeps the component's name and gives its unit as its description, and the column is that
-/// name with the unit (`theta_dot` in rad/s: `theta_dot_rad_per_s`). Column → (topic, path).
+/// name with the unit (`theta_dot` in rad/s: `theta_dot_rad_per_s`); the applied input is the
+/// state's `applied` (a live recording only). Column → (topic, path).
 fn columns_in(recording: &Recording) -> BTreeMap<String, (&'static str, Vec<String>)> {
     let fields = |schema: &Value| -> Vec<(String, String)> {
         let properties = schema["properties"].as_object().unwrap();
         let unit = |field: &Value| field["description"].as_str().unwrap_or("").to_string();
         properties
             .iter()
-            .filter(|(name, _)| !["k", "t"].contains(&name.as_str()))
+            .filter(|(name, _)| !["k", "t", "lost", "applied"].contains(&name.as_str()))
             .map(|(n, f)| (n.clone(), unit(f)))
             .collect()
     };
@@ -85,6 +86,12 @@ fn columns_in(recording: &Recording) -> BTreeMap<String, (&'static str, Vec<Stri
     for (topic, prefix) in [("/state", ""), ("/estimate", "est."), ("/command", "cmd.")] {
         for (name, unit) in fields(&recording.schemas[topic]) {
             columns.insert(column_name(&format!("{prefix}{name}"), &unit), (topic, vec![name]));
+        }
+    }
+    let applied = &recording.schemas["/state"]["properties"]["applied"];
+    if !applied.is_null() {
+        for (name, unit) in fields(applied) {
+            columns.insert(column_name(&format!("applied.{name}"), &unit), ("/state", vec!["applied".into(), name]));
         }
     }
     let measurements = &recording.schemas["/measurements"];
@@ -102,15 +109,18 @@ fn columns_in(recording: &Recording) -> BTreeMap<String, (&'static str, Vec<Stri
 
 /// Every value of trajectory.csv equals the recording's, exactly, in the field its column names
 /// (see [`columns_in`]); `t_s` is the recording's `t`, k / rate exactly. The applied input's
-/// columns (`applied.*`) have no channel: the recording's state is the plant's state vector.
-fn assert_trajectory_matches(dir: &Path, recording: &Recording, rate_hz: f64) {
+/// columns (`applied.*`) are in the monitor's recording only (`with_applied`): export's keeps
+/// the plant's state vector alone.
+fn assert_trajectory_matches(dir: &Path, recording: &Recording, rate_hz: f64, with_applied: bool) {
     let (header, rows) = csv(&dir.join("trajectory.csv"));
     assert_eq!(header[..2], ["k", "t_s"]);
     let columns = columns_in(recording);
-    let recorded = header.iter().filter(|name| !name.starts_with("applied.")).count();
-    assert!(recorded < header.len(), "no applied.* column in {header:?}");
+    let recorded = header.iter().filter(|name| with_applied || !name.starts_with("applied.")).count();
+    assert!(header.iter().any(|name| name.starts_with("applied.")), "no applied.* column in {header:?}");
     assert_eq!(columns.len(), recorded - 2, "{header:?} against {:?}", columns.keys());
-    for (column, name) in header.iter().enumerate().skip(2).filter(|(_, name)| !name.starts_with("applied.")) {
+    for (column, name) in
+        header.iter().enumerate().skip(2).filter(|(_, name)| with_applied || !name.starts_with("applied."))
+    {
         let (topic, path) = columns.get(name).unwrap_or_else(|| panic!("{name} is in no schema: {:?}", columns.keys()));
         let messages = &recording.messages[*topic];
         assert_eq!(messages.len(), rows.len(), "{name}");
@@ -163,7 +173,7 @@ fn a_lockstep_run_records_every_loop_and_fault_and_export_writes_the_same() {
     assert_eq!(r.summary["loops"], 2000);
     assert_counts(&r.summary, &live);
     assert_clock(&live, "simulation");
-    assert_trajectory_matches(&r.dir, &live, 1000.0);
+    assert_trajectory_matches(&r.dir, &live, 1000.0, true);
 
     // Log time: simulation time of tick k (1 kHz: k ms); publish time the same in lockstep.
     for topic in ["/state", "/loop"] {
@@ -198,6 +208,7 @@ fn a_lockstep_run_records_every_loop_and_fault_and_export_writes_the_same() {
     }
     let encoder = &live.messages["/measurements"][5].json["encoder"];
     assert_eq!((encoder["fresh"].as_bool(), encoder["sample_time"].as_f64()), (Some(true), Some(0.005)));
+    assert_eq!((encoder["valid"].as_bool(), encoder["seq"].as_u64()), (Some(true), Some(5)));
 
     // The export from the files: the same vectors, latencies and faults byte for byte, at the
     // same times; the files keep no sample times, fresh or lost flags.
@@ -207,12 +218,25 @@ fn a_lockstep_run_records_every_loop_and_fault_and_export_writes_the_same() {
     let exported = Recording::read(&r.dir.join("run.mcap"));
     assert_counts(&r.summary, &exported);
     assert_clock(&exported, "simulation");
-    assert_trajectory_matches(&r.dir, &exported, 1000.0);
-    for topic in ["/state", "/estimate", "/command", "/latency", "/faults"] {
+    assert_trajectory_matches(&r.dir, &exported, 1000.0, false);
+    for topic in ["/latency", "/faults"] {
         let (a, b) = (&live.messages[topic], &exported.messages[topic]);
         assert!(a.iter().zip(b).all(|(a, b)| a.data == b.data && a.log_time == b.log_time), "{topic}");
     }
+    // The vectors the same, less what only the monitor saw: the applied input and lost flags.
+    for topic in ["/state", "/estimate", "/command"] {
+        let (a, b) = (&live.messages[topic], &exported.messages[topic]);
+        let files_keep = |json: &Value| {
+            let mut json = json.clone();
+            json.as_object_mut().unwrap().retain(|key, _| key != "applied" && key != "lost");
+            json
+        };
+        assert!(a.iter().zip(b).all(|(a, b)| files_keep(&a.json) == b.json && a.log_time == b.log_time), "{topic}");
+    }
+    let lost_estimates = live.messages["/estimate"].iter().filter(|m| m.json["lost"] == true).count();
+    assert_eq!(lost_estimates, lost, "the dropped estimates are marked lost");
     assert_eq!(exported.messages["/measurements"][5].json["encoder"].get("fresh"), None);
+    assert_eq!(exported.messages["/state"][5].json.get("applied"), None);
     assert_eq!(exported.messages["/loop"][5].json.get("lost"), None);
     // A recording there is never overwritten, unless --force says so.
     std::fs::write(r.dir.join("run.mcap"), "the monitor's").unwrap();

@@ -90,6 +90,7 @@ fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Res
             Ok(message) => message,
             // A killed monitor's file ends where it last flushed: what came before is whole.
             Err(mcap::McapError::UnexpectedEof | mcap::McapError::UnexpectedEoc) => break,
+            Err(e @ mcap::McapError::BadMagic) => bail!("{}: not an MCAP recording ({e})", path.display()),
             Err(e) => bail!("{}: unreadable ({e})", path.display()),
         };
         let Some(topic) = Topic::of(&message.channel.topic) else { continue };

@@ -564,39 +564,58 @@ mod tests {
             ]
         );
         let float = json!({"type": ["number", "null"]});
-        assert_eq!(schemas[0]["required"], json!(["k", "t", "theta", "omega"]));
+        assert_eq!(schemas[0]["required"], json!(["k", "t", "theta", "omega", "applied"]));
+        assert_eq!(schemas[0]["properties"]["applied"]["required"], json!(["u"]));
+        assert_eq!(schemas[0]["properties"]["applied"]["properties"]["u"]["description"], "N·m");
         assert_eq!(schemas[0]["properties"]["omega"], json!({"type": ["number", "null"], "description": "rad/s"}));
         assert_eq!(schemas[0]["properties"]["k"]["type"], "integer");
         let imu = &schemas[1]["properties"]["imu"];
-        assert_eq!(imu["required"], json!(["value", "sample_time", "fresh"]));
+        assert_eq!(imu["required"], json!(["value", "sample_time", "seq", "fresh", "valid"]));
+        assert_eq!(imu["properties"]["seq"]["type"], "integer");
+        assert_eq!(imu["properties"]["valid"]["type"], "boolean");
         assert_eq!(imu["properties"]["value"]["required"], json!(["x", "y"]));
         assert_eq!(imu["properties"]["value"]["properties"]["x"]["description"], "m/s²");
         // A pure number has no unit to give.
         assert_eq!(imu["properties"]["value"]["properties"]["y"], float);
         assert_eq!(imu["properties"]["fresh"]["type"], "boolean");
-        assert_eq!(schemas[1]["required"], json!(["k", "t", "encoder", "imu"]));
+        assert_eq!(schemas[1]["required"], json!(["k", "t", "encoder", "imu", "applied"]));
         assert_eq!(schemas[3]["required"], json!(["k", "t", "u"]));
+        // `lost` is written only on a lost message.
+        for schema in &schemas[..4] {
+            assert_eq!(schema["properties"]["lost"]["type"], "boolean", "{}", schema["title"]);
+            assert!(!schema["required"].as_array().unwrap().contains(&json!("lost")), "{}", schema["title"]);
+        }
         let latency = &schemas[5];
         assert_eq!(latency["required"].as_array().unwrap().len(), 2 + 1 + HOPS.len());
         assert_eq!(latency["properties"]["plant_to_sensors_ns"]["type"], "integer");
         assert_eq!(schemas[6]["properties"]["within_limits"]["type"], "boolean");
         assert_eq!(schemas[6]["properties"]["recovery_s"], float);
 
-        // A run folder's files keep no sample times, flags or incarnations.
+        // A run folder's files keep no sample times, flags or incarnations, and export keeps the
+        // applied input nowhere.
         let files = super::schemas(&layout(), Detail::Files);
+        assert_eq!(files[0]["required"], json!(["k", "t", "theta", "omega"]));
+        assert_eq!(files[1]["required"], json!(["k", "t", "encoder", "imu"]));
         assert_eq!(files[1]["properties"]["imu"]["required"], json!(["value"]));
+        assert!(files[..4].iter().all(|schema| schema["properties"].get("lost").is_none()));
         assert_eq!(files[4]["required"], json!(["k", "t", "deadline_miss", "rejected"]));
     }
 
     #[test]
-    fn no_built_in_vector_has_a_component_named_k_or_t() {
-        // They would collide with the loop's `k` and `t` in /state, /estimate and /command.
+    fn no_built_in_vector_or_sensor_has_the_name_of_a_message_field() {
+        // They would collide with the loop's `k`, `t` and `lost` in every message, and with
+        // `applied` in /state and /measurements (whose sensors are fields too).
         for entry in crate::scenarios::ALL {
             let (config, scenario) = crate::scenarios::resolve(entry.name, &[]).unwrap();
             let layout = Layout::new(&config, scenario.as_ref());
-            for name in layout.state.iter().chain(&layout.estimate).chain(&layout.input).map(|c| c.name) {
-                assert!(name != "k" && name != "t", "{}: a component is named {name}", entry.name);
+            let components = layout.state.iter().chain(&layout.estimate).chain(&layout.input).map(|c| c.name);
+            for name in components.chain(layout.sensors.iter().map(|(name, _)| name.as_str())) {
+                assert!(!["k", "t", "lost", "applied"].contains(&name), "{}: a field is named {name}", entry.name);
             }
         }
     }
 }
+
+#[cfg(test)]
+#[path = "recorded_tests.rs"]
+mod recorded_tests;
