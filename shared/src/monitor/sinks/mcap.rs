@@ -63,10 +63,12 @@ impl Channel {
 /// What the recording knows of each loop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Detail {
-    /// Everything the monitor received.
+    /// Everything the monitor received: every field a stage reads, which `looplab replay` plays
+    /// back (`runtime::recorded`).
     Live,
-    /// What a run folder's files keep (`looplab export`): no sensor sample times or fresh flags,
-    /// no lost flags or incarnations.
+    /// What a run folder's files keep (`looplab export`): no sensor sample times, sequence
+    /// numbers or fresh and valid flags, no applied input in the messages, no lost flags or
+    /// incarnations; `runtime::recorded` refuses it.
     Files,
 }
 
