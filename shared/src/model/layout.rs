@@ -115,20 +115,6 @@ mod tests {
     }
 
     #[test]
-    fn every_built_in_column_is_ascii_and_unique() {
-        for entry in crate::scenarios::ALL {
-            let (config, scenario) = crate::scenarios::resolve(entry.name, &[]).unwrap();
-            let columns = Layout::new(&config, scenario.as_ref()).trajectory_columns();
-            for column in &columns {
-                let allowed = |ch: char| ch.is_ascii_alphanumeric() || ch == '_' || ch == '.';
-                assert!(column.chars().all(allowed), "{}: column {column:?}", entry.name);
-            }
-            let unique: std::collections::HashSet<&String> = columns.iter().collect();
-            assert_eq!(unique.len(), columns.len(), "{}: {columns:?}", entry.name);
-        }
-    }
-
-    #[test]
     fn the_example_layout_has_these_columns() {
         assert_eq!(
             Layout::example().trajectory_columns(),

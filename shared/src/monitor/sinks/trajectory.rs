@@ -136,4 +136,18 @@ mod tests {
              5,0.005,,,,,,,,\n"
         );
     }
+
+    #[test]
+    fn every_built_in_column_is_ascii_and_unique() {
+        for entry in crate::scenarios::ALL {
+            let (config, scenario) = crate::scenarios::resolve(entry.name, &[]).unwrap();
+            let columns = crate::model::layout::Layout::new(&config, scenario.as_ref()).trajectory_columns();
+            for column in &columns {
+                let allowed = |ch: char| ch.is_ascii_alphanumeric() || ch == '_' || ch == '.';
+                assert!(column.chars().all(allowed), "{}: column {column:?}", entry.name);
+            }
+            let unique: std::collections::HashSet<&String> = columns.iter().collect();
+            assert_eq!(unique.len(), columns.len(), "{}: {columns:?}", entry.name);
+        }
+    }
 }
