@@ -135,7 +135,9 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         let mut stage = toml::Table::new();
         stage.insert("command".into(), toml::Value::Array(program.iter().cloned().map(toml::Value::String).collect()));
         stage.insert("dir".into(), toml::Value::String(dir.display().to_string()));
-        overrides.push(set(&format!("stages.{role}"), toml::Value::Table(stage)));
+        let mut stage = set(&format!("stages.{role}"), toml::Value::Table(stage));
+        stage.text = format!("stages.{role}.command (from --stage {})", args.stage);
+        overrides.push(stage);
     }
     let spec = ReplaySpec {
         recording: recording.clone(),
