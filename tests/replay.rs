@@ -16,9 +16,7 @@ use common::*;
 const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/python");
 
 fn replay_with(mut launcher: std::process::Command, recording: &Path, out: &Path, args: &[&str]) -> Output {
-    let output =
-        launcher.arg("replay").arg(recording).args(args).arg("--out").arg(out).output().expect("start looplab");
-    output
+    launcher.arg("replay").arg(recording).args(args).arg("--out").arg(out).output().expect("start looplab")
 }
 
 /// `looplab replay RECORDING ARGS --out OUT`, expected to succeed.

@@ -85,6 +85,10 @@ pub struct ReplayReport {
     pub skipped_in_replay: Vec<[u64; 2]>,
     /// Loops where the recorded stage restarted (a new incarnation's first loop).
     pub restarts: Vec<u64>,
+    /// Loops whose output the recorded stage sent but whose state it had not kept when it was
+    /// killed (real time): its successor thawed the loop before's, and so does the replay's,
+    /// which is not given these loops.
+    pub thawed_older: Vec<u64>,
     /// Loops whose outputs a `delay` fault held back in the recording (real time: the same
     /// outputs, later; lockstep: the outputs of earlier loops, replayed alike).
     pub delayed: Vec<[u64; 2]>,
@@ -139,18 +143,22 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         stage.text = format!("stages.{role}.command (from --stage {})", args.stage);
         overrides.push(stage);
     }
-    let spec = ReplaySpec {
+    if !args.closed_loop {
+        let faults = seen.faults(&recorded_config);
+        overrides.push(set("faults", toml::Value::try_from(&faults).expect("faults convert to TOML")));
+    }
+    let mut spec = ReplaySpec {
         recording: recording.clone(),
         stage: role.name().to_string(),
         closed_loop: args.closed_loop,
         skipped: if args.closed_loop { Vec::new() } else { seen.skipped.clone() },
     };
-    overrides.push(set(KEY, toml::Value::try_from(&spec).expect("a replay converts to TOML")));
-    if !args.closed_loop {
-        let faults = seen.faults(&recorded_config);
-        overrides.push(set("faults", toml::Value::try_from(&faults).expect("faults convert to TOML")));
-    }
-    let (config, scenario) = catalog.resolve(&target, &overrides).map_err(|e| bad(e.to_string()))?;
+    let resolve = |spec: &ReplaySpec| {
+        let mut overrides = overrides.clone();
+        overrides.push(set(KEY, toml::Value::try_from(spec).expect("a replay converts to TOML")));
+        catalog.resolve(&target, &overrides).map_err(|e| bad(e.to_string()))
+    };
+    let (config, scenario) = resolve(&spec)?;
     if Layout::new(&config, scenario.as_ref()) != layout {
         return Err(bad(format!(
             "--set: the replay's vectors or sensors differ from the recording's ({}); a replay feeds the stage \
@@ -170,20 +178,61 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
     };
     let run_dir = crate::launcher::create_run_dir(args.out.as_deref(), &format!("replay-{}", config.scenario))
         .map_err(|e| bad(format!("{e:#}")))?;
-
-    let started = Instant::now();
-    let ran = match &binaries {
-        Some(binaries) => {
-            crate::runtime::ipc::clean_abandoned_runs();
-            let view = crate::launcher::LiveView::Quiet;
-            crate::launcher::run_with(&config, scenario.as_ref(), binaries, &run_dir, view)
-        }
-        None => crate::launcher::in_process::run_in_process(&config, scenario.as_ref(), &run_dir),
+    let attempt = |spec: &ReplaySpec, dir: &std::path::Path| -> Result<Attempt, ToolError> {
+        let (config, scenario) = resolve(spec)?;
+        let started = Instant::now();
+        let (summary, outcome) = match &binaries {
+            Some(binaries) => {
+                crate::runtime::ipc::clean_abandoned_runs();
+                let view = crate::launcher::LiveView::Quiet;
+                crate::launcher::run_with(&config, scenario.as_ref(), binaries, dir, view)?
+            }
+            None => crate::launcher::in_process::run_in_process(&config, scenario.as_ref(), dir)?,
+        };
+        let seconds = started.elapsed().as_secs_f64();
+        let replayed = recorded::load(dir, &layout, config.loops())?;
+        let outputs = compare(output_columns(role, &layout), |l| output_values(role, &layout, l), &loops, &replayed);
+        Ok(Attempt {
+            skipped: RecordedStage::new(&config, role, &replayed).skipped,
+            summary,
+            outcome,
+            seconds,
+            replayed,
+            outputs,
+        })
     };
-    let (summary, outcome) = ran?;
-    let seconds = started.elapsed().as_secs_f64();
-    let replayed = recorded::load(&run_dir, &layout, config.loops())?;
-    let replayed_stage = RecordedStage::new(&config, role, &replayed);
+    let mut ran = attempt(&spec, &run_dir)?;
+    // A real-time recording's stage killed after it sent an output and before it kept its state
+    // (a window of about a microsecond) had its successor thaw the state of the loop before. The
+    // same stage and settings then differ from the restart on: replayed again with that loop
+    // withheld from the stage, they must match from there; if they do, that is what happened.
+    let (mut thawed_older, mut tried) = (Vec::new(), Vec::new());
+    let same_stage = program.is_none() && args.set.is_empty() && !args.closed_loop;
+    while same_stage
+        && recorded_config.mode == Mode::Realtime
+        && let Some(first) = ran.outputs.first_difference
+        && let Some(&restart) = seen.restarts.iter().rev().find(|&&r| r <= first)
+        && !tried.contains(&restart)
+        && let Some(last) = (0..restart).rev().find(|&k| !spec.skipped(k))
+    {
+        tried.push(restart);
+        let mut older = spec.clone();
+        older.skipped.push([last, last]);
+        older.skipped.sort_unstable();
+        let trial_dir = run_dir.with_extension("older-thaw");
+        let _ = std::fs::remove_dir_all(&trial_dir);
+        let trial = attempt(&older, &trial_dir)?;
+        let _ = std::fs::remove_dir_all(&trial_dir);
+        if trial.outputs.first_difference.is_some_and(|f| f <= first) {
+            break;
+        }
+        // It is: the run folder gets that replay (lockstep: the same bytes as the trial's).
+        std::fs::remove_dir_all(&run_dir).with_context(|| format!("clear {}", run_dir.display()))?;
+        spec = older;
+        ran = attempt(&spec, &run_dir)?;
+        thawed_older.push(last);
+    }
+    let Attempt { summary, outcome, seconds, replayed, outputs, skipped } = ran;
     let report = ReplayReport {
         recording,
         run_dir: run_dir.clone(),
@@ -196,10 +245,11 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         seconds,
         loops_per_s: summary.loops as f64 / seconds,
         skipped: seen.skipped.clone(),
-        skipped_in_replay: replayed_stage.skipped,
+        skipped_in_replay: skipped,
         restarts: seen.restarts.clone(),
+        thawed_older,
         delayed: seen.delayed.clone(),
-        outputs: compare(output_columns(role, &layout), |l| output_values(role, &layout, l), &loops, &replayed),
+        outputs,
         state: args.closed_loop.then(|| {
             let columns = layout.trajectory_columns()[2..2 + layout.state.len()].to_vec();
             compare(columns, |l| l.state.map(|s| s.x[..layout.state.len()].to_vec()), &loops, &replayed)
@@ -220,6 +270,17 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         )));
     }
     Ok(report)
+}
+
+/// One run of a replay.
+struct Attempt {
+    summary: crate::launcher::summary::Summary,
+    outcome: Outcome,
+    seconds: f64,
+    replayed: Vec<RecordedLoop>,
+    outputs: OutputComparison,
+    /// The loops the replayed stage did not compute.
+    skipped: Vec<[u64; 2]>,
 }
 
 fn set(key: &str, value: toml::Value) -> Override {
@@ -477,6 +538,14 @@ pub fn render(r: &ReplayReport) -> String {
             "  restarts: the recorded {stage} restarted at loop {}; the replayed one restarted there too and thawed its \
              frozen state",
             loops.join(", ")
+        );
+    }
+    for k in &r.thawed_older {
+        let _ = writeln!(
+            out,
+            "  thawed one loop older: the recorded {stage} was killed after it sent loop {k}'s output and before it kept \
+             its state, so its successor thawed loop {}'s; the replayed one was not given loop {k}, and thawed the same",
+            k.saturating_sub(1)
         );
     }
     if !r.delayed.is_empty() {
