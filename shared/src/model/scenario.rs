@@ -300,6 +300,11 @@ pub trait Plant {
     fn initial_input(&self) -> Option<&[f64]> {
         None
     }
+    /// Whether the state of tick k goes out marked lost (a replay's recorded plant, for a tick
+    /// its recording has no state of), so that the stages skip it.
+    fn withheld(&self, _k: u64) -> bool {
+        false
+    }
 }
 
 pub trait Estimator {

@@ -135,6 +135,7 @@ impl PlantCore {
             ..Default::default()
         };
         msg.header.set_incarnation(Role::Plant, self.incarnation);
+        msg.header.lost = u32::from(self.plant.withheld(self.k));
         let x = self.plant.state();
         msg.x[..x.len()].copy_from_slice(x);
         msg.header.trace.stamp_published(Role::Plant, published_ns);

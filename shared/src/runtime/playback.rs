@@ -7,8 +7,7 @@
 //! A loop the recording has no output of a process for (it was dead, or the monitor missed it)
 //! is withheld: sent on marked lost, so the stages after it skip it as they skip a dropped
 //! loop. The process just before the replayed stage also withholds the loops the recorded stage
-//! skipped (`[replay] skipped`), so that the replayed stage sees what the recorded one saw. (The
-//! plant does not withhold: a replay of the sensors computes every loop.)
+//! skipped (`[replay] skipped`), so that the replayed stage sees what the recorded one saw.
 
 use anyhow::{Result, bail};
 
@@ -49,7 +48,9 @@ impl Playback {
     /// The plant that sends the recorded states.
     pub fn plant(&self) -> Box<dyn Plant> {
         let states: Vec<Option<PlantState>> = self.loops.iter().map(|l| l.state).collect();
-        Box::new(RecordedPlant::new(states, self.state_len, self.input_len))
+        let withheld =
+            states.iter().enumerate().map(|(k, state)| self.withholds(Role::Plant, k as u64, state.as_ref())).collect();
+        Box::new(RecordedPlant::new(states, withheld, self.state_len, self.input_len))
     }
 
     /// Whether the process of `role` withholds loop k (see the module's documentation).
@@ -119,19 +120,21 @@ playback_task!(Estimate, Command);
 
 /// The plant of an open-loop replay: the recorded state of each tick and the input the
 /// recorded actuator applied, whatever the commands; a tick the recording has no state of holds
-/// the last.
+/// the last, and goes out marked lost.
 pub struct RecordedPlant {
     states: Vec<Option<PlantState>>,
+    /// Per tick: whether its state goes out marked lost (see [`Playback::withholds`]).
+    withheld: Vec<bool>,
     k: usize,
     x: Vec<f64>,
     applied: Vec<f64>,
 }
 
 impl RecordedPlant {
-    fn new(states: Vec<Option<PlantState>>, state_len: usize, input_len: usize) -> Self {
+    fn new(states: Vec<Option<PlantState>>, withheld: Vec<bool>, state_len: usize, input_len: usize) -> Self {
         let first = states.iter().flatten().next().copied().unwrap_or_else(|| unreachable!("checked at load"));
         let mut plant =
-            Self { states, k: 0, x: first.x[..state_len].to_vec(), applied: first.u_applied[..input_len].to_vec() };
+            Self { states, withheld, k: 0, x: first.x[..state_len].to_vec(), applied: first.u_applied[..input_len].to_vec() };
         plant.take(0);
         plant
     }
@@ -167,5 +170,9 @@ impl Plant for RecordedPlant {
 
     fn initial_input(&self) -> Option<&[f64]> {
         Some(&self.applied)
+    }
+
+    fn withheld(&self, k: u64) -> bool {
+        self.withheld.get(k as usize).copied().unwrap_or(true)
     }
 }
