@@ -265,6 +265,15 @@ fn from_document(
             .map_err(|message| origins.error(python_plant::KEY, message))?;
     }
 
+    // In an open-loop replay the processes that play the recording back are LoopLab's own,
+    // whatever the file runs in their place.
+    if let Some(replay) = &common.replay {
+        stages.commands.retain(|role, _| !replay.plays_back(*role));
+        if replay.plays_back(crate::contract::role::Role::Plant) {
+            stages.plant = None;
+        }
+    }
+
     let mut sensors: BTreeMap<String, SensorSpec> = common.sensors.into_iter().filter(|(_, s)| s.enabled).collect();
     for (name, sensor) in &mut sensors {
         if schema.name == declared::DECLARED {
