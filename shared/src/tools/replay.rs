@@ -36,7 +36,7 @@ use crate::tools::ToolError;
 #[derive(Debug, Clone, clap::Args)]
 #[command(after_help = "Examples:\n  looplab run pendulum --mode lockstep --out runs/golden\n  \
 looplab replay runs/golden --stage estimator --out runs/same\n  \
-looplab replay runs/golden --stage estimator --set estimator.observer_poles=[-30,-31,-32,-33]\n  \
+looplab replay runs/golden --stage estimator --set 'estimator.bias-observer.poles=[-30,-35,-40]'\n  \
 looplab replay runs/golden --stage 'estimator=python3 my_estimator.py'\n  \
 looplab diff runs/golden runs/same\n\
 Exit codes: 0 the replay ran (`looplab diff` judges its outputs), 1 it failed, 2 bad input.")]
