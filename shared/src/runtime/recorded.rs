@@ -17,6 +17,7 @@ use serde_json::{Map, Value};
 use crate::config::schema::Component;
 use crate::contract::msg::{Command, Estimate, Header, LoopRecord, Measurements, PlantState};
 use crate::contract::role::Role;
+use crate::contract::role::Topic;
 use crate::model::layout::Layout;
 
 /// The first monitor's recording (`monitor::sinks::mcap::FILE`, a layer above); a restarted
@@ -54,27 +55,10 @@ pub fn load(run_dir: &Path, layout: &Layout, loops: u64) -> Result<Vec<RecordedL
     Ok(recorded)
 }
 
-/// The topics a stage reads back, as the recording names them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Topic {
-    State,
-    Measurements,
-    Estimate,
-    Command,
-    Loop,
-}
-
-impl Topic {
-    fn of(topic: &str) -> Option<Self> {
-        Some(match topic {
-            "/state" => Topic::State,
-            "/measurements" => Topic::Measurements,
-            "/estimate" => Topic::Estimate,
-            "/command" => Topic::Command,
-            "/loop" => Topic::Loop,
-            _ => return None,
-        })
-    }
+/// The topic of a channel of the recording (`/state` …); None for the others (`/latency`,
+/// `/faults`).
+fn topic_of(channel: &str) -> Option<Topic> {
+    Topic::ALL.into_iter().find(|t| channel.strip_prefix('/') == Some(t.name()))
 }
 
 /// Adds one recording file's messages to `recorded`, where no earlier file (or message) has one
@@ -93,7 +77,7 @@ fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Res
             Err(e @ mcap::McapError::BadMagic) => bail!("{}: not an MCAP recording ({e})", path.display()),
             Err(e) => bail!("{}: unreadable ({e})", path.display()),
         };
-        let Some(topic) = Topic::of(&message.channel.topic) else { continue };
+        let Some(topic) = topic_of(&message.channel.topic) else { continue };
         let json: Value = serde_json::from_slice(&message.data)
             .map_err(|e| anyhow!("{}: a {} message is not JSON ({e})", path.display(), message.channel.topic))?;
         let Value::Object(fields) = &json else {
