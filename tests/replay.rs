@@ -106,6 +106,13 @@ fn a_lockstep_replay_of_the_same_estimator_gives_the_recording_back_byte_for_byt
     let same = diff(&recording.dir, &processes, &[]);
     assert_eq!(same.status.code(), Some(0), "{}", String::from_utf8_lossy(&same.stdout));
 
+    // The controller of the same recording: the estimator plays back, its delay line and the
+    // loops it passed on marked lost included.
+    let controller = fresh_dir("replay-lockstep-controller");
+    replay(&recording.dir, &controller, &["--stage", "controller"]);
+    assert!(bytes(&controller, "trajectory.csv") == bytes(&recording.dir, "trajectory.csv"), "controller differs");
+    let _ = std::fs::remove_dir_all(controller);
+
     // In one process: the same bytes.
     let one = fresh_dir("replay-lockstep-in-process");
     replay(&recording.dir, &one, &["--stage", "estimator", "--in-process"]);
@@ -205,6 +212,10 @@ fn a_real_time_recording_with_a_kill_and_a_delay_is_replayed_as_what_the_estimat
     assert_eq!(outputs["identical"], outputs["compared"]);
     let computed = table.rows.len() as u64 - in_replay.len() as u64;
     assert_eq!(outputs["compared"], computed);
+    // So diff, which reads the files, finds the recording in the replay: the loops the
+    // estimator skipped are left out of the replay's files as the recording has none.
+    let same = diff(&recording.dir, &out, &["--no-figure"]);
+    assert_eq!(same.status.code(), Some(0), "{}", String::from_utf8_lossy(&same.stdout));
 
     // The sensors of the same recording: the ticks the real-time plant skipped are withheld from
     // them, so their noise draws line up, and their readings are the recording's.

@@ -7,6 +7,7 @@
 //! stage = "estimator"                  # the stage that runs; sensors | estimator | controller
 //! closed_loop = false                  # true: only a note, every process runs
 //! skipped = [[2000, 2149]]             # loops the recorded stage did not compute
+//! recorded_in_real_time = true         # leave out of the files what the recording never had
 //! ```
 //!
 //! Open loop, every other process of the loop plays its recorded messages back, loop by loop:
@@ -36,6 +37,10 @@ pub struct ReplaySpec {
     /// withholds them, so that the stage skips them again.
     #[serde(default)]
     pub skipped: Vec<[u64; 2]>,
+    /// The recording ran in real time, where a message that did not come left no trace: the
+    /// replay's files leave out what is sent on marked lost for it, as the recording's do.
+    #[serde(default)]
+    pub recorded_in_real_time: bool,
 }
 
 impl ReplaySpec {

@@ -48,6 +48,9 @@ pub struct Recording {
     /// A restarted monitor starts at the first loop it sees; the first one starts at 0.
     started: bool,
     restarted: bool,
+    /// A replay of a real-time recording: what goes out marked lost stands for a message that
+    /// never came, and is left out, as the recording has none.
+    leave_out_lost: bool,
     /// Where the running state goes at each checkpoint, for the next monitor ([`resume`]).
     snapshot: Option<PathBuf>,
     /// The first loop this recording has no state of: 0, or where the last monitor's snapshot
@@ -102,6 +105,7 @@ impl Recording {
             status,
             started: !restarted,
             restarted,
+            leave_out_lost: config.replay.as_ref().is_some_and(|r| r.recorded_in_real_time),
             snapshot: None,
             resume_k: 0,
             last_record_sequence: 0,
@@ -201,6 +205,9 @@ impl Recording {
 
     /// Takes one message; writes every loop it completes.
     pub fn take(&mut self, sample: Sample) -> Result<()> {
+        if self.leave_out_lost && !matches!(sample, Sample::Loop(_)) && sample.header().lost != 0 {
+            return Ok(());
+        }
         let (k, topic) = sample.key();
         if !self.started {
             // The loops from where the last monitor's state ended to this one went with it (or

@@ -6,8 +6,8 @@
 //!
 //! A loop the recording has no output of a process for (it was dead, or the monitor missed it)
 //! is withheld: sent on marked lost, so the stages after it skip it as they skip a dropped
-//! loop. The process just before the replayed stage also withholds the loops the recorded stage
-//! skipped (`[replay] skipped`), so that the replayed stage sees what the recorded one saw.
+//! loop. The replayed stage itself skips the loops its recording skipped (`[replay] skipped`,
+//! `runtime::task::StageRunner`), so that it computes what the recorded one computed.
 
 use anyhow::{Result, bail};
 
@@ -48,35 +48,33 @@ impl Playback {
     /// The plant that sends the recorded states.
     pub fn plant(&self) -> Box<dyn Plant> {
         let states: Vec<Option<PlantState>> = self.loops.iter().map(|l| l.state).collect();
-        let withheld =
-            states.iter().enumerate().map(|(k, state)| self.withholds(Role::Plant, k as u64, state.as_ref())).collect();
+        let withheld = states.iter().map(|state| withheld(state.as_ref())).collect();
         Box::new(RecordedPlant::new(states, withheld, self.state_len, self.input_len))
     }
 
-    /// Whether the process of `role` withholds loop k (see the module's documentation).
-    fn withholds(&self, role: Role, k: u64, recorded: Option<&impl Message>) -> bool {
-        let before_stage = self.replay.role().input().map(|topic| topic.writer()) == Some(role);
-        recorded.is_none_or(|m| m.header().lost != 0) || (before_stage && self.replay.skipped(k))
-    }
-
-    fn task<Out: Message>(&self, role: Role, pick: impl Fn(&RecordedLoop) -> Option<Out>) -> PlaybackTask<Out> {
+    fn task<Out: Message>(&self, pick: impl Fn(&RecordedLoop) -> Option<Out>) -> PlaybackTask<Out> {
         let outputs: Vec<Option<Out>> = self.loops.iter().map(&pick).collect();
-        let withheld =
-            outputs.iter().enumerate().map(|(k, out)| self.withholds(role, k as u64, out.as_ref())).collect();
+        let withheld = outputs.iter().map(|out| withheld(out.as_ref())).collect();
         PlaybackTask { outputs, withheld, last: None }
     }
 
     pub fn sensors(&self) -> PlaybackTask<Measurements> {
-        self.task(Role::Sensors, |l| l.measurements)
+        self.task(|l| l.measurements)
     }
 
     pub fn estimator(&self) -> PlaybackTask<Estimate> {
-        self.task(Role::Estimator, |l| l.estimate)
+        self.task(|l| l.estimate)
     }
 
     pub fn controller(&self) -> PlaybackTask<Command> {
-        self.task(Role::Controller, |l| l.command)
+        self.task(|l| l.command)
     }
+}
+
+/// Whether a playback sends a loop on marked lost: the recording has no message of it, or
+/// one marked lost.
+fn withheld(recorded: Option<&impl Message>) -> bool {
+    recorded.is_none_or(|m| m.header().lost != 0)
 }
 
 /// A stage that sends its recorded output of each loop, whatever its input (its input type is
@@ -99,6 +97,7 @@ macro_rules! playback_task {
         impl Task for PlaybackTask<$out> {
             type In = $in;
             type Out = $out;
+            const PLAYS_BACK: bool = true;
             fn process(&mut self, input: &$in, out: &mut $out) -> Result<()> {
                 if let Some(recorded) = self.output(input.header().k) {
                     self.last = Some(*recorded);
@@ -123,7 +122,7 @@ playback_task!(Estimate, Command);
 /// the last, and goes out marked lost.
 pub struct RecordedPlant {
     states: Vec<Option<PlantState>>,
-    /// Per tick: whether its state goes out marked lost (see [`Playback::withholds`]).
+    /// Per tick: whether its state goes out marked lost (the recording has none).
     withheld: Vec<bool>,
     k: usize,
     x: Vec<f64>,
@@ -133,8 +132,13 @@ pub struct RecordedPlant {
 impl RecordedPlant {
     fn new(states: Vec<Option<PlantState>>, withheld: Vec<bool>, state_len: usize, input_len: usize) -> Self {
         let first = states.iter().flatten().next().copied().unwrap_or_else(|| unreachable!("checked at load"));
-        let mut plant =
-            Self { states, withheld, k: 0, x: first.x[..state_len].to_vec(), applied: first.u_applied[..input_len].to_vec() };
+        let mut plant = Self {
+            states,
+            withheld,
+            k: 0,
+            x: first.x[..state_len].to_vec(),
+            applied: first.u_applied[..input_len].to_vec(),
+        };
         plant.take(0);
         plant
     }

@@ -25,6 +25,9 @@ pub trait Task {
     type Out: Message;
     /// Whether the task has state to freeze (the process runner then keeps a snapshot).
     const FREEZES: bool = false;
+    /// Whether it plays a recording back (`runtime::playback`): its output of each loop is the
+    /// recorded one, a loop passed on marked lost included.
+    const PLAYS_BACK: bool = false;
     /// Computes this loop's output from its input (the header is the runner's business). An
     /// error (a user's stage that raised) ends the process's incarnation.
     fn process(&mut self, input: &Self::In, output: &mut Self::Out) -> Result<()>;
@@ -39,9 +42,9 @@ pub trait Task {
     }
     /// Replaces the output by a corrupt value (`corrupt` faults, which target the command).
     fn corrupt(&self, _output: &mut Self::Out, _value: CorruptValue) {}
-    /// Whether this task has no output for loop k (a playback whose recording has none, or
-    /// whose replayed stage skipped it): the runner sends the loop on marked lost, as a drop
-    /// fault does in lockstep, so that the stages after it skip it too.
+    /// Whether this task has no output for loop k (a playback whose recording has none): the
+    /// runner sends the loop on marked lost, as a drop fault does in lockstep, so that the
+    /// stages after it skip it too.
     fn withheld(&self, _k: u64) -> bool {
         false
     }
@@ -196,6 +199,9 @@ pub struct StageRunner<T: Task> {
     drop_sends_lost: bool,
     upstream: Option<[u32; 4]>,
     last_k: Option<u64>,
+    /// A replay's stage: the loops its recording skipped, which it skips again (passes on
+    /// marked lost, as a lost input).
+    replay_skips: Vec<[u64; 2]>,
     pub report: StageReport,
 }
 
@@ -214,6 +220,12 @@ impl<T: Task> StageRunner<T> {
             drop_sends_lost: config.mode == Mode::Lockstep,
             upstream: None,
             last_k: None,
+            replay_skips: config
+                .replay
+                .as_ref()
+                .filter(|r| !r.closed_loop && r.stage == role.name())
+                .map(|r| r.skipped.clone())
+                .unwrap_or_default(),
             report: StageReport::default(),
         }
     }
@@ -231,8 +243,10 @@ impl<T: Task> StageRunner<T> {
         self.upstream = Some(seen);
 
         // A loop dropped upstream (lockstep) is passed on, not computed: like a lost message in
-        // real time, this stage does not run for it.
-        let mut out = if header.lost == 0 {
+        // real time, this stage does not run for it; nor for a loop a replay's recording of it
+        // skipped. A playback's output is the recorded one either way.
+        let skipped = self.replay_skips.iter().any(|[from, to]| (*from..=*to).contains(&k));
+        let mut out = if (header.lost == 0 && !skipped) || T::PLAYS_BACK {
             let mut out = T::Out::default();
             self.task.process(input, &mut out)?;
             if let Some(value) = self.faults.corrupt(k) {
@@ -257,7 +271,7 @@ impl<T: Task> StageRunner<T> {
         }
         *out.header_mut() = header;
         out.header_mut().set_incarnation(self.role, self.incarnation);
-        if self.task.withheld(k) {
+        if self.task.withheld(k) || skipped {
             out.header_mut().lost = 1;
         } else if self.faults.drops(k) {
             self.report.dropped_by_fault += 1;

@@ -152,6 +152,7 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         stage: role.name().to_string(),
         closed_loop: args.closed_loop,
         skipped: if args.closed_loop { Vec::new() } else { seen.skipped.clone() },
+        recorded_in_real_time: recorded_config.mode == Mode::Realtime && !args.closed_loop,
     };
     let resolve = |spec: &ReplaySpec| {
         let mut overrides = overrides.clone();
@@ -531,7 +532,7 @@ pub fn render(r: &ReplayReport) -> String {
             ranges_text(&r.skipped)
         );
     }
-    if !r.restarts.is_empty() {
+    if !r.restarts.is_empty() && !r.closed_loop {
         let loops: Vec<String> = r.restarts.iter().map(u64::to_string).collect();
         let _ = writeln!(
             out,
@@ -548,7 +549,7 @@ pub fn render(r: &ReplayReport) -> String {
             k.saturating_sub(1)
         );
     }
-    if !r.delayed.is_empty() {
+    if !r.delayed.is_empty() && !r.closed_loop {
         let what = if r.recorded_mode == Mode::Realtime {
             "held back in the recording by a delay fault (real time: the same outputs, later); the replay computes \
              them without the hold"
