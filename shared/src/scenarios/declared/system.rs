@@ -187,7 +187,9 @@ impl System {
                 ));
             }
         };
-        let pass_through = if c.stages.commands.contains_key(&Role::Estimator) {
+        // A replay that plays the estimator back needs none of its own.
+        let played_back = c.replay.as_ref().is_some_and(|r| r.plays_back(Role::Estimator));
+        let pass_through = if c.stages.commands.contains_key(&Role::Estimator) || played_back {
             None
         } else {
             // Each estimate component from the first sensor that reads a component of its name.
