@@ -6,7 +6,7 @@
 mod common;
 mod figure_check;
 
-use common::{fresh_dir, looplab, run};
+use common::{FaultKind, fresh_dir, looplab, run};
 use figure_check::{Image, assert_charts, assert_figure, check, data_pixels};
 use looplab_shared::model::figure::RunColumns;
 use looplab_shared::tools::plot::figure::{Cell, Colour, Curve, FaultMark, Figure, Line, Panel};
@@ -58,7 +58,16 @@ fn a_stopped_controller_leaves_a_gap_in_the_commands_and_the_held_input_beside_i
             _ => {}
         }
     }
-    assert!(gap.len() >= 500 && t[gap.start] >= 1.0, "no stretch without commands at the stop: {gap:?}");
+    // The stop took effect when the launcher sent it (a tick is due each ms from tick 0): the
+    // loops whose commands were not out by then are in the gap too, more of them the further
+    // the loop lagged behind its schedule (a loaded machine).
+    let stop = r.summary().faults.iter().find(|f| f.kind == FaultKind::Stop).expect("the stop's report");
+    let injected_ms = stop.injected_at_ms.expect("the launcher's injection time");
+    let (first, last) = (t[gap.start] * 1e3, t[gap.end - 1] * 1e3);
+    assert!(
+        gap.len() >= 500 && first <= injected_ms.ceil() && last >= injected_ms,
+        "no stretch without commands at the stop ({injected_ms:.3} ms after tick 0): {gap:?}"
+    );
     // Across the stop the applied input is one value in every row that has the plant's state (a
     // tick the plant skipped on a loaded machine has neither): from gap.start + 1 on, since the
     // last command may take effect a tick after it came. That value is one of the last two

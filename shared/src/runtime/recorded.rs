@@ -88,7 +88,10 @@ fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Res
         at.k = Some(k);
         let Some(slot) = usize::try_from(k).ok().and_then(|k| recorded.get_mut(k)) else { continue };
         let t = at.float(fields, "t")?;
-        let header = Header { k, t, lost: at.lost(fields)?, ..Header::default() };
+        let mut header = Header { k, t, lost: at.lost(fields)?, ..Header::default() };
+        if let Some(sender) = topic.writer().slot() {
+            header.incarnations[sender] = at.incarnation(fields)?;
+        }
         match topic {
             Topic::State if slot.state.is_none() => slot.state = Some(at.state(fields, header, layout)?),
             Topic::Measurements if slot.measurements.is_none() => {
@@ -138,7 +141,7 @@ fn check_names(path: &Path, layout: &Layout) -> Result<()> {
     let components =
         vectors.iter().flat_map(|(what, components, also)| components.iter().map(move |c| (*what, c.name, *also)));
     for (what, name, also) in components.chain(sensors) {
-        if ["k", "t", "lost"].contains(&name) || also.contains(&name) {
+        if ["k", "t", "lost", "incarnation"].contains(&name) || also.contains(&name) {
             bail!(
                 "{}: the {what} {name:?} has the name of a field every message has; replay cannot tell them apart",
                 path.display()
@@ -199,6 +202,15 @@ impl At<'_> {
         self.get(fields, key)?.as_object().ok_or_else(|| self.bad(key, "an object"))
     }
 
+    /// `"incarnation"` is written only after the sender's first restart.
+    fn incarnation(&self, fields: &Map<String, Value>) -> Result<u32> {
+        match fields.get("incarnation") {
+            None => Ok(0),
+            Some(_) => u32::try_from(self.unsigned(fields, "incarnation")?)
+                .map_err(|_| self.bad("incarnation", "an incarnation")),
+        }
+    }
+
     /// `"lost":true` is written only on a lost message.
     fn lost(&self, fields: &Map<String, Value>) -> Result<u32> {
         match fields.get("lost") {
@@ -257,9 +269,10 @@ impl At<'_> {
     }
 }
 
-/// Each message's incarnations, from its loop's record (or the nearest earlier loop's, when
-/// none came), masked to the processes it had passed: the state the plant's, the measurements
-/// the plant's and the sensors', the estimate up to the estimator's, the command all four.
+/// Each message's incarnations: its sender's, from the message itself; those of the processes
+/// before it, from its loop's record (or the nearest earlier loop's, when none came): the
+/// measurements the plant's, the estimate the plant's and the sensors', the command the first
+/// three.
 fn fill_incarnations(recorded: &mut [RecordedLoop]) {
     let mut incarnations = [0; 4];
     for recorded in recorded {
@@ -267,7 +280,7 @@ fn fill_incarnations(recorded: &mut [RecordedLoop]) {
             incarnations = record.header.incarnations;
         }
         let passed = |header: &mut Header, processes: usize| {
-            header.incarnations[..processes].copy_from_slice(&incarnations[..processes]);
+            header.incarnations[..processes - 1].copy_from_slice(&incarnations[..processes - 1]);
         };
         if let Some(m) = &mut recorded.state {
             passed(&mut m.header, 1);

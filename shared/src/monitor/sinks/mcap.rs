@@ -218,11 +218,20 @@ impl McapRecording {
         number(&mut self.buf, t);
     }
 
-    /// Marks the message in the buffer lost, when its header says so (a live recording only:
-    /// the run folder's files keep no lost flags).
-    fn lost(&mut self, header: &Header) {
-        if self.detail == Detail::Live && header.lost != 0 {
+    /// Marks the message in the buffer lost, when its header says so, and gives the incarnation
+    /// of the process that sent it, after its first restart (a live recording only: the run
+    /// folder's files keep neither). A replay finds where its stage restarted from these.
+    fn lost(&mut self, header: &Header, sender: Role) {
+        if self.detail != Detail::Live {
+            return;
+        }
+        if header.lost != 0 {
             self.buf.extend_from_slice(br#","lost":true"#);
+        }
+        let incarnation = header.incarnations[sender.slot().expect("a loop process")];
+        if incarnation != 0 {
+            self.buf.extend_from_slice(br#","incarnation":"#);
+            number(&mut self.buf, incarnation);
         }
     }
 
@@ -333,7 +342,7 @@ impl RunSink for McapRecording {
             self.begin(k, t);
             fields(&mut self.buf, &self.keys.state, &state.x, true);
             self.applied(&state.u_applied);
-            self.lost(&state.header);
+            self.lost(&state.header, Role::Plant);
             self.put(Channel::State, self.log_time(k, &state.header), state.header.trace.plant_publish)?;
         }
         if let Some(m) = &parts.measurements {
@@ -356,19 +365,19 @@ impl RunSink for McapRecording {
                 self.buf.push(b'}');
             }
             self.applied(&m.u_applied);
-            self.lost(&m.header);
+            self.lost(&m.header, Role::Sensors);
             self.put(Channel::Measurements, self.log_time(k, &m.header), m.header.trace.sensors_publish)?;
         }
         if let Some(estimate) = &parts.estimate {
             self.begin(k, t);
             fields(&mut self.buf, &self.keys.estimate, &estimate.x, true);
-            self.lost(&estimate.header);
+            self.lost(&estimate.header, Role::Estimator);
             self.put(Channel::Estimate, self.log_time(k, &estimate.header), estimate.header.trace.estimator_publish)?;
         }
         if let Some(command) = &parts.command {
             self.begin(k, t);
             fields(&mut self.buf, &self.keys.input, &command.u, true);
-            self.lost(&command.header);
+            self.lost(&command.header, Role::Controller);
             self.put(Channel::Command, self.log_time(k, &command.header), command.header.trace.controller_publish)?;
         }
         if let (Some(record), Some(end_to_end), Some(hops)) = (&parts.record, parts.end_to_end_ns(), parts.hops_ns()) {
@@ -462,9 +471,12 @@ fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
     };
     // Only on a message whose header says an upstream stage dropped the loop's output.
     let lost = boolean("an upstream stage dropped this loop's output (lockstep drop fault); absent: not lost");
+    // Only after the sending process's first restart.
+    let incarnation = integer("the incarnation of the process that sent it; absent: 0");
     let with_lost = |mut schema: Value| {
         if live {
             schema["properties"]["lost"] = lost.clone();
+            schema["properties"]["incarnation"] = incarnation.clone();
         }
         schema
     };

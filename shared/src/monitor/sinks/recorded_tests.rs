@@ -189,7 +189,8 @@ fn a_restarted_monitors_file_fills_in_and_the_first_message_of_a_loop_wins() {
         assert_loop(got, written, &layout);
     }
 
-    // A loop without a record takes the incarnations of the nearest earlier loop's.
+    // A loop without a record takes the incarnations of the processes before each message from
+    // the nearest earlier loop's; its sender's is its own.
     let dir = tempfile::tempdir().unwrap();
     for (k, parts) in second.iter_mut().enumerate() {
         let record = parts.record.as_mut().unwrap();
@@ -207,9 +208,18 @@ fn a_restarted_monitors_file_fills_in_and_the_first_message_of_a_loop_wins() {
     recording.finish_with(&[]).unwrap();
     let recorded = load(dir.path(), &layout, 20).unwrap();
     assert!(recorded[13].record.is_none());
-    assert_eq!(recorded[13].command.unwrap().header.incarnations, [2, 1, 1, 1]);
-    assert_eq!(recorded[13].state.unwrap().header.incarnations, [2, 0, 0, 0]);
-    assert_eq!(recorded[14].estimate.unwrap().header.incarnations, [4, 1, 1, 0]);
+    let own = |k: usize, slot: usize| -> u32 {
+        let parts = &second[k];
+        let header = match slot {
+            0 => parts.state.unwrap().header,
+            2 => parts.estimate.unwrap().header,
+            _ => parts.command.unwrap().header,
+        };
+        header.incarnations[slot]
+    };
+    assert_eq!(recorded[13].command.unwrap().header.incarnations, [2, 1, 1, own(3, 3)]);
+    assert_eq!(recorded[13].state.unwrap().header.incarnations, [own(3, 0), 0, 0, 0]);
+    assert_eq!(recorded[14].estimate.unwrap().header.incarnations, [4, 1, own(4, 2), 0]);
 }
 
 #[test]
