@@ -4,7 +4,7 @@
 //! built-in controller's run in lockstep; a C step's error ends the run with its code named.
 //! The C programs are compiled here with the machine's `cc`.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

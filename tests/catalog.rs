@@ -2,7 +2,7 @@
 //! the built-in catalog with one entry added, resolved by name, run in lockstep in this process.
 //! The added entry is the pendulum's code under another name with other default gains.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -1,7 +1,7 @@
 //! The command line: help, the scenario list, and bad input, which must give one clear error
 //! naming the file and key, exit code 2, and leave nothing behind.
 
-mod common;
+use crate::common;
 
 use common::{fresh_dir, load_summary, looplab, png_size};
 
@@ -195,8 +195,8 @@ fn bench_quick_writes_every_part() {
     let sizes: Vec<u64> = report["payload"].as_array().unwrap().iter().map(|p| p["bytes"].as_u64().unwrap()).collect();
     assert_eq!(sizes, (0..9).map(|i| 64u64 << (2 * i)).collect::<Vec<_>>());
     let auto = report["lockstep_auto"].as_str().unwrap();
-    assert_eq!(auto, if cpus >= 5 { "poll" } else { "block" });
-    for method in ["poll", "block"] {
+    assert_eq!(auto, if cpus >= 5 { "poll" } else { "handoff" });
+    for method in ["poll", "handoff", "block"] {
         let rate = report["lockstep_by_method"][method].as_f64().unwrap();
         assert!(rate > 0.0 && rate < report["in_process_loops_per_s"].as_f64().unwrap(), "{method}: {rate}");
     }

@@ -2,8 +2,8 @@
 //! the table's structure, its numbers against the runs' summaries, its ratios against the
 //! numbers it prints; and bad input.
 
-mod common;
-mod figure_check;
+use crate::common;
+use crate::figure_check;
 
 use std::path::Path;
 

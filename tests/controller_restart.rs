@@ -3,7 +3,7 @@
 //! byte for byte. One that started afresh would lose its integrators (the library's tests in
 //! `runtime/task_tests.rs` show a fresh controller commanding otherwise).
 
-mod common;
+use crate::common;
 
 use common::*;
 

@@ -1,7 +1,7 @@
 //! `looplab run --dashboard` in a pseudo-terminal: the screen it draws, read back with a terminal
 //! emulator (vt100), and `q` stopping the run in order.
 
-mod common;
+use crate::common;
 
 use std::fs::File;
 use std::io::{Read, Write};

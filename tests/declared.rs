@@ -1,7 +1,7 @@
 //! A system declared in its launch file (no `scenario`, a `[system]` table), with the built-in
 //! linear plant: five processes and in-process, real time with its plant killed, and bad files.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -1,7 +1,7 @@
 //! A declared system's generic metrics, tracking error and `[limits]` verdict, end to end: the
 //! numbers summary.json reports, recomputed here from the run's own trajectory.csv.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 

@@ -5,8 +5,8 @@
 //! that cannot be compared and bad options are one line and exit 2. The figure is decoded and
 //! checked: not blank, data in every panel.
 
-mod common;
-mod figure_check;
+use crate::common;
+use crate::figure_check;
 
 use std::path::Path;
 use std::process::Output;

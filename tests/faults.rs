@@ -2,7 +2,7 @@
 //! iceoryx2 shared memory. Numbers come from lockstep runs, which are deterministic; real-time
 //! runs are checked for what happened, never for how fast.
 
-mod common;
+use crate::common;
 
 use common::*;
 

@@ -3,7 +3,7 @@
 //! launch file in launch/fip/. The numerical cases run in-process (byte-identical to the five
 //! processes: tests/trajectory_hashes.rs); one runs the five processes in real time.
 
-mod common;
+use crate::common;
 
 use common::{looplab, run, run_in_process};
 

@@ -4,7 +4,7 @@
 //! Model Exchange (the FMU's ẋ is the same arithmetic) and in Co-Simulation (its doStep is the same
 //! RK4); a killed FMU plant goes on from the FMU's own serialised state; bad FMUs are one line.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -15,7 +15,7 @@ use looplab_shared::scenarios::declared::fmu::{Version, build_fmu, pendulum_sour
 const LAUNCH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/fmu/pendulum_fmu.toml");
 
 fn launcher() -> std::process::Command {
-    python_launcher("python-module-fmu")
+    python_launcher()
 }
 
 /// The pendulum FMU of `version`, built once per test process.

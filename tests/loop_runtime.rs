@@ -1,7 +1,7 @@
 //! The loop as processes: start-up without loss, the summary contract, determinism, isolation of
 //! concurrent runs, and clean shutdown on signals and on a dead process.
 
-mod common;
+use crate::common;
 
 use std::time::{Duration, Instant};
 

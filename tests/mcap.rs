@@ -2,7 +2,7 @@
 //! `summary.json` counts them, every value of `trajectory.csv` exactly, the log time's clock in
 //! each channel's metadata, and `looplab export` writing the same from the run folder's files.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::Path;

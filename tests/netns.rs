@@ -3,7 +3,7 @@
 //! where the build is not root or lacks a tool the hosts need, every test is ignored
 //! (services/build.rs).
 
-mod common;
+use crate::common;
 
 use std::io::{Read, Write};
 use std::net::{IpAddr, SocketAddr, TcpListener, TcpStream};

@@ -3,7 +3,7 @@
 //! tested. The models' numbers run in-process (byte-identical to the five processes, see
 //! tests/trajectory_hashes.rs); the sensors' zero-order hold runs through the real processes.
 
-mod common;
+use crate::common;
 
 use common::{assert_loops_csv_integers, run, run_in_process};
 

@@ -3,8 +3,8 @@
 //! figure is decoded and checked: not blank, data in every panel (`figure_check`), a check shown
 //! to fail on a figure with an empty panel.
 
-mod common;
-mod figure_check;
+use crate::common;
+use crate::figure_check;
 
 use common::{FaultKind, fresh_dir, looplab, run};
 use figure_check::{Image, assert_charts, assert_figure, check, data_pixels};

@@ -3,7 +3,7 @@
 //! as python3 with the `looplab` module that cargo built. Five real processes over real shared
 //! memory; numbers from lockstep runs, real-time runs checked for what happened.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +13,7 @@ use looplab_shared::contract::role::Role;
 const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/python");
 
 fn launcher() -> std::process::Command {
-    python_launcher("python-module-plant")
+    python_launcher()
 }
 
 fn example(file: &str) -> String {

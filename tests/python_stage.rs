@@ -2,7 +2,7 @@
 //! by a real python3 with the `looplab` module that cargo built, as five real processes over real
 //! shared memory. Numbers come from lockstep runs; real-time runs are checked for what happened.
 
-mod common;
+use crate::common;
 
 use common::*;
 
@@ -12,7 +12,7 @@ const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/p
 const OTHER_GAINS: &str = "controller.gains=[-450.0, -65.0, -1.2]";
 
 fn launcher() -> std::process::Command {
-    python_launcher("python-module")
+    python_launcher()
 }
 
 fn example(file: &str) -> String {

@@ -3,7 +3,7 @@
 //! in-process (byte-identical to the five processes, see tests/trajectory_hashes.rs); the
 //! restarted estimator runs through the real processes.
 
-mod common;
+use crate::common;
 
 use common::{looplab, run, run_in_process};
 

@@ -2,7 +2,7 @@
 //! back): trajectory.csv's numbers exactly, and the flags the monitor saw. The reader's
 //! round trip of awkward floats and its errors are unit tests (`monitor/sinks/recorded_tests.rs`).
 
-mod common;
+use crate::common;
 
 use common::{Run, run, run_in_process};
 use looplab_shared::model::layout::Layout;

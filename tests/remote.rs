@@ -3,7 +3,7 @@
 //! Root only (namespaces): where the build is not root or lacks a tool the hosts need, every test
 //! is ignored (services/build.rs).
 
-mod common;
+use crate::common;
 
 use common::netns::{Host, TestHosts, test_hosts};
 use common::*;

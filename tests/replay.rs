@@ -6,7 +6,7 @@
 //! where both computed one; a Python estimator takes the built-in one's place; bad input is one
 //! line, exit 2, and nothing is written.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Output;
@@ -238,7 +238,7 @@ fn a_python_estimator_replayed_in_the_built_in_ones_place_gives_the_same_estimat
     let recording = run("replay-python-recording", &["pendulum", "--mode", "lockstep", "--duration", "1"]);
     let out = fresh_dir("replay-python");
     let stage = format!("estimator=python3 {EXAMPLES}/pendulum_estimator.py");
-    let output = replay_with(python_launcher("python-module-replay"), &recording.dir, &out, &["--stage", &stage]);
+    let output = replay_with(python_launcher(), &recording.dir, &out, &["--stage", &stage]);
     let said = String::from_utf8_lossy(&output.stdout);
     assert!(output.status.success(), "{said}\n{}", String::from_utf8_lossy(&output.stderr));
     assert!(said.contains(&format!("program: python3 {EXAMPLES}/pendulum_estimator.py")), "{said}");
@@ -285,8 +285,7 @@ fn bad_input_is_one_line_exit_2_and_writes_nothing() {
     for (args, expected) in cases {
         let out = fresh_dir("replay-bad-out");
         // With the Python module importable, so that the Python stage is refused for --in-process.
-        let output =
-            python_launcher("python-module-replay").arg("replay").args(&args).arg("--out").arg(&out).output().unwrap();
+        let output = python_launcher().arg("replay").args(&args).arg("--out").arg(&out).output().unwrap();
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
         assert!(stderr.contains(&expected), "{args:?}: {stderr}");

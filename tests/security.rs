@@ -1,7 +1,7 @@
 //! Attacks on a run by another local user: files planted in /dev/shm under the run's names the
 //! moment its folder appears. Root only: the attacker is the user nobody.
 
-mod common;
+use crate::common;
 
 use std::os::unix::process::CommandExt as _;
 use std::path::Path;

@@ -3,7 +3,7 @@
 //! only outcomes that do not depend on how fast the machine is: every fault seen, every process
 //! back, the run complete, every loop either recorded or reported missing, nothing left behind.
 
-mod common;
+use crate::common;
 
 use common::*;
 use looplab_shared::tools::bench::restarts::Load;

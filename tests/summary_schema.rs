@@ -2,7 +2,7 @@
 //! restarted process, and in-process) validate against the JSON Schema kept in the repo, say
 //! what wrote them and where, and give each incarnation of a process its own counts.
 
-mod common;
+use crate::common;
 
 use common::*;
 

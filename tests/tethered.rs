@@ -4,7 +4,7 @@
 //! tests/trajectory_hashes.rs); the sweeps run `looplab sweep`; one case runs the five
 //! processes in real time.
 
-mod common;
+use crate::common;
 
 use common::{fresh_dir, looplab, run, run_in_process};
 

@@ -4,7 +4,7 @@
 //! in-process (byte-identical to the five processes: tests/trajectory_hashes.rs); one runs the
 //! five processes in real time.
 
-mod common;
+use crate::common;
 
 use common::{run, run_in_process};
 

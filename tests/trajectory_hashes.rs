@@ -20,7 +20,7 @@
 //! `trajectory.csv`); every row was run twice when recorded and gave the same bytes. The runs
 //! are short (2 s of simulated time, 2000–2400 loops, about half a second each).
 
-mod common;
+use crate::common;
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -174,7 +174,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
         &["launch/tethered/6-noise.toml"],
         "79367b4c9c6d23ea7833f028769eec403dc7ca26ac07d24103d26d0574030aa7",
     ),
-    // Lockstep polls or blocks (`wait.lockstep`, auto picks by the CPUs): how a process waits
+    // Lockstep polls, blocks or hands off (`wait.lockstep`, auto picks by the CPUs): how a process waits
     // never changes what the loop computes.
     (
         "pendulum, lockstep polling",
@@ -184,6 +184,11 @@ const CASES: &[(&str, &[&str], &str)] = &[
     (
         "pendulum, lockstep blocking",
         &["pendulum", "--set", "wait.lockstep=block"],
+        "02185331ac0bbefa0c73e42086e7090f8f51a6a97b6eea57d5533158ba18c5af",
+    ),
+    (
+        "pendulum, lockstep handing off",
+        &["pendulum", "--set", "wait.lockstep=handoff"],
         "02185331ac0bbefa0c73e42086e7090f8f51a6a97b6eea57d5533158ba18c5af",
     ),
     (

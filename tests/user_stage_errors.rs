@@ -147,7 +147,7 @@ fn port_refuses_other_layouts() {
     let lock = create_run_storage(&run_id).unwrap();
     let refused = {
         let other = Ipc::with_layout("other", &run_id, common::Mode::Lockstep, OTHER_LAYOUT).unwrap();
-        let _publisher = other.publisher::<Command>(Topic::Command, false).unwrap();
+        let _publisher = other.publisher::<Command>(Topic::Command, looplab_shared::runtime::ipc::Wake::Never).unwrap();
         let ours = Ipc::new("ours", &run_id, common::Mode::Lockstep).unwrap();
         ours.stage_subscriber::<Command>(Topic::Command, false).err().expect("refused")
     };

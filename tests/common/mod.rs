@@ -29,30 +29,17 @@ pub fn looplab() -> Command {
 }
 
 /// The launcher, with the `looplab` Python module that cargo builds importable by the stages and
-/// plants it starts: the workspace's `liblooplab.so` linked as `looplab.so` into `target/<folder>`
-/// (a folder per test binary, so that two binaries never race on one link).
-pub fn python_launcher(folder: &str) -> Command {
+/// plants it starts: the workspace's `liblooplab.so` linked as `looplab.so` into
+/// `target/<profile>/python-module`.
+pub fn python_launcher() -> Command {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     let dir = DIR.get_or_init(|| {
-        let target = Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher's folder");
-        // The module is not a dependency of the tests, so cargo may not have built it (or not
-        // since the last change): build it, a no-op when it is fresh.
-        if let Some(cargo) = std::env::var_os("CARGO") {
-            let mut build = Command::new(cargo);
-            build.args(["build", "--quiet", "-p", "looplab-python"]).current_dir(env!("CARGO_MANIFEST_DIR"));
-            if target.file_name().is_some_and(|name| name == "release") {
-                build.arg("--release");
-            }
-            let status = build.status().expect("start cargo");
-            assert!(status.success(), "cargo build -p looplab-python failed: {status}");
-        }
-        let built = target.join("liblooplab.so");
-        assert!(built.exists(), "{} is missing: build the workspace first", built.display());
-        let dir = target.join(folder);
+        let target = built();
+        let dir = target.join("python-module");
         std::fs::create_dir_all(&dir).unwrap();
         let module = dir.join("looplab.so");
         let _ = std::fs::remove_file(&module);
-        std::os::unix::fs::symlink(&built, &module).unwrap();
+        std::os::unix::fs::symlink(target.join("liblooplab.so"), &module).unwrap();
         dir
     });
     let mut command = looplab();
@@ -231,13 +218,14 @@ pub fn profile_dir() -> PathBuf {
     Path::new(env!("CARGO_BIN_EXE_looplab")).parent().expect("the launcher is in a folder").to_owned()
 }
 
-/// The C library, its header and the Rust example, built (or found fresh) once: they are not
-/// dependencies of this test, so cargo may not have built them since the last change.
+/// The C library, its header, the Rust example and the Python module, built (or found fresh)
+/// once: they are not dependencies of the tests, so cargo may not have built them since the last
+/// change.
 pub fn built() -> &'static Path {
     static BUILT: OnceLock<PathBuf> = OnceLock::new();
     BUILT.get_or_init(|| {
         let dir = profile_dir();
-        let needed = ["liblooplab_stage.so", "looplab_stage.h", "looplab-example-controller"];
+        let needed = ["liblooplab_stage.so", "looplab_stage.h", "looplab-example-controller", "liblooplab.so"];
         cargo_build(&dir);
         for file in needed {
             assert!(dir.join(file).exists(), "{} is missing after the build", dir.join(file).display());
@@ -246,20 +234,16 @@ pub fn built() -> &'static Path {
     })
 }
 
-/// `cargo build -p looplab-stage -p looplab-example-controller` in the tests' profile (a no-op
-/// when they are fresh). Where the
+/// `cargo build --workspace --all-targets` in the tests' profile: every target `cargo test
+/// --workspace` builds, with the same features, so it finds them fresh and only links what the
+/// tests do not (the C library, the example, the Python module). A `-p` build would resolve the
+/// dependencies' features for those packages alone and compile LoopLab a second time. Where the
 /// running `cargo test` holds the build folder's lock, cargo would wait for it for ever: that is
 /// a failure that says what to run first.
 fn cargo_build(dir: &Path) {
     let release = dir.file_name().is_some_and(|name| name == "release");
     let mut command = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
-    command.current_dir(env!("CARGO_MANIFEST_DIR")).args([
-        "build",
-        "-p",
-        "looplab-stage",
-        "-p",
-        "looplab-example-controller",
-    ]);
+    command.current_dir(env!("CARGO_MANIFEST_DIR")).args(["build", "--workspace", "--all-targets"]);
     if release {
         command.arg("--release");
     }
@@ -271,8 +255,8 @@ fn cargo_build(dir: &Path) {
             child.kill().expect("stop cargo");
             let _ = child.wait();
             panic!(
-                "the C library or the Rust example is not built, and cargo cannot build it while this cargo test \
-                 holds the build folder: run `cargo build{} -p looplab-stage -p looplab-example-controller` first",
+                "the C library, the Rust example or the Python module is not built, and cargo cannot build it while \
+                 this cargo test holds the build folder: run `cargo build{} --workspace --all-targets` first",
                 if release { " --release" } else { "" }
             );
         }

@@ -1,6 +1,6 @@
 //! How a loop process waits for its input: the `[wait]` section of a launch file.
 //!
-//! - `block`: sleep in the WaitSet until the input's notification. Cheap, but on a virtual
+//! - `block`: sleep on the reader's futex until its writer wakes it. Cheap, but on a virtual
 //!   machine each wake-up of a halted vCPU costs tens of microseconds per hop.
 //! - `spin`: poll without pause. The lowest latency, and a whole core per process.
 //! - `adaptive` (real time): the loop is periodic, so the input's arrival can be predicted.
@@ -16,9 +16,11 @@
 //!   `block` does: there a yield gives the CPU away for a whole time slice.
 //!   In lockstep there is no schedule to learn: see `lockstep`.
 //!
-//! Lockstep has no schedule, so each hop either blocks or polls (`lockstep`): polling needs a
+//! Lockstep has no schedule, so each hop polls, blocks, or hands off (`lockstep`): polling needs a
 //! CPU per loop process, and `auto` polls when the machine has one for each process of the loop,
-//! the monitor's included.
+//! the monitor's included; otherwise it hands off: a process polls for about one handoff's time
+//! (yielding its CPU) and then sleeps on its reader's futex until its writer wakes it. On two CPUs
+//! that runs faster than polling (the stage whose turn it is gets a CPU) at half its CPU time.
 
 use serde::{Deserialize, Serialize};
 
@@ -44,13 +46,21 @@ impl Strategy {
 #[serde(rename_all = "lowercase")]
 #[strum(serialize_all = "lowercase")]
 pub enum LockstepWait {
-    /// Poll when the machine has a CPU for every process of the loop, else block.
+    /// Poll when the machine has a CPU for every process of the loop, else hand off.
     Auto,
     /// Poll, yielding the CPU between looks, whatever the machine.
     Poll,
-    /// Block in the WaitSet until the input's wake-up.
+    /// Sleep until the input's wake-up.
     Block,
+    /// Poll for [`HANDOFF_POLL_US`], yielding the CPU between looks, then sleep until woken.
+    Handoff,
 }
+
+/// How long a handing-off process polls before it sleeps, µs: about one loop of four hops in
+/// lockstep on a 2-CPU virtual machine (measured: 5 µs a hop), so that an input that follows
+/// its writer's CPU time closely is caught without a wake-up, and a process whose turn is far
+/// off sleeps.
+pub const HANDOFF_POLL_US: u64 = 20;
 
 /// CPUs that every process of the loop polling needs: one each, the monitor's included (lockstep's
 /// `auto` polls only with them, and the bench spins only with them).
@@ -79,7 +89,8 @@ pub struct WaitSettings {
     /// sensors, estimator, controller on CPUs 0, 1, 2, 3, modulo the CPUs there are): each hop's
     /// reader then waits on another CPU than its writer's.
     pub pin: bool,
-    /// Lockstep: poll or block for each hop (`auto`: poll when there is a CPU per process).
+    /// Lockstep: poll, block or hand off at each hop (`auto`: poll when there is a CPU per
+    /// process, else hand off).
     pub lockstep: LockstepWait,
 }
 
@@ -115,16 +126,15 @@ impl WaitSettings {
     /// the run's launch.toml, so that every process of the run waits, and wakes its reader, the
     /// same way, and the run says which was used.
     pub fn decided_for(&self, cpus: usize) -> Self {
-        let lockstep = if self.lockstep_polls(cpus) { LockstepWait::Poll } else { LockstepWait::Block };
-        Self { lockstep, ..self.clone() }
+        Self { lockstep: self.lockstep_on(cpus), ..self.clone() }
     }
 
-    /// Whether lockstep polls on a machine with `cpus` CPUs.
-    pub fn lockstep_polls(&self, cpus: usize) -> bool {
+    /// How lockstep waits on a machine with `cpus` CPUs (never `Auto`).
+    pub fn lockstep_on(&self, cpus: usize) -> LockstepWait {
         match self.lockstep {
-            LockstepWait::Auto => cpus >= CPUS_TO_POLL,
-            LockstepWait::Poll => true,
-            LockstepWait::Block => false,
+            LockstepWait::Auto if cpus >= CPUS_TO_POLL => LockstepWait::Poll,
+            LockstepWait::Auto => LockstepWait::Handoff,
+            chosen => chosen,
         }
     }
 }

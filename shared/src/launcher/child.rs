@@ -136,6 +136,10 @@ pub struct Start {
     pub exit: Exit,
     /// User + system CPU seconds, once reaped.
     pub cpu_s: f64,
+    /// Times it slept and was woken (voluntary context switches), once reaped.
+    pub wakeups: u64,
+    /// Times another task took its CPU while it could run (involuntary context switches).
+    pub preemptions: u64,
 }
 
 impl Start {
@@ -152,6 +156,7 @@ impl Start {
             return false;
         }
         self.cpu_s = crate::contract::clock::cpu_seconds(&usage);
+        (self.wakeups, self.preemptions) = (usage.ru_nvcsw as u64, usage.ru_nivcsw as u64);
         self.exit = if libc::WIFEXITED(status) {
             Exit::Status(libc::WEXITSTATUS(status))
         } else {
@@ -292,5 +297,9 @@ pub fn spawn<E: Send + 'static>(
         }
         let _ = send(Line::Closed);
     });
-    Ok(Spawned { start: Start { pid: child.id(), exit: Exit::Running, cpu_s: 0.0 }, stdin: child.stdin.take(), reader })
+    Ok(Spawned {
+        start: Start { pid: child.id(), exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 },
+        stdin: child.stdin.take(),
+        reader,
+    })
 }

@@ -215,7 +215,8 @@ pub fn render(s: &Summary) -> String {
         .map(|p| {
             let again = if p.incarnation > 0 { format!(" restart {}", p.incarnation) } else { String::new() };
             let own = p.command.as_ref().map(|c| format!("your own: `{c}`, ")).unwrap_or_default();
-            format!("{}{again} ({own}pid {}, exit {}, cpu {:.2} s)", p.name, p.pid, p.exit, p.cpu_s)
+            let cpu = format!("cpu {:.2} s, {} wake-ups", p.cpu_s, p.wakeups);
+            format!("{}{again} ({own}pid {}, exit {}, {cpu})", p.name, p.pid, p.exit)
         })
         .collect();
     let processes =

@@ -205,6 +205,11 @@ pub struct ProcessInfo {
     pub exit: Exit,
     /// User + system CPU time, seconds.
     pub cpu_s: f64,
+    /// Times it slept and was woken (voluntary context switches, all its threads): what its
+    /// waiting costs the machine, a count that does not move with a noisy machine's timing.
+    pub wakeups: u64,
+    /// Times another task took its CPU while it could run (involuntary context switches).
+    pub preemptions: u64,
     /// Sensors, estimator, controller: this incarnation's inputs handled, and loops it never saw
     /// (real-time mode: a newer input replaced them, or the plant skipped the tick). An
     /// incarnation that sent no report (killed) has, for `processed`, the loop records the
@@ -515,6 +520,8 @@ fn processes(
                 pid: start.pid,
                 exit: start.exit,
                 cpu_s: start.cpu_s,
+                wakeups: start.wakeups,
+                preemptions: start.preemptions,
                 processed: report.map(|r| r.processed).or_else(|| recorded.map(|r| r.get(n).copied().unwrap_or(0))),
                 skipped: report.map(|r| r.skipped),
                 command: config.stages.command(role).map(|stage| stage.text()),
@@ -683,7 +690,8 @@ pub(crate) mod tests {
             ..Default::default()
         };
         let starts: BTreeMap<Role, Vec<Start>> =
-            [(Role::Sensors, vec![Start { pid: 7, exit: Exit::Status(0), cpu_s: 0.5 }])].into();
+            [(Role::Sensors, vec![Start { pid: 7, exit: Exit::Status(0), cpu_s: 0.5, wakeups: 0, preemptions: 0 }])]
+                .into();
         let summary = build(SummaryInputs {
             config: &config,
             scenario: scenario.as_ref(),
@@ -780,7 +788,7 @@ pub(crate) mod tests {
             }),
             ..Default::default()
         };
-        let start = |pid, exit| Start { pid, exit, cpu_s: 0.0 };
+        let start = |pid, exit| Start { pid, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0 };
         let starts: BTreeMap<Role, Vec<Start>> = [
             (Role::Estimator, vec![start(1, Exit::Signal(9)), start(2, Exit::Status(0))]),
             (Role::Plant, vec![start(3, Exit::Status(0))]),
@@ -825,6 +833,8 @@ pub(crate) mod tests {
             pid: 9,
             exit: Exit::Signal(9),
             cpu_s: 0.0,
+            wakeups: 0,
+            preemptions: 0,
             processed: None,
             skipped: None,
             command: None,

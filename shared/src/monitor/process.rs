@@ -3,14 +3,16 @@
 //! Its readers have no listeners, so publishing never wakes it; it polls every few milliseconds
 //! with deep buffers (real-time mode: safe overflow, so a slow monitor loses samples, counted,
 //! and never blocks a stage). The receive loop only copies samples out of shared memory, feeds
-//! the stall watch and passes the samples over a channel to a writer thread, which runs the
-//! [`Recording`] and sends the live status to the launcher.
+//! the stall watch and passes each drain's samples as one batch over a channel to a writer
+//! thread, which runs the [`Recording`] and sends the live status to the launcher. One batch per
+//! drain wakes the writer once per poll, not once per sample: on two CPUs each of its wake-ups
+//! can take a CPU from a stage of the loop.
 
 use std::fmt::Debug;
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
+use crossbeam_channel::{Receiver, RecvTimeoutError};
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::config::launch::Mode;
@@ -42,17 +44,15 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Reader<T> {
         Ok(Self { subscriber: context.ipc.passive_subscriber(topic)?, wrap })
     }
 
-    /// Passes on every sample queued; returns how many.
-    fn drain(&self, watch: &mut StallWatch, tx: &Sender<Sample>) -> Result<usize> {
-        let mut n = 0;
+    /// Adds every sample queued to `batch`.
+    fn drain(&self, watch: &mut StallWatch, batch: &mut Vec<Sample>) -> Result<()> {
         while let Some(message) = self.subscriber.receive()? {
-            n += 1;
             let sample = (self.wrap)(message);
             let (k, topic) = sample.key();
             watch.saw(topic, k, sample.published_ns());
-            tx.send(sample).map_err(|_| anyhow!("the monitor's writer stopped"))?;
+            batch.push(sample);
         }
-        Ok(n)
+        Ok(())
     }
 }
 
@@ -101,14 +101,19 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
     let timeout_ns = (config.supervision.stall_timeout_s * 1e9) as u64;
     let mut watch = StallWatch::new(timeout_ns, config.loops(), plant_period_ns, Box::new(now_ns));
     let mut drain = || -> Result<usize> {
+        let mut batch = Vec::new();
         // In the order data flows, so a loop's parts tend to arrive together.
-        let n = states.drain(&mut watch, &tx)?
-            + measurements.drain(&mut watch, &tx)?
-            + estimates.drain(&mut watch, &tx)?
-            + commands.drain(&mut watch, &tx)?
-            + records.drain(&mut watch, &tx)?;
+        states.drain(&mut watch, &mut batch)?;
+        measurements.drain(&mut watch, &mut batch)?;
+        estimates.drain(&mut watch, &mut batch)?;
+        commands.drain(&mut watch, &mut batch)?;
+        records.drain(&mut watch, &mut batch)?;
         for event in watch.check() {
             emit(&event)?;
+        }
+        let n = batch.len();
+        if n > 0 {
+            tx.send(batch).map_err(|_| anyhow!("the monitor's writer stopped"))?;
         }
         Ok(n)
     };
@@ -131,11 +136,15 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
 
 /// The writer thread: records every sample, with a checkpoint (status and flush) every
 /// [`STATUS_PERIOD`], until the receive loop hangs up.
-fn write(mut recording: Recording, rx: Receiver<Sample>) -> Result<MonitorReport> {
+fn write(mut recording: Recording, rx: Receiver<Vec<Sample>>) -> Result<MonitorReport> {
     let mut last_status = Instant::now();
     loop {
         match rx.recv_timeout(STATUS_PERIOD) {
-            Ok(sample) => recording.take(sample)?,
+            Ok(batch) => {
+                for sample in batch {
+                    recording.take(sample)?;
+                }
+            }
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => break,
         }

@@ -18,7 +18,7 @@ use iceoryx2::prelude::ipc;
 use iceoryx2::waitset::{WaitSet, WaitSetGuard};
 
 use crate::runtime::faults::{LinkCut, OnLink};
-use crate::runtime::ipc::{Ipc, TopicPublisher, TopicSubscriber};
+use crate::runtime::ipc::{Ipc, TopicPublisher, TopicSubscriber, Wake};
 use crate::runtime::wait::reader_blocks;
 
 /// The key of a topic on the link: the run's id keeps two runs on one network apart.
@@ -247,8 +247,7 @@ fn from_frame<T: Message>(frame: &[u8]) -> Option<T> {
 /// reader is on this host too and decides the wake-ups) and drained at each wake-up.
 pub fn outbound(ipc: &Ipc, config: &LaunchConfig, bridge: Role, topic: Topic) -> Result<Box<dyn Outbound>> {
     fn make<T: Message>(ipc: &Ipc, topic: Topic, listens: bool, cut: LinkCut) -> Result<Box<dyn Outbound>> {
-        let subscriber =
-            if listens { ipc.stage_subscriber::<T>(topic, true)? } else { ipc.passive_subscriber::<T>(topic)? };
+        let subscriber = if listens { ipc.bridge_subscriber::<T>(topic)? } else { ipc.passive_subscriber::<T>(topic)? };
         Ok(Box::new(Out { topic, subscriber, cut, counts: Cell::default() }))
     }
     let reader_here = Role::reading(topic).is_some_and(|r| config.hosts.is_remote(r) == (bridge == Role::BridgeRemote));
@@ -266,11 +265,12 @@ pub fn outbound(ipc: &Ipc, config: &LaunchConfig, bridge: Role, topic: Topic) ->
 /// The writer of a received topic: it wakes the topic's reader here as that reader's own writer
 /// would (whether it blocks is its own waiting method's business).
 pub fn inbound(ipc: &Ipc, config: &LaunchConfig, bridge: Role, topic: Topic) -> Result<Box<dyn Inbound>> {
-    fn make<T: Message>(ipc: &Ipc, topic: Topic, wakes: bool, cut: LinkCut) -> Result<Box<dyn Inbound>> {
+    fn make<T: Message>(ipc: &Ipc, topic: Topic, wakes: Wake, cut: LinkCut) -> Result<Box<dyn Inbound>> {
         let publisher = ipc.publisher::<T>(topic, wakes)?;
         Ok(Box::new(In { topic, publisher, cut, last_k: None, counts: CrossingCounts::default() }))
     }
-    let wakes = reader_blocks(&config.wait, topic, config.mode == Mode::Realtime);
+    let wakes =
+        if reader_blocks(&config.wait, topic, config.mode == Mode::Realtime) { Wake::Futex } else { Wake::Never };
     let cut = LinkCut::for_bridge(config, bridge);
     match topic {
         Topic::State => make::<PlantState>(ipc, topic, wakes, cut),

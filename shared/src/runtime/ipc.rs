@@ -38,6 +38,7 @@ use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::msg::{MONITOR_BUFFER, layout_fingerprint};
 use crate::runtime::reader_state::ReaderState;
+pub use crate::runtime::reader_state::Wake;
 use crate::runtime::signals::StopFlag;
 use crate::runtime::wait::{sleep_until, timespec};
 
@@ -159,11 +160,11 @@ impl Ipc {
         ReaderState::open(&folder, topic)
     }
 
-    /// A publisher that, if `wake` is set, also wakes the topic's readers after each sample.
+    /// A publisher that wakes the topic's reader after each sample as `wake` says.
     pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(
         &self,
         topic: Topic,
-        wake: bool,
+        wake: Wake,
     ) -> Result<TopicPublisher<T>> {
         let counters = Arc::new(BackpressureCounters::default());
         let handler_counters = counters.clone();
@@ -182,21 +183,23 @@ impl Ipc {
             })
             .create()
             .map_err(|e| anyhow!("cannot create the {} publisher: {e:?}", topic.name()))?;
-        let notifier = if wake {
-            let notifier = self
-                .event(topic)?
-                .notifier_builder()
-                .create()
-                .map_err(|e| anyhow!("cannot create the {} notifier: {e:?}", topic.name()))?;
-            Some((notifier, self.reader_state(topic)?))
-        } else {
-            None
+        let waker = match wake {
+            Wake::Never => None,
+            Wake::Futex => Some(Waker::Futex(self.reader_state(topic)?)),
+            Wake::Event => {
+                let notifier = self
+                    .event(topic)?
+                    .notifier_builder()
+                    .create()
+                    .map_err(|e| anyhow!("cannot create the {} notifier: {e:?}", topic.name()))?;
+                Some(Waker::Event(notifier, self.reader_state(topic)?))
+            }
         };
-        Ok(TopicPublisher { topic, publisher, notifier, counters })
+        Ok(TopicPublisher { topic, publisher, waker, counters })
     }
 
     /// A reader for the next stage: a one-sample buffer (the newest wins in real-time mode),
-    /// and if it `listens` (its process ever blocks), a listener that wakes it.
+    /// and if it `listens` (its process ever blocks), the futex its writer wakes it with.
     pub fn stage_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(
         &self,
         topic: Topic,
@@ -204,13 +207,24 @@ impl Ipc {
     ) -> Result<TopicSubscriber<T>> {
         let mut subscriber = self.subscriber_with_buffer::<T>(topic, 1)?;
         if listens {
-            let listener = self
-                .event(topic)?
-                .listener_builder()
-                .create()
-                .map_err(|e| anyhow!("cannot create the {} listener: {e:?}", topic.name()))?;
-            subscriber.listener = Some((listener, self.reader_state(topic)?));
+            subscriber.wakeup = Some(Wakeup::Futex(self.reader_state(topic)?));
         }
+        Ok(subscriber)
+    }
+
+    /// The bridge's reader of a topic it sends: a one-sample buffer, woken through iceoryx2's
+    /// event, which the bridge's WaitSet waits on for all its topics at once.
+    pub fn bridge_subscriber<T: Debug + ZeroCopySend + Copy + 'static>(
+        &self,
+        topic: Topic,
+    ) -> Result<TopicSubscriber<T>> {
+        let mut subscriber = self.subscriber_with_buffer::<T>(topic, 1)?;
+        let listener = self
+            .event(topic)?
+            .listener_builder()
+            .create()
+            .map_err(|e| anyhow!("cannot create the {} listener: {e:?}", topic.name()))?;
+        subscriber.wakeup = Some(Wakeup::Event(listener, self.reader_state(topic)?));
         Ok(subscriber)
     }
 
@@ -234,7 +248,7 @@ impl Ipc {
             .buffer_size(buffer)
             .create()
             .map_err(|e| anyhow!("cannot create the {} subscriber: {e:?}", topic.name()))?;
-        Ok(TopicSubscriber { topic, service, subscriber, listener: None, slept: Cell::new(false) })
+        Ok(TopicSubscriber { topic, service, subscriber, wakeup: None, slept: Cell::new(false) })
     }
 }
 
@@ -250,11 +264,30 @@ struct BackpressureCounters {
     dropped: AtomicU64,
 }
 
+/// How a publisher wakes its reader, and the word that says whether the reader may be asleep.
+enum Waker {
+    Futex(ReaderState),
+    Event(Notifier<ipc::Service>, ReaderState),
+}
+
+/// How a blocking reader is woken (the writer's [`Waker`]).
+enum Wakeup {
+    Futex(ReaderState),
+    Event(Listener<ipc::Service>, ReaderState),
+}
+
+impl Wakeup {
+    fn state(&self) -> &ReaderState {
+        match self {
+            Wakeup::Futex(state) | Wakeup::Event(_, state) => state,
+        }
+    }
+}
+
 pub struct TopicPublisher<T: Debug + ZeroCopySend + 'static> {
     topic: Topic,
     publisher: Publisher<ipc::Service, T, ()>,
-    /// The notifier, and whether the reader may be asleep (it is woken only then).
-    notifier: Option<(Notifier<ipc::Service>, ReaderState)>,
+    waker: Option<Waker>,
     counters: Arc<BackpressureCounters>,
 }
 
@@ -278,10 +311,14 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicPublisher<T> {
     /// Wakes the topic's reader, if this publisher wakes it (it ever blocks) and it may be
     /// asleep now: a polling reader sees the sample itself, and the syscall is saved.
     pub fn wake(&self) -> Result<()> {
-        if let Some((notifier, reader)) = &self.notifier
-            && reader.needs_waking()
-        {
-            notifier.notify().with_context(|| format!("notify on {}", self.topic.name()))?;
+        match &self.waker {
+            None => {}
+            Some(Waker::Futex(reader)) => reader.wake(),
+            Some(Waker::Event(notifier, reader)) => {
+                if reader.needs_waking() {
+                    notifier.notify().with_context(|| format!("notify on {}", self.topic.name()))?;
+                }
+            }
         }
         Ok(())
     }
@@ -297,9 +334,10 @@ pub struct TopicSubscriber<T: Debug + ZeroCopySend + 'static> {
     topic: Topic,
     service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
     subscriber: Subscriber<ipc::Service, T, ()>,
-    /// The listener that wakes it, and the mark that tells the writer when it may sleep.
-    listener: Option<(Listener<ipc::Service>, ReaderState)>,
-    /// It has slept since it last consumed its wake-ups (only then can any be pending).
+    /// How it is woken, with the mark that tells the writer when it may sleep.
+    wakeup: Option<Wakeup>,
+    /// It has slept on an event since it last consumed its wake-ups (only then can any be
+    /// pending; a futex leaves none).
     slept: Cell<bool>,
 }
 
@@ -328,10 +366,10 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
 
     /// The next queued sample, in place in shared memory: its chunk goes back to the writer
     /// when the sample is dropped, so a stage reads only what it uses and returns the chunk
-    /// after it has published, off the hop's path. Once the queue is empty it consumes the
-    /// pending wake-ups and looks once more, so that a sample landing later leaves a wake-up
-    /// behind and a blocking wait cannot miss it; consuming them after the data keeps that
-    /// syscall off the latency. `cleared` starts false for each drain.
+    /// after it has published, off the hop's path. Once the queue is empty, a reader woken by
+    /// an event consumes the pending wake-ups and looks once more, so that a sample landing
+    /// later leaves a wake-up behind and a blocking wait cannot miss it; consuming them after
+    /// the data keeps that syscall off the latency. `cleared` starts false for each drain.
     pub fn next(&self, cleared: &mut bool) -> Result<Option<Sample<ipc::Service, T, ()>>> {
         if let Some(sample) = self.subscriber.receive().context("receive")? {
             return Ok(Some(sample));
@@ -349,25 +387,26 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
         self.subscriber.has_samples().map_err(|e| anyhow!("{}: {e:?}", self.topic.name()))
     }
 
-    pub fn listener(&self) -> Option<&Listener<ipc::Service>> {
-        self.listener.as_ref().map(|(listener, _)| listener)
-    }
-
-    /// Attaches this reader's listener, if it has one, to the process's WaitSet.
+    /// Attaches this reader's event listener, if it has one (a bridge's reader), to a WaitSet.
     pub fn attach_to<'w, 'a>(
         &'a self,
         ws: &'w WaitSet<ipc::Service>,
     ) -> Result<Option<WaitSetGuard<'w, 'a, ipc::Service>>> {
-        self.listener()
-            .map(|listener| ws.attach_notification(listener))
-            .transpose()
+        let Some(Wakeup::Event(listener, _)) = &self.wakeup else { return Ok(None) };
+        ws.attach_notification(listener)
+            .map(Some)
             .map_err(|e| anyhow!("cannot attach the {} listener: {e:?}", self.topic.name()))
     }
 
-    /// Sleeps until this reader's next wake-up or `deadline_ns`, whichever comes first.
+    /// Sleeps until this reader's next wake-up or `deadline_ns`, whichever comes first (a
+    /// reader that is never woken sleeps until the deadline).
     pub fn doze_until(&self, deadline_ns: u64) -> Result<()> {
-        match &self.listener {
-            Some((listener, _)) => self.asleep(|| doze(listener, deadline_ns)),
+        match &self.wakeup {
+            Some(Wakeup::Futex(state)) => self.asleep(|| {
+                state.sleep_until(deadline_ns);
+                Ok(())
+            }),
+            Some(Wakeup::Event(listener, _)) => self.asleep(|| doze(listener, deadline_ns)),
             None => {
                 sleep_until(deadline_ns);
                 Ok(())
@@ -378,9 +417,10 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
     /// Runs `sleep` (a doze, or a block in the WaitSet) marked asleep, so that the writer wakes
     /// this reader; skips it if a sample came in the meantime.
     pub fn asleep(&self, sleep: impl FnOnce() -> Result<()>) -> Result<()> {
-        let Some((_, state)) = &self.listener else { return sleep() };
+        let Some(wakeup) = &self.wakeup else { return sleep() };
+        let state = wakeup.state();
         state.asleep();
-        self.slept.set(true);
+        self.slept.set(matches!(wakeup, Wakeup::Event(..)));
         if !self.has_samples()? {
             sleep()?;
         }
@@ -390,7 +430,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
 
     /// Consumes pending wake-ups, so that the next wait blocks until new data.
     pub fn clear_wakeups(&self) -> Result<()> {
-        if let Some((listener, _)) = &self.listener {
+        if let Some(Wakeup::Event(listener, _)) = &self.wakeup {
             listener.try_wait(|_| {}).map_err(|e| anyhow!("listener: {e:?}"))?;
         }
         self.slept.set(false);

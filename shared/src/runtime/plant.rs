@@ -19,7 +19,7 @@
 use std::collections::{BTreeSet, VecDeque};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context as _, Result, anyhow};
+use anyhow::{Context as _, Result};
 
 use crate::config::faults::OnStale;
 use crate::config::launch::{LaunchConfig, Mode};
@@ -28,7 +28,8 @@ use crate::contract::msg::*;
 use crate::contract::protocol::{ChildEvent, PlantReport};
 use crate::contract::role::{Role, Topic};
 use crate::model::scenario::Scenario;
-use crate::runtime::child::{Context, WAIT_SLICE, emit, line_written, wait, wait_for_line, wait_for_lines, waitset};
+use crate::runtime::child::{Context, WAIT_SLICE, emit, line_written, wait_for_line, wait_for_lines};
+use crate::runtime::ipc::Wake;
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::snapshot::{ModelSnapshot, Snapshot};
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
@@ -402,7 +403,7 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
     let mut p = PlantProcess {
         core: PlantCore::with_plant(&context.config, context.scenario.as_ref(), plant, context.incarnation),
         state_out: context.ipc.publisher(Topic::State, writer_wakes(&context.config, Topic::State))?,
-        loop_out: context.ipc.publisher(Topic::Loop, false)?,
+        loop_out: context.ipc.publisher(Topic::Loop, Wake::Never)?,
         snapshot: Snapshot::open(&context.run_id, Role::Plant.name())?,
         model_snapshot: None,
     };
@@ -416,8 +417,6 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
             p.k
         ));
     }
-    let ws = waitset()?;
-    let _wake = commands.attach_to(&ws)?;
     commands.connect(&context.stop)?;
     emit(&ChildEvent::Ready)?;
     if !wait_for_line(&context.stop, "start")? {
@@ -466,12 +465,13 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
                         p.report.stalled_at = Some(p.k);
                         break 'ticks;
                     }
+                    let slice_end = now_ns() + WAIT_SLICE.as_nanos() as u64;
                     waiter.wait(
                         None,
-                        now_ns() + WAIT_SLICE.as_nanos() as u64,
+                        slice_end,
                         || commands.has_samples(),
                         |until| commands.doze_until(until),
-                        || commands.asleep(|| wait(&ws)),
+                        || commands.doze_until(slice_end),
                     )?;
                     p.drain(&commands)?;
                     // Only while command k is awaited: the launcher says so of a lost stage.
@@ -494,7 +494,6 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
                 p.save();
             }
             let timer = TickTimer::new(start_ns + (p.k + 1) * period_ns, period_ns)?;
-            let _tick = ws.attach_notification(&timer).map_err(|e| anyhow!("cannot attach the tick timer: {e:?}"))?;
             let mut previous_wake = woke;
             // A plant killed after publishing its newest tick (or after the run's last tick), and
             // restarted before the next is due, has no tick to publish: that state went out.
@@ -514,7 +513,7 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
                     next_tick,
                     || Ok(commands.has_samples()? || now_ns() >= next_tick),
                     |until| commands.doze_until(until),
-                    || commands.asleep(|| wait(&ws)),
+                    || commands.doze_until(next_tick),
                 )?;
                 let woke = now_ns();
                 p.drain(&commands)?;
@@ -538,7 +537,7 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
             // Record the last commands even when they come late.
             let grace_end = now_ns() + LATE_COMMAND_GRACE.as_nanos() as u64;
             while p.report.commands < p.report.published && now_ns() < grace_end && !context.stop.requested() {
-                commands.asleep(|| wait(&ws))?;
+                commands.doze_until(grace_end)?;
                 p.drain(&commands)?;
             }
         }

@@ -1,5 +1,5 @@
 //! Whether a topic's reader may be asleep: one word in shared memory that lets the writer skip
-//! the notifier's syscall while its reader is polling (a futex's idea, over iceoryx2's event).
+//! the wake-up's syscall while its reader is polling, and the futex a sleeping reader waits on.
 //!
 //! The reader marks itself asleep before it dozes or blocks, then looks for a sample once more;
 //! the writer, after delivering, looks at the mark and wakes the reader only if it is asleep.
@@ -8,15 +8,37 @@
 //! it. The word starts zeroed, which means asleep: a writer whose reader never said otherwise
 //! (or was restarted) always wakes it.
 //!
+//! A loop stage's reader sleeps on the word itself (a shared futex: the file is mapped by both
+//! processes): the writer that finds it asleep marks it polling and wakes it, one syscall with
+//! no data, where iceoryx2's event sends a datagram that the reader must then read back. A
+//! reader that marks itself asleep after the writer looked finds the sample; one whose futex
+//! wait starts after the writer marked it polling returns at once.
+//!
 //! The file is in the run's private folder (the ports open it there), removed with it.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicU32, Ordering, fence};
+use std::time::Duration;
 
 use anyhow::Result;
+use linux_futex::{AsFutex, Shared, TimedWaitError};
 
+use crate::contract::clock::now_ns;
 use crate::contract::role::Topic;
 use crate::runtime::shared_file::{self, Open};
+
+/// How a writer wakes its topic's reader when the reader may be asleep.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// Never: the reader polls (or there is none that blocks).
+    Never,
+    /// A futex on the reader's state word: a loop stage's reader (one syscall, and only while
+    /// the reader sleeps).
+    Futex,
+    /// iceoryx2's event (a datagram to the reader's socket): a bridge, which waits for all its
+    /// topics in one WaitSet.
+    Event,
+}
 
 const ASLEEP: u32 = 0;
 const POLLING: u32 = 1;
@@ -54,6 +76,27 @@ impl ReaderState {
         fence(Ordering::SeqCst);
         self.word().load(Ordering::SeqCst) == ASLEEP
     }
+
+    /// Reader, marked asleep and with no sample: sleeps until the writer wakes it or
+    /// `deadline_ns` (CLOCK_MONOTONIC) passes. Returns whether it was woken (or the writer had
+    /// already marked it polling) rather than reaching the deadline. A signal ends it early,
+    /// which is harmless: the caller looks for input and waits again.
+    pub fn sleep_until(&self, deadline_ns: u64) -> bool {
+        let left = deadline_ns.saturating_sub(now_ns());
+        if left == 0 {
+            return false;
+        }
+        let futex = AsFutex::<Shared>::as_futex(self.word());
+        !matches!(futex.wait_for(ASLEEP, Duration::from_nanos(left)), Err(TimedWaitError::TimedOut))
+    }
+
+    /// Writer, after delivering: wakes the reader if it may be asleep, marking it polling first
+    /// so that a futex wait it has not started yet returns at once.
+    pub fn wake(&self) {
+        if self.needs_waking() && self.word().swap(POLLING, Ordering::SeqCst) == ASLEEP {
+            AsFutex::<Shared>::as_futex(self.word()).wake(i32::MAX);
+        }
+    }
 }
 
 impl Drop for ReaderState {
@@ -80,7 +123,35 @@ mod tests {
         assert!(!writer.needs_waking());
         reader.asleep();
         assert!(writer.needs_waking());
+        // Woken before it sleeps: its futex wait returns at once.
+        writer.wake();
+        assert!(!writer.needs_waking());
+        assert!(reader.sleep_until(now_ns() + 3_600_000_000_000));
         drop((reader, writer));
+        std::fs::remove_dir_all(&folder).unwrap();
+    }
+
+    /// A reader asleep on the word (in another thread here; the futex is a shared one, as
+    /// between processes) is woken by its writer, long before its deadline of an hour.
+    #[test]
+    fn a_sleeping_reader_is_woken_by_its_writer() {
+        let folder = std::env::temp_dir().join(format!("looplab-reader-wake-{}", std::process::id()));
+        std::fs::create_dir_all(&folder).unwrap();
+        let writer = ReaderState::open(&folder, Topic::Command).unwrap();
+        let sleeper = {
+            let folder = folder.clone();
+            std::thread::spawn(move || {
+                let reader = ReaderState::open(&folder, Topic::Command).unwrap();
+                reader.asleep();
+                reader.sleep_until(now_ns() + 3_600_000_000_000)
+            })
+        };
+        // Until the reader has marked itself asleep, a wake finds nothing to do.
+        while !sleeper.is_finished() {
+            writer.wake();
+            std::thread::yield_now();
+        }
+        assert!(sleeper.join().unwrap(), "the reader slept until its deadline");
         std::fs::remove_dir_all(&folder).unwrap();
     }
 }

@@ -11,7 +11,7 @@ use crate::contract::protocol::ChildEvent;
 use crate::contract::role::Role;
 use crate::model::scenario::Calibration;
 use crate::runtime::child::emit;
-use crate::runtime::child::{Context, WAIT_SLICE, wait, waitset};
+use crate::runtime::child::{Context, WAIT_SLICE};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::playback::Playback;
 use crate::runtime::snapshot::Snapshot;
@@ -25,8 +25,6 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
     let subscriber: TopicSubscriber<T::In> =
         context.ipc.stage_subscriber(input, reader_blocks(wait_settings, input, realtime))?;
     let publisher: TopicPublisher<T::Out> = context.ipc.publisher(output, writer_wakes(&context.config, output))?;
-    let ws = waitset()?;
-    let _wake = subscriber.attach_to(&ws)?;
     // The frozen state of the task survives a restart in the run's snapshot folder.
     let mut kept: Option<Snapshot<Calibration>> =
         if T::FREEZES { Some(Snapshot::open(&context.run_id, role.name())?) } else { None };
@@ -62,7 +60,7 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
                 slice_end,
                 || subscriber.has_samples(),
                 |until| subscriber.doze_until(until),
-                || subscriber.asleep(|| wait(&ws)),
+                || subscriber.doze_until(slice_end),
             )?;
         }
         let mut cleared = false;

@@ -183,7 +183,7 @@ mod tests {
         let id = unique_id("private");
         let lock = create_run_storage(&id).unwrap();
         let node = Ipc::new("plant", &id, crate::config::launch::Mode::Realtime).unwrap();
-        let _publisher = node.publisher::<u64>(Topic::State, true).unwrap();
+        let _publisher = node.publisher::<u64>(Topic::State, crate::runtime::ipc::Wake::Futex).unwrap();
         let mut snapshot = Snapshot::<u64>::open(&id, "plant").unwrap();
         snapshot.write(&7);
         let folder = std::fs::symlink_metadata(run_folder(&id)).unwrap();

@@ -6,10 +6,11 @@ use std::collections::VecDeque;
 use anyhow::Result;
 
 use crate::config::launch::{LaunchConfig, Mode};
-use crate::config::wait::{Strategy, WaitSettings};
+use crate::config::wait::{HANDOFF_POLL_US, LockstepWait, Strategy, WaitSettings};
 use crate::contract::clock::now_ns;
 use crate::contract::protocol::WaitCounts;
 use crate::contract::role::{Role, Topic};
+use crate::runtime::reader_state::Wake;
 
 /// Observations kept to estimate how soon after a tick the input arrives.
 const WINDOW: usize = 64;
@@ -117,24 +118,28 @@ pub enum Method {
     Adaptive,
     /// Lockstep: look, yield the CPU, look again.
     Poll,
+    /// Lockstep: poll for about a handoff's time ([`HANDOFF_POLL_US`]), then sleep until woken.
+    Handoff,
 }
 
 impl Method {
     /// Whether a process waiting this way ever blocks: only then does its writer need to wake it
     /// (a poller sees the sample itself, and both notify syscalls are saved).
     pub fn blocks(self) -> bool {
-        matches!(self, Method::Block | Method::Adaptive)
+        matches!(self, Method::Block | Method::Adaptive | Method::Handoff)
     }
 }
 
-/// How `role` waits: its own strategy in real time, lockstep's poll or block otherwise.
+/// How `role` waits: its own strategy in real time, lockstep's otherwise.
 pub fn method_of(settings: &WaitSettings, role: Role, realtime: bool) -> Method {
     if realtime {
         settings.for_process(role).into()
-    } else if settings.lockstep_polls(available_cpus()) {
-        Method::Poll
     } else {
-        Method::Block
+        match settings.lockstep_on(available_cpus()) {
+            LockstepWait::Poll => Method::Poll,
+            LockstepWait::Handoff => Method::Handoff,
+            LockstepWait::Block | LockstepWait::Auto => Method::Block,
+        }
     }
 }
 
@@ -144,10 +149,17 @@ pub fn reader_blocks(settings: &WaitSettings, topic: Topic, realtime: bool) -> b
     Role::reading(topic).is_some_and(|reader| method_of(settings, reader, realtime).blocks())
 }
 
-/// Whether the writer of `topic` wakes its reader: the reader blocks, or it runs on another host
-/// and a bridge, which always blocks, reads the topic on the writer's host.
-pub fn writer_wakes(config: &LaunchConfig, topic: Topic) -> bool {
-    config.hosts.read_by_bridge(topic) || reader_blocks(&config.wait, topic, config.mode == Mode::Realtime)
+/// How the writer of `topic` wakes its reader: by the reader's futex if the reader blocks, by
+/// iceoryx2's event if it runs on another host and a bridge, which always blocks, reads the topic
+/// on the writer's host; never if the reader polls.
+pub fn writer_wakes(config: &LaunchConfig, topic: Topic) -> Wake {
+    if config.hosts.read_by_bridge(topic) {
+        Wake::Event
+    } else if reader_blocks(&config.wait, topic, config.mode == Mode::Realtime) {
+        Wake::Futex
+    } else {
+        Wake::Never
+    }
 }
 
 impl From<Strategy> for Method {
@@ -161,8 +173,8 @@ impl From<Strategy> for Method {
 }
 
 /// Waits for input with the process's method. `ready` says whether input is there; `doze`
-/// sleeps until the input's wake-up or a deadline, whichever comes first; `block` waits in the
-/// WaitSet (for the input or the next timer).
+/// sleeps until the input's wake-up or a deadline, whichever comes first; `block` sleeps until
+/// the input's wake-up or the slice's end (the real-time plant: its next tick).
 pub struct Waiter {
     pub method: Method,
     lead_ns: u64,
@@ -196,8 +208,8 @@ impl Waiter {
         recent[recent.len() * 3 / 4]
     }
 
-    /// The waiter of a loop process: its own strategy in real time, lockstep's poll or block
-    /// (`wait.lockstep`) otherwise, pinned to its core if the settings say so. `period_ns` is
+    /// The waiter of a loop process: its own strategy in real time, lockstep's (`wait.lockstep`)
+    /// otherwise, pinned to its core if the settings say so. `period_ns` is
     /// the loop's period.
     pub fn new(settings: &WaitSettings, role: Role, realtime: bool, period_ns: u64) -> Self {
         let method = method_of(settings, role, realtime);
@@ -209,7 +221,8 @@ impl Waiter {
 
     /// A waiter with the given method and the settings' lead and cap (the bench's ends).
     pub fn with_method(settings: &WaitSettings, method: Method, period_ns: u64) -> Self {
-        if method == Method::Adaptive {
+        // A futex's timeout (the plant's tick, a doze's end) is a timer too.
+        if method.blocks() {
             tighten_timer_slack();
         }
         Self {
@@ -226,8 +239,8 @@ impl Waiter {
         }
     }
 
-    /// Waits until `ready()`, `slice_end_ns` (for spin and poll; block and adaptive leave that
-    /// to the WaitSet's timers), or `block` returns.
+    /// Waits until `ready()`, `slice_end_ns` (for spin, poll and a handoff's polling; blocking
+    /// leaves that to `block`'s own deadline), or `block` returns.
     pub fn wait(
         &mut self,
         due_ns: Option<u64>,
@@ -250,6 +263,17 @@ impl Waiter {
                     unsafe { libc::sched_yield() };
                 }
                 Ok(())
+            }
+            Method::Handoff => {
+                let poll_end = now_ns() + HANDOFF_POLL_US * 1000;
+                while now_ns() < poll_end {
+                    if ready()? {
+                        return Ok(());
+                    }
+                    // SAFETY: sched_yield has no preconditions.
+                    unsafe { libc::sched_yield() };
+                }
+                block()
             }
             Method::Adaptive => {
                 let Some(due) = due_ns else { return block() };
@@ -346,16 +370,18 @@ mod tests {
 
     #[test]
     fn lockstep_polls_or_blocks_by_its_own_key() {
-        use crate::config::wait::LockstepWait;
         let mut s = WaitSettings { strategy: Strategy::Adaptive, ..Default::default() };
         assert_eq!(Waiter::new(&s, Role::Sensors, true, 1_000_000).method, Method::Adaptive);
         s.lockstep = LockstepWait::Poll;
         assert_eq!(Waiter::new(&s, Role::Sensors, false, 1_000_000).method, Method::Poll);
         s.lockstep = LockstepWait::Block;
         assert_eq!(Waiter::new(&s, Role::Sensors, false, 1_000_000).method, Method::Block);
+        s.lockstep = LockstepWait::Handoff;
+        assert_eq!(Waiter::new(&s, Role::Sensors, false, 1_000_000).method, Method::Handoff);
         s.lockstep = LockstepWait::Auto;
         let auto = Waiter::new(&s, Role::Sensors, false, 1_000_000).method;
-        assert_eq!(auto == Method::Poll, available_cpus() >= crate::config::wait::CPUS_TO_POLL);
+        let polls = available_cpus() >= crate::config::wait::CPUS_TO_POLL;
+        assert_eq!(auto, if polls { Method::Poll } else { Method::Handoff });
     }
 
     /// An input that arrives while the process dozes ends the doze; one that is late is polled

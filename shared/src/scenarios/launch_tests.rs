@@ -156,7 +156,7 @@ fn durations_rates_and_counts_are_bounded() {
     run(&["sensors.encoder.delay_ticks=10000"]).unwrap();
     rejected(&["wait.lead_us=1000001"], "wait.lead_us", "0 to 1000000");
     rejected(&["wait.spin_cap_us=-1"], "wait.spin_cap_us", "0 to 1000000");
-    rejected(&["wait.lockstep=sometimes"], "wait.lockstep", "`auto`, `poll`, `block`");
+    rejected(&["wait.lockstep=sometimes"], "wait.lockstep", "`auto`, `poll`, `block`, `handoff`");
     rejected(&["plant.substeps=1001"], "plant.substeps", "1 to 1000");
     rejected(&["plant.substeps=0"], "plant.substeps", "1 to 1000");
 }
@@ -306,7 +306,7 @@ fn lockstep_auto_is_decided_for_the_machine_and_written_down() {
     use crate::config::wait::LockstepWait;
     let config = run(&["mode=lockstep"]).unwrap();
     assert_eq!(config.wait.lockstep, LockstepWait::Auto);
-    for (cpus, decided) in [(2, LockstepWait::Block), (4, LockstepWait::Block), (5, LockstepWait::Poll)] {
+    for (cpus, decided) in [(2, LockstepWait::Handoff), (4, LockstepWait::Handoff), (5, LockstepWait::Poll)] {
         let d = config.with_wait_decided(cpus);
         assert_eq!(d.wait.lockstep, decided, "{cpus} CPUs");
         let name: &str = decided.into();

@@ -255,7 +255,7 @@ mod tests {
     /// A process with one start that ended with `exit` (no real process: its pid is never used).
     fn ended(role: Role, exit: Exit) -> Process {
         let mut p = Process::new(role, ON_FAILURE);
-        p.started(Start { pid: 0, exit, cpu_s: 0.0 }, None);
+        p.started(Start { pid: 0, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
         p
     }
 
@@ -281,7 +281,7 @@ mod tests {
         assert!(p.cleaned() && !p.cleaned(), "the clean-up counts once");
         assert!(!p.restart_due(died + 9_999_999), "within the backoff");
         assert!(p.restart_due(died + 10_000_000));
-        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0 }, None);
+        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
         assert!(!p.restart_due(died + 20_000_000) && p.incarnation() == 1);
         assert_eq!(p.row().state, ProcessState::Starting);
     }
@@ -291,14 +291,14 @@ mod tests {
         let mut p = ended(Role::Sensors, Exit::Running);
         p.became_ready(at(0));
         assert_eq!(kill(&mut p, 1.0, at(100)), Decision::Restart { backoff: ms(10), quick_restarts: 1 });
-        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0 }, None);
+        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
         p.became_ready(at(200));
         assert_eq!(kill(&mut p, 1.0, at(300)), Decision::Restart { backoff: ms(20), quick_restarts: 2 });
-        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0 }, None);
+        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
         p.became_ready(at(400));
         // It ran one second (backoff_reset_s) ready: healthy, back to the first backoff.
         assert_eq!(kill(&mut p, 1.0, at(1400)), Decision::Restart { backoff: ms(10), quick_restarts: 1 });
-        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0 }, None);
+        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
         // Killed before it was ready: it never ran healthy; and it reached max_restarts.
         assert_eq!(kill(&mut p, 1.0, at(9000)), Decision::TooMany { max_restarts: 3 });
     }

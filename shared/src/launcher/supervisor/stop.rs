@@ -94,7 +94,7 @@ mod tests {
         let policy = Policy { restart: Restart::OnFailure, on_death: OnDeath::End, max_restarts: 0, backoff_s: 0.0 };
         let processes = Role::START_ORDER.into_iter().zip(exits).map(|(role, exit)| {
             let mut p = Process::new(role, policy);
-            p.started(Start { pid: 0, exit, cpu_s: 0.0 }, None);
+            p.started(Start { pid: 0, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
             p
         });
         Processes::new(processes.collect())

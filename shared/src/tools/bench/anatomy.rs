@@ -27,7 +27,7 @@ use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::msg::{Measurements, Message, PlantState};
 use crate::contract::role::Topic;
-use crate::runtime::ipc::Ipc;
+use crate::runtime::ipc::{Ipc, Wake};
 use crate::runtime::signals::StopFlag;
 use crate::runtime::wait::sleep_until;
 
@@ -123,7 +123,7 @@ fn write<T: Message>(
     ready: &AtomicBool,
 ) -> Result<Vec<[u64; 6]>> {
     let ipc = Ipc::new("anatomy-writer", run_id, Mode::Realtime)?;
-    let publisher = ipc.publisher::<T>(topic, true)?;
+    let publisher = ipc.publisher::<T>(topic, Wake::Futex)?;
     let monitor = if monitor { Some(ipc.passive_subscriber::<T>(topic)?) } else { None };
     let until = Instant::now() + Duration::from_secs(10);
     while !ready.load(Ordering::Acquire) {

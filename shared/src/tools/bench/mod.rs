@@ -159,7 +159,7 @@ pub struct BenchReport {
     pub payload: Vec<PayloadPoint>,
     /// Through the five processes, with the method `lockstep = "auto"` picks on this machine.
     pub lockstep_loops_per_s: f64,
-    /// The method auto picks here: poll or block.
+    /// The method auto picks here: poll or handoff.
     pub lockstep_auto: String,
     /// Through the five processes, per method.
     pub lockstep_by_method: BTreeMap<String, f64>,
@@ -585,9 +585,9 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
     progress.inc(1);
     progress.suspend(|| tell!("  lockstep speed"));
     let lockstep_seconds = if quick { 3.0 } else { 20.0 };
-    let auto = if WaitSettings::default().lockstep_polls(cpus) { LockstepWait::Poll } else { LockstepWait::Block };
+    let auto = WaitSettings::default().lockstep_on(cpus);
     let mut lockstep_by_method = BTreeMap::new();
-    for method in [LockstepWait::Poll, LockstepWait::Block] {
+    for method in [LockstepWait::Poll, LockstepWait::Handoff, LockstepWait::Block] {
         let name: &'static str = method.into();
         lockstep_by_method.insert(name.to_owned(), lockstep_run(&out, name, lockstep_seconds, &binaries, catalog)?);
     }

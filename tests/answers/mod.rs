@@ -3,11 +3,6 @@
 //! (`verdict`), and how does it degrade when a stage dies and stays dead (`degradation`). One test
 //! binary, so that CI links it once.
 
-#[path = "../common/mod.rs"]
-mod common;
-#[path = "../figure_check/mod.rs"]
-mod figure_check;
-
 mod deadline;
 mod degradation;
 mod latency_budget;
