@@ -8,7 +8,8 @@
 #   services/scripts/lockstep_beside_realtime.sh [RUNS] [SECONDS] [LOCKSTEP WAITS...]
 #   (defaults: 3 runs of 20 s, lockstep handoff and block, and none for the real-time run alone)
 #
-# Uses target/release/looplab (build it first: cargo build --release).
+# Uses target/release/looplab (build it first: cargo build --release); NEIGHBOUR=PATH runs the
+# lockstep runs with another build's looplab (to compare with an older release).
 set -euo pipefail
 runs=${1:-3}
 seconds=${2:-20}
@@ -17,6 +18,7 @@ waits=("$@")
 [ $# -eq 0 ] && waits=(none handoff block)
 root=$(cd "$(dirname "$0")/../.." && pwd)
 looplab=$root/target/release/looplab
+neighbour_looplab=${NEIGHBOUR:-$looplab}
 out=$(mktemp -d /tmp/looplab-beside.XXXXXX)
 
 printf '%-9s %3s %9s %12s %12s %14s\n' lockstep run misses 'e2e p50 µs' 'e2e p99 µs' 'lockstep loops/s'
@@ -28,7 +30,7 @@ for run in $(seq 1 "$runs"); do
     if [ "$wait" != none ]; then
       # Lockstep runs back to back until the real-time run is over.
       ( n=0; while [ ! -e "$dir/done" ]; do
-          "$looplab" run pendulum --mode lockstep --duration 10 -q --set wait.lockstep="\"$wait\"" \
+          "$neighbour_looplab" run pendulum --mode lockstep --duration 10 -q --set wait.lockstep="\"$wait\"" \
             --out "$dir/lockstep-$n" > /dev/null 2>&1 || true
           n=$((n + 1)); done ) &
       neighbour=$!
