@@ -192,7 +192,7 @@ impl Ipc {
                     .notifier_builder()
                     .create()
                     .map_err(|e| anyhow!("cannot create the {} notifier: {e:?}", topic.name()))?;
-                Some(Waker::Event(notifier, self.reader_state(topic)?))
+                Some(Waker::Event(Box::new(notifier), self.reader_state(topic)?))
             }
         };
         Ok(TopicPublisher { topic, publisher, waker, counters })
@@ -224,7 +224,7 @@ impl Ipc {
             .listener_builder()
             .create()
             .map_err(|e| anyhow!("cannot create the {} listener: {e:?}", topic.name()))?;
-        subscriber.wakeup = Some(Wakeup::Event(listener, self.reader_state(topic)?));
+        subscriber.wakeup = Some(Wakeup::Event(Box::new(listener), self.reader_state(topic)?));
         Ok(subscriber)
     }
 
@@ -267,13 +267,15 @@ struct BackpressureCounters {
 /// How a publisher wakes its reader, and the word that says whether the reader may be asleep.
 enum Waker {
     Futex(ReaderState),
-    Event(Notifier<ipc::Service>, ReaderState),
+    /// Boxed: a notifier is large beside the futex's word.
+    Event(Box<Notifier<ipc::Service>>, ReaderState),
 }
 
 /// How a blocking reader is woken (the writer's [`Waker`]).
 enum Wakeup {
     Futex(ReaderState),
-    Event(Listener<ipc::Service>, ReaderState),
+    /// Boxed: a listener is large beside the futex's word.
+    Event(Box<Listener<ipc::Service>>, ReaderState),
 }
 
 impl Wakeup {
@@ -314,11 +316,10 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicPublisher<T> {
         match &self.waker {
             None => {}
             Some(Waker::Futex(reader)) => reader.wake(),
-            Some(Waker::Event(notifier, reader)) => {
-                if reader.needs_waking() {
-                    notifier.notify().with_context(|| format!("notify on {}", self.topic.name()))?;
-                }
+            Some(Waker::Event(notifier, reader)) if reader.needs_waking() => {
+                notifier.notify().with_context(|| format!("notify on {}", self.topic.name()))?;
             }
+            Some(Waker::Event(..)) => {}
         }
         Ok(())
     }
@@ -393,7 +394,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
         ws: &'w WaitSet<ipc::Service>,
     ) -> Result<Option<WaitSetGuard<'w, 'a, ipc::Service>>> {
         let Some(Wakeup::Event(listener, _)) = &self.wakeup else { return Ok(None) };
-        ws.attach_notification(listener)
+        ws.attach_notification(listener.as_ref())
             .map(Some)
             .map_err(|e| anyhow!("cannot attach the {} listener: {e:?}", self.topic.name()))
     }
