@@ -397,7 +397,7 @@ pub(crate) mod tests {
                 };
                 next[topic] = next[topic].max(k + 1);
                 let sample = [state, measurements, estimate, command, record][topic](k);
-                assert_eq!(joiner.put(sample.clone()), model.put(sample), "round {round}");
+                assert_eq!(joiner.put(sample), model.put(sample), "round {round}");
                 loop {
                     let (got, expected) = (joiner.next_settled(), model.next_settled());
                     assert_eq!(

@@ -188,7 +188,7 @@ mod tests {
             f64::MIN,
             f64::EPSILON,
             5e-324,
-            2.2250738585072009e-308,
+            f64::from_bits(0x000F_FFFF_FFFF_FFFF), // the largest subnormal
             0.30000000000000004,
             9007199254740993.0,
         ];
