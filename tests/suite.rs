@@ -38,3 +38,19 @@ mod summary_schema;
 mod tethered;
 mod tiltrotor;
 mod trajectory_hashes;
+
+/// Every file of tests/ is a module of this binary: with `autotests = false` a test file left
+/// out of the list above would never be built, and its tests would pass unseen.
+#[test]
+fn every_test_file_is_in_the_suite() {
+    let suite = include_str!("suite.rs");
+    let tests = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
+    for entry in std::fs::read_dir(&tests).unwrap().flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let module = name.strip_suffix(".rs").unwrap_or(&name);
+        if matches!(module, "suite" | "user_stage_errors") {
+            continue;
+        }
+        assert!(suite.contains(&format!("\nmod {module};\n")), "tests/{name} is not a module of tests/suite.rs");
+    }
+}

@@ -13,6 +13,7 @@ use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
 use crate::monitor::Recording;
+use crate::monitor::recorder::RecordingThread;
 use crate::runtime::in_process;
 use crate::runtime::signals::StopFlag;
 
@@ -20,15 +21,15 @@ use crate::runtime::signals::StopFlag;
 pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &Path) -> Result<(Summary, Outcome)> {
     let (_, started_at) = begin_run(run_dir, config)?;
     let stop = StopFlag::install()?;
-    let mut recording = Recording::new(config, scenario, run_dir, 0, None)?;
-    let ran = in_process::run(config, scenario, &stop, |message| recording.take(message))?;
+    // The loop's thread only hands each message over; the recording runs beside it.
+    let mut recording = RecordingThread::spawn(Recording::in_process(config, scenario, run_dir)?)?;
+    let ran = in_process::run(config, scenario, &stop, |message| recording.take(message));
+    // The recording's own error first (a full disk): the loop only saw it stop.
+    let monitor = recording.finish()?;
+    let ran = ran?;
     let outcome = if stop.requested() { Outcome::Interrupted } else { Outcome::Completed };
-    let reports = Reports {
-        plant: Some(ran.plant),
-        stages: ran.stages,
-        monitor: Some(recording.finish()?),
-        bridges: BTreeMap::new(),
-    };
+    let reports =
+        Reports { plant: Some(ran.plant), stages: ran.stages, monitor: Some(monitor), bridges: BTreeMap::new() };
     let summary = summary::build(SummaryInputs {
         config,
         scenario,

@@ -1,7 +1,7 @@
 //! Joining the five messages of each loop by k: the parts arrive per topic, in loop order on
 //! each topic but not across topics, and go out as whole loops in order.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::ops::{Index, IndexMut};
 
 use crate::contract::msg::{Command, Estimate, LoopRecord, Measurements, PlantState};
@@ -103,7 +103,11 @@ impl<T> IndexMut<Topic> for PerTopic<T> {
 #[derive(Debug)]
 pub struct Joiner {
     window: u64,
-    pending: BTreeMap<u64, LoopParts>,
+    /// The loops from the next one on, in order (a loop nothing has arrived of yet is empty),
+    /// up to `window` + 1 of them: the parts of at most that many loops are waiting in a run.
+    pending: VecDeque<LoopParts>,
+    /// Parts of loops further ahead than that (after a gap), until `pending` reaches them.
+    far: BTreeMap<u64, LoopParts>,
     /// The next loop to hand out.
     next_k: u64,
     /// Per topic, the newest loop received.
@@ -112,7 +116,7 @@ pub struct Joiner {
 
 impl Joiner {
     pub fn new(window: u64) -> Self {
-        Self { window, pending: BTreeMap::new(), next_k: 0, newest: PerTopic::default() }
+        Self { window, pending: VecDeque::new(), far: BTreeMap::new(), next_k: 0, newest: PerTopic::default() }
     }
 
     /// Starts at loop `k` instead of 0 (a restarted monitor: the loops before were the last one's).
@@ -132,8 +136,29 @@ impl Joiner {
         if k < self.next_k {
             return false;
         }
-        self.pending.entry(k).or_default().put(sample);
+        match self.slot(k) {
+            Some(parts) => parts.put(sample),
+            None => self.far.entry(k).or_default().put(sample),
+        }
         true
+    }
+
+    /// How many loops `pending` holds at most.
+    fn reach(&self) -> u64 {
+        self.window + 1
+    }
+
+    /// Loop k's place in `pending`, if it is within reach.
+    fn slot(&mut self, k: u64) -> Option<&mut LoopParts> {
+        let i = k - self.next_k;
+        if i >= self.reach() {
+            return None;
+        }
+        let i = i as usize;
+        if self.pending.len() <= i {
+            self.pending.resize_with(i + 1, LoopParts::default);
+        }
+        Some(&mut self.pending[i])
     }
 
     fn newest_any(&self) -> Option<u64> {
@@ -144,7 +169,7 @@ impl Joiner {
     pub fn next_settled(&mut self) -> Option<(u64, LoopParts)> {
         let newest = self.newest_any()?;
         let k = self.next_k;
-        let part = self.pending.get(&k);
+        let part = self.pending.front();
         let settled =
             Topic::ALL.iter().all(|&t| part.is_some_and(|p| p.has(t)) || self.newest[t].is_some_and(|n| n > k));
         if k > newest || !(settled || newest >= k + self.window) {
@@ -162,7 +187,13 @@ impl Joiner {
     fn pop(&mut self) -> (u64, LoopParts) {
         let k = self.next_k;
         self.next_k = k + 1;
-        (k, self.pending.remove(&k).unwrap_or_default())
+        let parts = self.pending.pop_front().unwrap_or_default();
+        // The loop that came within reach, if parts of it came early.
+        let newly_reached = self.next_k + self.reach() - 1;
+        if let Some(early) = self.far.remove(&newly_reached) {
+            *self.slot(newly_reached).expect("within reach") = early;
+        }
+        (k, parts)
     }
 }
 
@@ -288,6 +319,97 @@ pub(crate) mod tests {
             rest.push((k, shape(&parts)));
         }
         assert_eq!(rest, [(0, "sm---".to_string()), (1, "s----".to_string()), (2, "s----".to_string())]);
+    }
+
+    #[test]
+    fn parts_far_ahead_of_the_next_loop_wait_until_it_reaches_them() {
+        let mut joiner = Joiner::new(3);
+        let mut out = feed(&mut joiner, whole(0));
+        // Loop 9's state comes while the next loop is 1 (a gap on every topic): it settles loops 1
+        // to 6 as they are.
+        out.extend(feed(&mut joiner, [state(9)]));
+        out.extend(feed(&mut joiner, [measurements(9), estimate(9), command(9), record(9)]));
+        let shapes: Vec<(u64, &str)> = out.iter().map(|(k, shape)| (*k, shape.as_str())).collect();
+        let mut expected = vec![(0, "smecl")];
+        expected.extend((1..9).map(|k| (k, "-----")));
+        expected.push((9, "smecl"));
+        assert_eq!(shapes, expected);
+    }
+
+    /// The joiner as it was written first, with every waiting loop in a map: the model the
+    /// joiner must behave as.
+    struct Model {
+        window: u64,
+        pending: BTreeMap<u64, LoopParts>,
+        next_k: u64,
+        newest: PerTopic<Option<u64>>,
+    }
+
+    impl Model {
+        fn put(&mut self, sample: Sample) -> bool {
+            let (k, topic) = sample.key();
+            self.newest[topic] = self.newest[topic].max(Some(k));
+            if k < self.next_k {
+                return false;
+            }
+            self.pending.entry(k).or_default().put(sample);
+            true
+        }
+
+        fn next_settled(&mut self) -> Option<(u64, LoopParts)> {
+            let newest = Topic::ALL.iter().filter_map(|&t| self.newest[t]).max()?;
+            let k = self.next_k;
+            let part = self.pending.get(&k);
+            let settled =
+                Topic::ALL.iter().all(|&t| part.is_some_and(|p| p.has(t)) || self.newest[t].is_some_and(|n| n > k));
+            if k > newest || !(settled || newest >= k + self.window) {
+                return None;
+            }
+            self.next_k = k + 1;
+            Some((k, self.pending.remove(&k).unwrap_or_default()))
+        }
+    }
+
+    #[test]
+    fn the_joiner_hands_out_what_a_map_of_every_waiting_loop_does() {
+        // Random streams: each topic in loop order with parts skipped, the topics interleaved
+        // unevenly, jumps far ahead, and parts that come too late.
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut random = move |n: u64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % n
+        };
+        for round in 0..200 {
+            let window = 1 + random(12);
+            let (mut joiner, mut model) = (
+                Joiner::new(window),
+                Model { window, pending: BTreeMap::new(), next_k: 0, newest: PerTopic::default() },
+            );
+            let mut next = [0u64; 5];
+            for _ in 0..400 {
+                let topic = random(5) as usize;
+                let k = match random(20) {
+                    0 => next[topic] + random(40),
+                    1 => next[topic].saturating_sub(random(5)),
+                    _ => next[topic] + random(2),
+                };
+                next[topic] = next[topic].max(k + 1);
+                let sample = [state, measurements, estimate, command, record][topic](k);
+                assert_eq!(joiner.put(sample), model.put(sample), "round {round}");
+                loop {
+                    let (got, expected) = (joiner.next_settled(), model.next_settled());
+                    assert_eq!(
+                        got.as_ref().map(|(k, p)| (*k, shape(p))),
+                        expected.as_ref().map(|(k, p)| (*k, shape(p)))
+                    );
+                    if got.is_none() {
+                        break;
+                    }
+                }
+            }
+        }
     }
 
     #[test]

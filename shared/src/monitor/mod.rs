@@ -2,7 +2,8 @@
 //! without slowing the loop.
 //!
 //! - [`process`]: the monitor process (iceoryx2 readers, polling, the writer thread, status).
-//! - [`recording`]: the recorder it feeds, usable without a process.
+//! - [`recording`]: the recorder it feeds, usable without a process; [`recorder`]: the recorder
+//!   on a thread of its own, fed in [`batches`] (an in-process run).
 //! - [`join`]: the five messages of each loop joined by k; [`stats`]: the latency histograms;
 //!   [`fault_effect`]: what each fault did; [`stall`]: stalled processes found from the data.
 //! - [`crossing`]: the hops to and from another host, corrected with the other host's clock as
@@ -12,6 +13,7 @@
 //! - [`resume`]: the running state each checkpoint leaves for a restarted monitor to go on from.
 //! - [`injections`]: when the launcher really injected each kill and stop (real time).
 
+pub mod batches;
 pub mod clock_fit;
 pub mod crossing;
 pub mod distribution;
@@ -21,6 +23,7 @@ pub mod injections;
 pub mod join;
 pub mod live;
 pub mod process;
+pub mod recorder;
 pub mod recording;
 pub mod resume;
 pub mod sinks;

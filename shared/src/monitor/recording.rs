@@ -83,9 +83,26 @@ impl Recording {
         incarnation: u32,
         status: Option<StatusCallback>,
     ) -> Result<Self> {
+        Self::open(config, scenario, run_dir, incarnation, status, false)
+    }
+
+    /// An in-process run's recording, which has a core to spare for its files
+    /// ([`SinkSetup::spare_core`]).
+    pub fn in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &Path) -> Result<Self> {
+        Self::open(config, scenario, run_dir, 0, None, true)
+    }
+
+    fn open(
+        config: &LaunchConfig,
+        scenario: &dyn Scenario,
+        run_dir: &Path,
+        incarnation: u32,
+        status: Option<StatusCallback>,
+        spare_core: bool,
+    ) -> Result<Self> {
         let layout = Layout::new(config, scenario);
         let restarted = incarnation > 0;
-        let sinks = sinks::open(&SinkSetup { run_dir, restarted, config, layout: &layout })?;
+        let sinks = sinks::open(&SinkSetup { run_dir, restarted, config, layout: &layout, spare_core })?;
         let live = status.is_some().then(|| Live::new(&layout, config.rate_hz));
         // The one place the mode matters to the recording: in real time the loop runs in
         // wall-clock time, so a command's latency ages its data and a `stop` lasts for the loop.
@@ -241,7 +258,13 @@ impl Recording {
                 counts[incarnation] += 1;
             }
         }
-        *self.report.received.entry(topic.name().to_owned()).or_default() += 1;
+        // Found without making the key: a loop's five samples allocate nothing.
+        match self.report.received.get_mut(topic.name()) {
+            Some(count) => *count += 1,
+            None => {
+                self.report.received.insert(topic.name().to_owned(), 1);
+            }
+        }
         // A part of a loop written already came too late: it stays counted as received.
         if self.joiner.put(sample) {
             while let Some((k, parts)) = self.joiner.next_settled() {

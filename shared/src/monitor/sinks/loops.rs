@@ -12,10 +12,13 @@ use anyhow::Result;
 use crate::config::launch::Mode;
 use crate::contract::msg::LoopTrace;
 use crate::model::layout::column_name;
+use crate::monitor::sinks::text::{push_f64, push_int};
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 
 pub struct LoopsCsv {
     file: BufWriter<File>,
+    /// The row being written, reused.
+    row: Vec<u8>,
     run_dir: PathBuf,
     /// Real time: a loop without a command missed its deadline.
     wall_clock: bool,
@@ -28,7 +31,7 @@ impl LoopsCsv {
             writeln!(file, "{}", columns().join(","))?;
         }
         let wall_clock = setup.config.mode == Mode::Realtime;
-        Ok(Self { file, run_dir: setup.run_dir.to_path_buf(), wall_clock })
+        Ok(Self { file, row: Vec::with_capacity(256), run_dir: setup.run_dir.to_path_buf(), wall_clock })
     }
 }
 
@@ -57,29 +60,43 @@ pub fn columns() -> Vec<String> {
 
 impl RunSink for LoopsCsv {
     fn loop_joined(&mut self, joined: &JoinedLoop) -> Result<()> {
-        let mut row = format!("{},{}", joined.k, joined.t);
+        let row = &mut self.row;
+        row.clear();
+        push_int(row, joined.k);
+        row.push(b',');
+        push_f64(row, joined.t);
+        let cell = |row: &mut Vec<u8>, value: u64| {
+            row.push(b',');
+            push_int(row, value);
+        };
         match (&joined.parts.record, joined.parts.end_to_end_ns()) {
             (Some(r), Some(e2e)) => {
                 for s in r.header.trace.stamps() {
-                    row.push_str(&format!(",{s}"));
+                    cell(row, s);
                 }
-                row.push_str(&format!(",{e2e},{},{}", r.deadline_miss, r.rejected));
+                cell(row, e2e);
+                cell(row, r.deadline_miss.into());
+                cell(row, r.rejected.into());
             }
             // No stamps and no end to end; the flags where the miss is known (a command that
             // never came was not rejected either).
             _ => {
-                row.push_str(&",".repeat(LoopTrace::STAMP_NAMES.len() + 1));
+                row.resize(row.len() + LoopTrace::STAMP_NAMES.len() + 1, b',');
                 match joined.parts.deadline_missed(self.wall_clock) {
-                    Some(missed) => row.push_str(&format!(",{},0", u8::from(missed))),
-                    None => row.push_str(",,"),
+                    Some(missed) => {
+                        cell(row, missed.into());
+                        cell(row, 0);
+                    }
+                    None => row.extend_from_slice(b",,"),
                 }
             }
         }
         match joined.tick_timing() {
-            Some(tm) => row.push_str(&format!(",{},{},{}", tm.scheduled_ns, tm.wake_ns, tm.period_ns)),
-            None => row.push_str(",,,"),
+            Some(tm) => [tm.scheduled_ns, tm.wake_ns, tm.period_ns].into_iter().for_each(|ns| cell(row, ns)),
+            None => row.extend_from_slice(b",,,"),
         }
-        writeln!(self.file, "{row}")?;
+        row.push(b'\n');
+        self.file.write_all(row)?;
         Ok(())
     }
 

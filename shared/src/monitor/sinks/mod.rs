@@ -4,6 +4,7 @@
 pub mod hlog;
 pub mod loops;
 pub mod mcap;
+pub mod text;
 pub mod trajectory;
 
 use std::fs::File;
@@ -28,6 +29,9 @@ pub struct SinkSetup<'a> {
     /// The run's launch file (its faults with their ticks, the rate, the seed).
     pub config: &'a LaunchConfig,
     pub layout: &'a Layout,
+    /// The run has a core to spare for the files (an in-process run): run.mcap's chunks are
+    /// compressed on a thread of their own. The monitor process leaves the loop's processes theirs.
+    pub spare_core: bool,
 }
 
 /// One loop as the recorder joined it. Loops come in order of k, each once; a restarted

@@ -15,10 +15,13 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::monitor::sinks::text::{push_f64, push_int};
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 
 pub struct TrajectoryCsv {
     file: BufWriter<File>,
+    /// The row being written, reused.
+    row: Vec<u8>,
     run_dir: PathBuf,
     n_state: usize,
     sensor_dims: Vec<usize>,
@@ -35,6 +38,7 @@ impl TrajectoryCsv {
         }
         Ok(Self {
             file,
+            row: Vec::with_capacity(1024),
             run_dir: setup.run_dir.to_path_buf(),
             n_state: layout.state.len(),
             sensor_dims: layout.sensor_dims(),
@@ -47,11 +51,18 @@ impl TrajectoryCsv {
 impl RunSink for TrajectoryCsv {
     fn loop_joined(&mut self, joined: &JoinedLoop) -> Result<()> {
         let part = joined.parts;
-        let mut row = format!("{},{}", joined.k, joined.t);
+        let row = &mut self.row;
+        row.clear();
+        push_int(row, joined.k);
+        row.push(b',');
+        push_f64(row, joined.t);
         // A part that did not arrive leaves its cells empty.
         let mut push = |values: Option<&[f64]>, n: usize| match values {
-            Some(v) => v[..n].iter().for_each(|x| row.push_str(&format!(",{x}"))),
-            None => row.push_str(&",".repeat(n)),
+            Some(v) => v[..n].iter().for_each(|&x| {
+                row.push(b',');
+                push_f64(row, x);
+            }),
+            None => row.resize(row.len() + n, b','),
         };
         push(part.state.as_ref().map(|s| &s.x[..]), self.n_state);
         for (i, dim) in self.sensor_dims.iter().enumerate() {
@@ -60,7 +71,8 @@ impl RunSink for TrajectoryCsv {
         push(part.estimate.as_ref().map(|e| &e.x[..]), self.n_estimate);
         push(part.command.as_ref().map(|c| &c.u[..]), self.n_input);
         push(part.state.as_ref().map(|s| &s.u_applied[..]), self.n_input);
-        writeln!(self.file, "{row}")?;
+        row.push(b'\n');
+        self.file.write_all(row)?;
         Ok(())
     }
 
@@ -107,7 +119,8 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let config = crate::scenarios::resolve("pendulum", &[]).unwrap().0;
         let layout = layout();
-        let setup = |restarted| SinkSetup { run_dir: &dir, restarted, config: &config, layout: &layout };
+        let setup =
+            |restarted| SinkSetup { run_dir: &dir, restarted, config: &config, layout: &layout, spare_core: false };
 
         let mut sink = TrajectoryCsv::open(&setup(false)).unwrap();
         let whole = whole_loop();

@@ -2,13 +2,13 @@
 //! topic of the loop plus the per-loop latency and the faults. Messages are JSON with a JSON
 //! Schema made from the scenario's vectors, so that a viewer plots each field by its name.
 
-use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::{BufWriter, Write as _};
-use std::path::{Path, PathBuf};
+mod file;
+mod schemas;
 
-use anyhow::{Context as _, Result};
-use mcap::records::MessageHeader;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::Result;
 use serde_json::{Value, json};
 
 use crate::config::faults::FaultSpec;
@@ -18,7 +18,11 @@ use crate::contract::msg::Header;
 use crate::contract::report::{FaultEffect, HOPS, MonitorReport};
 use crate::contract::role::Role;
 use crate::model::layout::Layout;
+use crate::monitor::sinks::text::{push_int, push_json_f64};
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup};
+pub use file::Compression;
+use file::McapFile;
+use schemas::schemas;
 
 /// The first monitor's recording. An MCAP file cannot be appended to, so a restarted monitor
 /// writes the next free `run.<n>.mcap` (n = 1, 2, …: its incarnation).
@@ -118,8 +122,7 @@ impl Keys {
 /// A run's MCAP recording: the monitor's sink, and what `looplab export` writes.
 pub struct McapRecording {
     /// None once finished.
-    writer: Option<mcap::Writer<BufWriter<File>>>,
-    path: PathBuf,
+    file: Option<McapFile>,
     channel_ids: [u16; Channel::ALL.len()],
     sequences: [u32; Channel::ALL.len()],
     keys: Keys,
@@ -135,6 +138,8 @@ pub struct McapRecording {
     last_log_time: u64,
     /// The message being written, reused.
     buf: Vec<u8>,
+    /// The loop being written's `{"k":K,"t":T`, which each of its messages starts with.
+    loop_prefix: ((u64, u64), Vec<u8>),
 }
 
 impl McapRecording {
@@ -145,21 +150,25 @@ impl McapRecording {
             path =
                 (1..).map(|n| setup.run_dir.join(format!("run.{n}.mcap"))).find(|p| !p.exists()).expect("a free name");
         }
-        Self::create(&path, setup.config, setup.layout, Detail::Live)
+        let compression = if setup.spare_core { Compression::OnThread } else { Compression::Inline };
+        Self::create_with(&path, setup.config, setup.layout, Detail::Live, compression)
     }
 
     /// A recording of a run of `config` into `path` (replaced if it exists).
     pub fn create(path: &Path, config: &LaunchConfig, layout: &Layout, detail: Detail) -> Result<Self> {
-        let file = crate::runtime::run_file::open(path, crate::runtime::run_file::Existing::Replace)?;
-        // zstd's fastest level, in this thread: it shrinks the file fivefold (pendulum, 1 kHz: 72 MB
-        // a minute to 14 MB) for about 3 µs a loop, and no compression threads compete with the
-        // loop's processes.
-        let options = mcap::WriteOptions::new()
-            .compression(Some(mcap::Compression::Zstd))
-            .compression_level(1)
-            .compression_threads(0);
-        let mut writer =
-            options.create(BufWriter::new(file)).with_context(|| format!("write to {}", path.display()))?;
+        Self::create_with(path, config, layout, detail, Compression::Inline)
+    }
+
+    fn create_with(
+        path: &Path,
+        config: &LaunchConfig,
+        layout: &Layout,
+        detail: Detail,
+        compression: Compression,
+    ) -> Result<Self> {
+        // zstd's fastest level: it shrinks the file fivefold (pendulum, 1 kHz: 72 MB a minute to
+        // 14 MB) for about 1.5 µs a loop.
+        let mut file = McapFile::create(path, compression)?;
         let wall_clock = config.mode == Mode::Realtime;
         let metadata = BTreeMap::from([(
             "log_time".to_string(),
@@ -168,19 +177,14 @@ impl McapRecording {
         let schemas = schemas(layout, detail);
         let mut channel_ids = [0; Channel::ALL.len()];
         for (channel, schema) in Channel::ALL.iter().zip(&schemas) {
-            let add = |writer: &mut mcap::Writer<_>| -> mcap::McapResult<u16> {
-                let name = schema["title"].as_str().expect("every schema has a title");
-                let schema_id =
-                    writer.add_schema(name, "jsonschema", &serde_json::to_vec(schema).expect("a Value is JSON"))?;
-                writer.add_channel(schema_id, channel.topic(), "json", &metadata)
-            };
-            channel_ids[*channel as usize] =
-                add(&mut writer).with_context(|| format!("write to {}", path.display()))?;
+            let name = schema["title"].as_str().expect("every schema has a title");
+            let schema_id =
+                file.add_schema(name, "jsonschema", &serde_json::to_vec(schema).expect("a Value is JSON"))?;
+            channel_ids[*channel as usize] = file.add_channel(schema_id, channel.topic(), "json", &metadata)?;
         }
         let (from_ticks, _): (Vec<u64>, Vec<_>) = config.faults.iter().map(|f| f.ticks(config.rate_hz)).unzip();
         Ok(Self {
-            writer: Some(writer),
-            path: path.to_path_buf(),
+            file: Some(file),
             channel_ids,
             sequences: [0; Channel::ALL.len()],
             keys: Keys::new(layout),
@@ -192,6 +196,7 @@ impl McapRecording {
             fault_times: from_ticks.into_iter().map(|tick| (tick, None)).collect(),
             last_log_time: 0,
             buf: Vec::with_capacity(4096),
+            loop_prefix: ((u64::MAX, 0), vec![]),
         })
     }
 
@@ -209,13 +214,19 @@ impl McapRecording {
         }
     }
 
-    /// Starts a message of loop k: `{"k":K,"t":T`.
+    /// Starts a message of loop k: `{"k":K,"t":T` (written once per loop: every message has it).
     fn begin(&mut self, k: u64, t: f64) {
+        let (written_for, prefix) = &mut self.loop_prefix;
+        if *written_for != (k, t.to_bits()) {
+            *written_for = (k, t.to_bits());
+            prefix.clear();
+            prefix.extend_from_slice(br#"{"k":"#);
+            push_int(prefix, k);
+            prefix.extend_from_slice(br#","t":"#);
+            push_json_f64(prefix, t);
+        }
         self.buf.clear();
-        self.buf.extend_from_slice(br#"{"k":"#);
-        number(&mut self.buf, k);
-        self.buf.extend_from_slice(br#","t":"#);
-        number(&mut self.buf, t);
+        self.buf.extend_from_slice(prefix);
     }
 
     /// Marks the message in the buffer lost, when its header says so, and gives the incarnation
@@ -231,7 +242,7 @@ impl McapRecording {
         let incarnation = header.incarnations[sender.slot().expect("a loop process")];
         if incarnation != 0 {
             self.buf.extend_from_slice(br#","incarnation":"#);
-            number(&mut self.buf, incarnation);
+            push_int(&mut self.buf, incarnation);
         }
     }
 
@@ -251,11 +262,10 @@ impl McapRecording {
         self.buf.push(b'}');
         let publish_time = if self.wall_clock && published != 0 { published } else { log_time };
         let i = channel as usize;
-        let header =
-            MessageHeader { channel_id: self.channel_ids[i], sequence: self.sequences[i], log_time, publish_time };
-        self.sequences[i] = self.sequences[i].wrapping_add(1);
-        let writer = self.writer.as_mut().expect("no message after finish");
-        writer.write_to_known_channel(&header, &self.buf).with_context(|| format!("write to {}", self.path.display()))
+        let sequence = self.sequences[i];
+        self.sequences[i] = sequence.wrapping_add(1);
+        let file = self.file.as_mut().expect("no message after finish");
+        file.write(self.channel_ids[i], sequence, log_time, publish_time, &self.buf)
     }
 
     /// One fault with what it did (None: the monitor has no record of it), at the time it happened.
@@ -292,16 +302,37 @@ impl McapRecording {
         for (i, spec) in faults.iter().enumerate() {
             self.write_fault(i, spec, effects.get(i).and_then(Option::as_ref))?;
         }
-        let Some(mut writer) = self.writer.take() else { return Ok(()) };
-        let context = || format!("write to {}", self.path.display());
-        writer.finish().with_context(context)?;
-        writer.into_inner().flush().with_context(context)
+        match self.file.take() {
+            Some(file) => file.finish(),
+            None => Ok(()),
+        }
     }
 }
 
-/// Writes a number as JSON (a non-finite float, which JSON cannot hold, as null).
-fn number(buf: &mut Vec<u8>, value: impl serde::Serialize) {
-    serde_json::to_writer(buf, &value).expect("a number is JSON");
+/// A number as JSON writes it (a non-finite float, which JSON cannot hold, as null).
+trait JsonNumber: Copy {
+    fn push_to(self, buf: &mut Vec<u8>);
+}
+
+impl JsonNumber for f64 {
+    fn push_to(self, buf: &mut Vec<u8>) {
+        push_json_f64(buf, self);
+    }
+}
+
+macro_rules! json_integer {
+    ($($t:ty),*) => {$(
+        impl JsonNumber for $t {
+            fn push_to(self, buf: &mut Vec<u8>) {
+                push_int(buf, self);
+            }
+        }
+    )*};
+}
+json_integer!(u32, u64, i64);
+
+fn number(buf: &mut Vec<u8>, value: impl JsonNumber) {
+    value.push_to(buf);
 }
 
 fn boolean(buf: &mut Vec<u8>, value: bool) {
@@ -309,7 +340,7 @@ fn boolean(buf: &mut Vec<u8>, value: bool) {
 }
 
 /// `,"a":1,"b":2`, or without the first comma.
-fn fields<T: serde::Serialize + Copy>(buf: &mut Vec<u8>, keys: &[Vec<u8>], values: &[T], leading_comma: bool) {
+fn fields<T: JsonNumber>(buf: &mut Vec<u8>, keys: &[Vec<u8>], values: &[T], leading_comma: bool) {
     for (i, (key, value)) in keys.iter().zip(values).enumerate() {
         if leading_comma || i > 0 {
             buf.push(b',');
@@ -415,9 +446,9 @@ impl RunSink for McapRecording {
     }
 
     fn flush(&mut self) -> Result<()> {
-        match &mut self.writer {
+        match &mut self.file {
             // Ends the chunk, so that a killed monitor's file is readable up to here.
-            Some(writer) => writer.flush().with_context(|| format!("write to {}", self.path.display())),
+            Some(file) => file.flush(),
             None => Ok(()),
         }
     }
@@ -425,208 +456,6 @@ impl RunSink for McapRecording {
     fn finish(&mut self, report: &MonitorReport) -> Result<()> {
         let effects: Vec<Option<FaultEffect>> = report.faults.iter().cloned().map(Some).collect();
         self.finish_with(&effects)
-    }
-}
-
-/// The JSON Schemas of the channels, in [`Channel::ALL`]'s order. Every float may be null: a
-/// non-finite value (a corrupted command's NaN), which JSON cannot hold.
-fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
-    let float = || json!({"type": ["number", "null"]});
-    // A component's field keeps its name (a viewer plots by name) and gives its unit here.
-    let component = |c: &Component| {
-        let mut field = float();
-        if !matches!(c.unit, "1" | "") {
-            field["description"] = c.unit.into();
-        }
-        (c.name.to_string(), field)
-    };
-    let integer = |description: &str| json!({"type": "integer", "description": description});
-    let boolean = |description: &str| json!({"type": "boolean", "description": description});
-    let object = |title: &str, properties: Vec<(String, Value)>| {
-        let required: Vec<&String> = properties.iter().map(|(name, _)| name).collect();
-        json!({
-            "title": title,
-            "type": "object",
-            "required": required,
-            "properties": properties.iter().cloned().collect::<serde_json::Map<_, _>>(),
-        })
-    };
-    let loop_fields = || {
-        vec![
-            ("k".to_string(), integer("loop index: the plant tick the data derives from")),
-            ("t".to_string(), json!({"type": "number", "description": "simulation time of tick k, s"})),
-        ]
-    };
-    let vector = |title: &str, components: &[Component]| {
-        let mut properties = loop_fields();
-        properties.extend(components.iter().map(component));
-        object(title, properties)
-    };
-    let live = detail == Detail::Live;
-    let applied = || {
-        let description = "the input the actuator applied over the last interval";
-        let mut applied = object("looplab.Applied", layout.input.iter().map(component).collect());
-        applied["description"] = description.into();
-        ("applied".to_string(), applied)
-    };
-    // Only on a message whose header says an upstream stage dropped the loop's output.
-    let lost = boolean("an upstream stage dropped this loop's output (lockstep drop fault); absent: not lost");
-    // Only after the sending process's first restart.
-    let incarnation = integer("the incarnation of the process that sent it; absent: 0");
-    let with_lost = |mut schema: Value| {
-        if live {
-            schema["properties"]["lost"] = lost.clone();
-            schema["properties"]["incarnation"] = incarnation.clone();
-        }
-        schema
-    };
-
-    let mut measurements = loop_fields();
-    for (name, components) in &layout.sensors {
-        let mut sensor =
-            vec![("value".to_string(), object(&format!("{name} value"), components.iter().map(component).collect()))];
-        if live {
-            sensor.extend([
-                ("sample_time".into(), json!({"type": "number", "description": "when the truth behind the value was sampled (simulation time), s"})),
-                ("seq".into(), integer("samples this sensor delivered before this one")),
-                ("fresh".into(), boolean("delivered at this tick (else held)")),
-                ("valid".into(), boolean("the sensor's first sample has arrived")),
-            ]);
-        }
-        measurements.push((name.clone(), object(&format!("looplab.Reading.{name}"), sensor)));
-    }
-    if live {
-        measurements.push(applied());
-    }
-    let mut state = loop_fields();
-    state.extend(layout.state.iter().map(component));
-    if live {
-        state.push(applied());
-    }
-
-    let ns = |description: &str| json!({"type": "integer", "description": format!("{description}, ns")});
-    let mut record = loop_fields();
-    record.push(("deadline_miss".into(), boolean("the command reached the plant after tick k+1 was due")));
-    record.push(("rejected".into(), boolean("the plant rejected the command (non-finite or out of range)")));
-    if live {
-        record.push(("lost".into(), boolean("the command arrived marked lost (lockstep drop fault)")));
-        let incarnations = HEADER_ROLES.iter().map(|r| (r.name().to_string(), integer("0 before the first restart")));
-        record.push(("incarnations".into(), object("looplab.Incarnations", incarnations.collect())));
-    }
-
-    let mut latency = loop_fields();
-    latency.push(("end_to_end_ns".into(), ns("plant publish of loop k to command k reaching the plant")));
-    latency.extend(HOPS.iter().map(|(name, _, _)| (format!("{name}_ns"), ns(name))));
-    let mut latency = object("looplab.Latency", latency);
-    // Real time only.
-    latency["properties"]["wake_latency_ns"] = ns("plant wake-up minus the tick's scheduled time");
-    latency["properties"]["tick_period_error_ns"] = ns("time since the previous wake-up minus the period");
-
-    let mut faults = vec![
-        ("k".to_string(), integer("the tick of the injection")),
-        ("t".to_string(), json!({"type": "number", "description": "simulation time of the injection, s"})),
-        ("index".to_string(), integer("the fault's place in the launch file's [[faults]]")),
-        ("fault".to_string(), json!({"type": "string", "description": "in the --fault form"})),
-        ("kind".to_string(), json!({"type": "string"})),
-        ("process".to_string(), json!({"type": "string"})),
-        ("duration_s".to_string(), float()),
-    ];
-    let mut faults_schema = object("looplab.Fault", std::mem::take(&mut faults));
-    // What the fault did (absent when the monitor has no record of it): FaultEffect's fields.
-    let effect = serde_json::to_value(FaultEffect::default()).expect("a struct is JSON");
-    for (name, value) in effect.as_object().expect("a struct is an object") {
-        faults_schema["properties"][name] = match value {
-            Value::Bool(_) => json!({"type": "boolean"}),
-            Value::Number(_) => json!({"type": "integer"}),
-            _ => float(),
-        };
-    }
-
-    vec![
-        with_lost(object("looplab.State", state)),
-        with_lost(object("looplab.Measurements", measurements)),
-        with_lost(vector("looplab.Estimate", &layout.estimate)),
-        with_lost(vector("looplab.Command", &layout.input)),
-        object("looplab.Loop", record),
-        latency,
-        faults_schema,
-    ]
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn layout() -> Layout {
-        Layout::example()
-    }
-
-    #[test]
-    fn schemas_name_every_component_of_the_layout() {
-        let schemas = schemas(&layout(), Detail::Live);
-        let titles: Vec<&str> = schemas.iter().map(|s| s["title"].as_str().unwrap()).collect();
-        assert_eq!(
-            titles,
-            [
-                "looplab.State",
-                "looplab.Measurements",
-                "looplab.Estimate",
-                "looplab.Command",
-                "looplab.Loop",
-                "looplab.Latency",
-                "looplab.Fault"
-            ]
-        );
-        let float = json!({"type": ["number", "null"]});
-        assert_eq!(schemas[0]["required"], json!(["k", "t", "theta", "omega", "applied"]));
-        assert_eq!(schemas[0]["properties"]["applied"]["required"], json!(["u"]));
-        assert_eq!(schemas[0]["properties"]["applied"]["properties"]["u"]["description"], "N·m");
-        assert_eq!(schemas[0]["properties"]["omega"], json!({"type": ["number", "null"], "description": "rad/s"}));
-        assert_eq!(schemas[0]["properties"]["k"]["type"], "integer");
-        let imu = &schemas[1]["properties"]["imu"];
-        assert_eq!(imu["required"], json!(["value", "sample_time", "seq", "fresh", "valid"]));
-        assert_eq!(imu["properties"]["seq"]["type"], "integer");
-        assert_eq!(imu["properties"]["valid"]["type"], "boolean");
-        assert_eq!(imu["properties"]["value"]["required"], json!(["x", "y"]));
-        assert_eq!(imu["properties"]["value"]["properties"]["x"]["description"], "m/s²");
-        // A pure number has no unit to give.
-        assert_eq!(imu["properties"]["value"]["properties"]["y"], float);
-        assert_eq!(imu["properties"]["fresh"]["type"], "boolean");
-        assert_eq!(schemas[1]["required"], json!(["k", "t", "encoder", "imu", "applied"]));
-        assert_eq!(schemas[3]["required"], json!(["k", "t", "u"]));
-        // `lost` is written only on a lost message.
-        for schema in &schemas[..4] {
-            assert_eq!(schema["properties"]["lost"]["type"], "boolean", "{}", schema["title"]);
-            assert!(!schema["required"].as_array().unwrap().contains(&json!("lost")), "{}", schema["title"]);
-        }
-        let latency = &schemas[5];
-        assert_eq!(latency["required"].as_array().unwrap().len(), 2 + 1 + HOPS.len());
-        assert_eq!(latency["properties"]["plant_to_sensors_ns"]["type"], "integer");
-        assert_eq!(schemas[6]["properties"]["within_limits"]["type"], "boolean");
-        assert_eq!(schemas[6]["properties"]["recovery_s"], float);
-
-        // A run folder's files keep no sample times, flags or incarnations, and export keeps the
-        // applied input nowhere.
-        let files = super::schemas(&layout(), Detail::Files);
-        assert_eq!(files[0]["required"], json!(["k", "t", "theta", "omega"]));
-        assert_eq!(files[1]["required"], json!(["k", "t", "encoder", "imu"]));
-        assert_eq!(files[1]["properties"]["imu"]["required"], json!(["value"]));
-        assert!(files[..4].iter().all(|schema| schema["properties"].get("lost").is_none()));
-        assert_eq!(files[4]["required"], json!(["k", "t", "deadline_miss", "rejected"]));
-    }
-
-    #[test]
-    fn no_built_in_vector_or_sensor_has_the_name_of_a_message_field() {
-        // They would collide with the loop's `k`, `t` and `lost` in every message, and with
-        // `applied` in /state and /measurements (whose sensors are fields too).
-        for entry in crate::scenarios::ALL {
-            let (config, scenario) = crate::scenarios::resolve(entry.name, &[]).unwrap();
-            let layout = Layout::new(&config, scenario.as_ref());
-            let components = layout.state.iter().chain(&layout.estimate).chain(&layout.input).map(|c| c.name);
-            for name in components.chain(layout.sensors.iter().map(|(name, _)| name.as_str())) {
-                assert!(!["k", "t", "lost", "applied"].contains(&name), "{}: a field is named {name}", entry.name);
-            }
-        }
     }
 }
 
