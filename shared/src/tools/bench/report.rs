@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use super::{BLOCK_C, BLOCK_PYTHON, anatomy, own_stage};
 use crate::contract::role::Role;
+use crate::tools::plot::latency::nearest_rank;
 
 /// A latency distribution, µs.
 #[derive(Debug, Clone, Default, Serialize)]
@@ -25,12 +26,13 @@ impl Dist {
         Self::scaled(sorted, 1e-3)
     }
 
+    /// Nearest-rank percentiles, as the charts' legends give them, so that table and chart agree.
     pub(super) fn scaled(sorted: &[u64], unit: f64) -> Self {
         if sorted.is_empty() {
             return Self::default();
         }
-        let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize] as f64 * unit;
-        Self { n: sorted.len(), p50: at(0.5), p90: at(0.9), p99: at(0.99), p999: at(0.999), max: at(1.0) }
+        let at = |per_mille| nearest_rank(sorted, per_mille).map_or(0.0, |v| v as f64 * unit);
+        Self { n: sorted.len(), p50: at(500), p90: at(900), p99: at(990), p999: at(999), max: at(1000) }
     }
 }
 
