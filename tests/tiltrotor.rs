@@ -16,17 +16,59 @@ fn off_one(a: f64, b: f64) -> f64 {
     (a / b - 1.0).abs()
 }
 
-/// Section 4: with the paper's noise (fix σ 0.05 m and 0.04 m/s at 10 Hz, known force σ 1/3 N),
-/// the a-priori x error is within ±2.54 cm 95 % of the time and ±3.81 cm 99.8 % of the time
-/// (allowed: 25 %), far below the raw fix's 0.15 m; d̂_z's spread is 0.92 N (allowed: 30 %).
+/// Section 4 over the paper's Fig. 4 window: the a-priori x error of the first 10 s, from the
+/// known start (its error starts at 0), is ±2.54 cm 95 % and ±3.81 cm 99.8 % of the time: 2σ and
+/// 3σ of σ = 1.27 cm. One 10 s window's sample σ spreads ±30 %, so the claim is checked on the
+/// ensemble: 24 in-process windows pooled, each with its own parameter draw and noise seed (10–33,
+/// which the other tests do not use; the band depends on the noise, not on the draw). The flight adds nothing to the point mass's band (the load's pull, the mass error and
+/// the disturbances leave it unchanged to 0.01 cm; estimator.rs's unit test has the exact value,
+/// σ 1.375 cm, 8 % above the paper's). d̂_z's spread (paper 0.92 N) is √2·m·σ_v/T_s = 1.00 N.
 #[test]
 fn the_lkfui_error_band_and_disturbance_spread_match_the_paper() {
-    let r = run_in_process("tilt-nlls", &[NLLS]);
-    let (p95, p998) = (r.metric("lkfui_prior_x_err_p95_m"), r.metric("lkfui_prior_x_err_p998_m"));
-    assert!(off_one(p95, 0.0254) < 0.25, "p95 {p95} m against the paper's 0.0254");
-    assert!(off_one(p998, 0.0381) < 0.25, "p99.8 {p998} m against the paper's 0.0381");
-    let spread = r.metric("d_hat_z_std_n");
-    assert!(off_one(spread, 0.92) < 0.30, "d̂_z std {spread} N against the paper's 0.92");
+    let cases: Vec<(u64, u64)> = (10..34).map(|i| (i, i)).collect();
+    let run_window = |&(draw, seed): &(u64, u64)| {
+        let (draw_key, seed_key) = (format!("model.uncertainty_seed={draw}"), format!("seed={seed}"));
+        let args = [
+            NLLS,
+            "--duration",
+            "10",
+            "--set",
+            &draw_key,
+            "--set",
+            &seed_key,
+            "--set",
+            "metrics.d_hat_window_s=[1.0, 4.9]",
+        ];
+        let r = run_in_process(&format!("tilt-band-{draw}-{seed}"), &args);
+        let t = r.trajectory();
+        let errors: Vec<f64> = t.col("est.x_prior_m").iter().zip(t.col("x_m")).map(|(prior, x)| prior - x).collect();
+        (errors, r.metric("d_hat_z_std_n"))
+    };
+    let (first, second) = cases.split_at(cases.len() / 2);
+    let windows: Vec<(Vec<f64>, f64)> = std::thread::scope(|s| {
+        let a = s.spawn(|| first.iter().map(run_window).collect::<Vec<_>>());
+        let b = s.spawn(|| second.iter().map(run_window).collect::<Vec<_>>());
+        a.join().unwrap().into_iter().chain(b.join().unwrap()).collect()
+    });
+    let errors: Vec<f64> = windows.iter().flat_map(|(e, _)| e.iter().copied()).collect();
+    assert!(errors.iter().all(|e| e.is_finite()) && errors.len() == 24 * 1000);
+    let sigma = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+    let mut magnitudes: Vec<f64> = errors.iter().map(|e| e.abs()).collect();
+    magnitudes.sort_by(f64::total_cmp);
+    let nearest_rank = |fraction: f64| magnitudes[(fraction * magnitudes.len() as f64).ceil() as usize - 1];
+    let (p95, p998) = (nearest_rank(0.95), nearest_rank(0.998));
+    // d̂_z's spread over [1, 4.9] s of each window, before the first disturbance pulse.
+    let spread = windows.iter().map(|(_, s)| s).sum::<f64>() / windows.len() as f64;
+    eprintln!("24 windows: σ {sigma:.5} m, p95 {p95:.5} m, p99.8 {p998:.5} m, σ(d̂_z) {spread:.4} N");
+    // Measured: σ 1.38 cm, p95 2.73 cm, p99.8 3.98 cm, σ(d̂_z) 1.02 N; the exact ensemble is σ 1.375,
+    // p95 2.73, p99.8 4.38 cm, σ(d̂_z) 1.00 N. 24 windows still spread about 4 % in σ (two other
+    // sets of 24 seeds: σ 1.415 and 1.235 cm), hence the paper's value −8 % below; above, ours
+    // + about 7 %, so a band 10 % wider fails.
+    assert!((0.92..1.16).contains(&(sigma / 0.0127)), "σ {sigma} m against the paper's 0.0127 (2.54/2, 3.81/3)");
+    assert!((0.92..1.16).contains(&(p95 / 0.0254)), "p95 {p95} m against the paper's 0.0254");
+    assert!((0.92..1.24).contains(&(p998 / 0.0381)), "p99.8 {p998} m against the paper's 0.0381");
+    assert!((1.0..1.15).contains(&(spread / 0.92)), "d̂_z std {spread} N against the paper's 0.92");
+    assert!(p998 < 0.05, "far below the raw fix's 3σ = 0.15 m");
 }
 
 /// Table 4 and 5: over the same seeded run (same noise, same ±30 % draw), NLLS-2L tracks within

@@ -95,6 +95,10 @@ impl Rms {
 /// The input-based ones (IAVU, time at the thrust limits) read `applied`, the input held over
 /// the period that ended at the row's tick; at k = 0 no period has ended (the plant reports
 /// zeros), so that row's `applied` is ignored.
+/// The paper's Fig. 4 shows the a-priori x error over the first 10 s; its ±2.54 cm (95 %) and
+/// ±3.81 cm (99.8 %) are 2σ and 3σ of one σ = 1.27 cm (the ratio is 1.5).
+pub const FIG4_WINDOW_S: f64 = 10.0;
+
 pub struct TiltrotorMetrics {
     window: [f64; 2],
     reference: TiltReference,
@@ -103,6 +107,8 @@ pub struct TiltrotorMetrics {
     rows: u64,
     /// x_prior − x, signed, every tick.
     prior_x_errors: Vec<f64>,
+    /// The same over the paper's Fig. 4 window, t < [`FIG4_WINDOW_S`].
+    prior_x_errors_fig4: Vec<f64>,
     /// d̂_z at the corrected ticks inside the window.
     d_hat_z: Vec<f64>,
     corrections: u64,
@@ -130,6 +136,7 @@ impl TiltrotorMetrics {
             thrust_max,
             rows: 0,
             prior_x_errors: Vec::new(),
+            prior_x_errors_fig4: Vec::new(),
             d_hat_z: Vec::new(),
             corrections: 0,
             fix_ages: Vec::new(),
@@ -149,6 +156,9 @@ impl TiltrotorMetrics {
         let prior_error = e[layout::PRIOR_POSITION.start] - row.state[state::POSITION.start];
         if prior_error.is_finite() {
             self.prior_x_errors.push(prior_error);
+            if row.t < FIG4_WINDOW_S {
+                self.prior_x_errors_fig4.push(prior_error);
+            }
         }
         if e[layout::CORRECTED] == 1.0 {
             self.corrections += 1;
@@ -255,6 +265,12 @@ impl Metrics for TiltrotorMetrics {
         put("lkfui_prior_x_err_p95_m", nearest_rank(&prior_abs, 9_500));
         put("lkfui_prior_x_err_p998_m", nearest_rank(&prior_abs, 9_980));
         put("lkfui_prior_x_err_std_m", mean_std(&self.prior_x_errors).map(|(_, std)| std));
+        let fig4 = &self.prior_x_errors_fig4;
+        let fig4_abs = sorted(&fig4.iter().map(|e| e.abs()).collect::<Vec<_>>());
+        put("lkfui_prior_x_err_10s_p95_m", nearest_rank(&fig4_abs, 9_500));
+        put("lkfui_prior_x_err_10s_p998_m", nearest_rank(&fig4_abs, 9_980));
+        let rms = (!fig4.is_empty()).then(|| (fig4.iter().map(|e| e * e).sum::<f64>() / fig4.len() as f64).sqrt());
+        put("lkfui_prior_x_err_10s_rms_m", rms);
         let d_hat = mean_std(&self.d_hat_z);
         put("d_hat_z_mean_n", d_hat.map(|(mean, _)| mean));
         put("d_hat_z_std_n", d_hat.map(|(_, std)| std));
@@ -372,6 +388,21 @@ mod tests {
             feed(&mut m, k as u64, &on_reference(), &e, &[8.0; INPUTS]);
         }
         assert_eq!(m.finish()["lkfui_prior_x_err_std_m"], 1.0);
+    }
+
+    #[test]
+    fn the_fig4_window_takes_the_first_ten_seconds_only() {
+        let mut m = metrics([0.0, 1.0]);
+        // 3 and −4 cm before 10 s (rms √12.5), 100 cm after.
+        for (k, error) in [(0, 3.0), (19, -4.0), (20, 100.0)] {
+            let mut e = estimate();
+            e[layout::PRIOR_POSITION.start] = 1.0 + error;
+            feed(&mut m, k, &on_reference(), &e, &[8.0; INPUTS]);
+        }
+        let r = m.finish();
+        assert_eq!(r["lkfui_prior_x_err_10s_rms_m"], 12.5f64.sqrt());
+        assert_eq!(r["lkfui_prior_x_err_10s_p95_m"], 4.0);
+        assert_eq!(r["lkfui_prior_x_err_p95_m"], 100.0);
     }
 
     #[test]

@@ -322,6 +322,7 @@ impl ScenarioParts for Tiltrotor {
             self.tick_s,
             self.fix_period_ticks,
             self.inputs,
+            self.plant.initial.position_m,
         ))
     }
 
