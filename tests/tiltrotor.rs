@@ -68,6 +68,8 @@ fn the_lkfui_error_band_and_disturbance_spread_match_the_paper() {
     assert!((0.92..1.16).contains(&(p95 / 0.0254)), "p95 {p95} m against the paper's 0.0254");
     assert!((0.92..1.24).contains(&(p998 / 0.0381)), "p99.8 {p998} m against the paper's 0.0381");
     assert!((1.0..1.15).contains(&(spread / 0.92)), "d̂_z std {spread} N against the paper's 0.92");
+    let analytic = 2f64.sqrt() * 1.7652 * 0.04 / 0.1;
+    assert!(off_one(spread, analytic) < 0.05, "d̂_z std {spread} N against √2·m·σ_v/T_s = {analytic}");
     assert!(p998 < 0.05, "far below the raw fix's 3σ = 0.15 m");
 }
 

@@ -90,22 +90,23 @@ const CASES: &[(&str, &[&str], &str)] = &[
         "4d91824ca75780cb55a902893135ac4dfb95ae9dbfc6482da8571578387e8b35",
     ),
     // Added with the tilt-rotor (issue 12), recorded on its commit: 200 loops at 100 Hz.
+    // Re-recorded with issue 34: the LKFUI starts from the launch's start, not the first fix.
     (
         "launch/tiltrotor.toml",
         &["launch/tiltrotor.toml"],
-        "356866c7eceac063d13fcd298052a5185251400594fd71eead575a6ef5134351",
+        "15b276522186430a000a60bc820817172ee7deb77f4f411ade1e89d457c1f54e",
     ),
-    ("tiltrotor (by name)", &["tiltrotor"], "356866c7eceac063d13fcd298052a5185251400594fd71eead575a6ef5134351"),
+    ("tiltrotor (by name)", &["tiltrotor"], "15b276522186430a000a60bc820817172ee7deb77f4f411ade1e89d457c1f54e"),
     // Sets only mode and the kind it already has: the same bytes as launch/tiltrotor.toml.
     (
         "launch/tiltrotor/1-nlls-2l.toml",
         &["launch/tiltrotor/1-nlls-2l.toml"],
-        "356866c7eceac063d13fcd298052a5185251400594fd71eead575a6ef5134351",
+        "15b276522186430a000a60bc820817172ee7deb77f4f411ade1e89d457c1f54e",
     ),
     (
         "launch/tiltrotor/2-nlpt-2l.toml",
         &["launch/tiltrotor/2-nlpt-2l.toml"],
-        "824930b454b727c738f8b17e5659f8da3c95fb93bcbb6ae6abfe93d7d8d4f863",
+        "d5e4400bc11b298f28c88a4eb34be52fd52ab0204e9b3adeab5036dca56b8935",
     ),
     // Added with the flying inverted pendulum (issue 14), recorded on its commit: 2000 loops at 1 kHz.
     // The default is case (ii); cases 1 and 2 differ only in duration, overridden here.

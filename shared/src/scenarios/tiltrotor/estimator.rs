@@ -155,7 +155,7 @@ impl Lifted {
     }
 }
 
-/// The filter once it has its first fix.
+/// The filter once it has started (from the launch's start or a fix).
 #[derive(Debug, Clone)]
 struct Filter {
     /// x̂ = [x y z ẋ ẏ ż].
