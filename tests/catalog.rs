@@ -67,7 +67,7 @@ fn an_added_scenario_runs_by_name_with_its_own_defaults() {
     let stiff_dir = run_in_process(&catalog, "pendulum-stiff");
     assert_eq!(
         sha256(&builtin_dir.join("trajectory.csv")),
-        "02185331ac0bbefa0c73e42086e7090f8f51a6a97b6eea57d5533158ba18c5af",
+        "60c15b033268e52f261957d2292f96d1415a2855f0d452f8000bed24767e23a3",
         "the built-in pendulum's pinned trajectory"
     );
     let (builtin, stiff) =

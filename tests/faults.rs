@@ -164,7 +164,8 @@ fn corrupt_commands_are_rejected_and_never_reach_the_plants_state() {
     // The commands themselves were corrupt: the monitor saw them.
     let commands = trajectory.col("cmd.current_A");
     assert!(commands[2000..2100].iter().all(|u| u.is_nan()));
-    assert!(commands[3000..3050].iter().all(|u| *u == 50.0));
+    // Out of range: ten times the ±10 A limit.
+    assert!(commands[3000..3050].iter().all(|u| *u == 100.0));
     assert!(effect(&s.faults[0]).within_limits && effect(&s.faults[1]).within_limits);
 }
 
@@ -429,7 +430,7 @@ fn a_sweep_as_five_processes_reports_what_the_in_process_sweep_reports() {
     let sweep = |name: &str, extra: &[&str]| {
         let dir = fresh_dir(name);
         let output = looplab()
-            .args(["sweep", "pendulum", "--duration", "20", "--param", "faults.0.delay_ticks", "--from", "30"])
+            .args(["sweep", "pendulum", "--duration", "30", "--param", "faults.0.delay_ticks", "--from", "30"])
             .args(["--to", "31", "--set", "sensors.encoder.quantum=0", "--set", "sensors.wheel_speed.noise_std=0"])
             .args(["--fault", "delay controller by 0 ticks at 2s"])
             .args(extra)

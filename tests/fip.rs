@@ -158,3 +158,58 @@ fn bad_fip_settings_name_the_key() {
         assert!(stderr.contains(&format!("--set {set}")) && stderr.contains(expected), "{set}: {stderr}");
     }
 }
+
+/// The experiment's ‖z_p‖ (the paper: a mean of 9.72 cm once steady, Fig. 6). The profile's two
+/// choices (launch/fip/5-experiment.toml): q̂(0) at the measured rod direction, and a 0.25 N
+/// vertical force error that the experiment's q_b,z = 10⁻⁵ leaves unlearnt. On seeds no other
+/// test uses, ‖z_p‖ averages 9.51–9.55 cm (within 2 % of the paper's; held to 10 % of 9.54), and
+/// it is the offset b̃_z/(m_T k_p) (within 1 %; held to 5 %). Each choice isolated: without the
+/// force the same profile gives 0.43 cm, and with the simulation's q̂(0) = e₃ the rod swings
+/// past 80° (1.43 rad) and b̂_z ends far off.
+#[test]
+fn the_experiments_9_72_cm_is_the_offset_of_a_vertical_force_the_filter_does_not_learn() {
+    let experiment = case("5-experiment");
+    let cases: Vec<Vec<String>> = vec![
+        vec!["seed=3".into()],
+        vec!["seed=4".into()],
+        vec!["seed=5".into()],
+        vec!["seed=3".into(), "disturbance.kind=\"none\"".into()],
+        vec!["seed=3".into(), "estimator.initial_direction=[0.0, 0.0, 1.0]".into()],
+    ];
+    let run_one = |sets: &Vec<String>| {
+        let mut args = vec![experiment.as_str()];
+        for set in sets {
+            args.extend(["--set", set.as_str()]);
+        }
+        (sets.clone(), run_in_process("fip-exp-zp", &args))
+    };
+    let runs: Vec<(Vec<String>, common::Run)> = std::thread::scope(|scope| {
+        let second = scope.spawn(|| cases[3..].iter().map(run_one).collect::<Vec<_>>());
+        let mut runs: Vec<_> = cases[..3].iter().map(run_one).collect();
+        runs.extend(second.join().unwrap());
+        runs
+    });
+    // The lab's vehicle: m_T = 0.285 kg, k_p = 9.
+    let (total_mass, k_p) = (0.285, 9.0);
+    for (sets, r) in &runs[..3] {
+        let zp = r.metric("zp_mean_m");
+        assert!((zp / 0.0954 - 1.0).abs() < 0.1, "{sets:?}: ‖z_p‖ averages {zp} m");
+        assert!((zp / 0.0972 - 1.0).abs() < 0.25, "{sets:?}: ‖z_p‖ {zp} m against the paper's 0.0972 m");
+        let offset = (r.metric("b_mean_n_z") - r.metric("b_hat_mean_n_z")) / (total_mass * k_p);
+        let vertical = r.metric("zp_z_mean_m");
+        assert!((vertical / offset - 1.0).abs() < 0.05, "{sets:?}: z offset {vertical} m, b̃_z/(m_T k_p) = {offset} m");
+        assert!(
+            r.metric("theta_pendulum_max_rad") < 0.31,
+            "{sets:?}: the rod swung to {}",
+            r.metric("theta_pendulum_max_rad")
+        );
+    }
+    let (sets, without_force) = &runs[3];
+    let zp = without_force.metric("zp_mean_m");
+    assert!(zp < 1.1 * 0.0043, "{sets:?}: ‖z_p‖ {zp} m without the vertical force");
+    let (sets, wrong_start) = &runs[4];
+    let swing = wrong_start.metric("theta_pendulum_max_rad");
+    assert!(swing > 0.9 * 1.43, "{sets:?}: the rod swung only to {swing} rad");
+    let b_error = (wrong_start.metric("b_mean_n_z") - wrong_start.metric("b_hat_mean_n_z")).abs();
+    assert!(b_error > 0.9 * 0.58, "{sets:?}: b̂_z off by only {b_error} N");
+}

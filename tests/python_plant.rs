@@ -114,11 +114,11 @@ fn a_python_plant_and_a_python_controller_killed_in_real_time_restart_and_resume
     };
     assert!(before != 0.0 && after != 0.0, "the wheel turns before the kill and after the restart");
     // The ticks go on (none published twice), and the wheel speed changed by at most what the
-    // physics allows over the outage: |φ̈| ≤ k·5 A·(1/J_r + 1/J₀) + a ≈ 155 + 50 rad/s² per second,
-    // 0.21 rad/s per tick (the lockstep test below proves the state is the snapshot's exactly).
+    // physics allows over the outage: |φ̈| ≤ k·10 A·(1/J_r + 1/J₀) + a ≈ 310 + 50 rad/s² per second,
+    // 0.36 rad/s per tick (the lockstep test below proves the state is the snapshot's exactly).
     assert!(states.windows(2).all(|w| w[1].0 > w[0].0), "a tick was published twice");
     let ticks = k_after - k_before;
-    assert!((after - before).abs() <= 0.21 * ticks, "{before} at tick {k_before} → {after} at tick {k_after}");
+    assert!((after - before).abs() <= 0.36 * ticks, "{before} at tick {k_before} → {after} at tick {k_after}");
     for p in last_incarnations(s).values() {
         assert_eq!(p.exit, Exit::Status(0), "{:?}", s.processes);
     }

@@ -211,7 +211,7 @@ class Checking:
         assert stage.role == "controller" and stage.incarnation == 0, stage
         assert stage.input_names == ["theta", "theta_dot", "wheel_speed", "bias"], stage.input_names
         assert stage.output_names == ["current"], stage.output_names
-        assert stage.config["scenario"] == "pendulum" and stage.config["model"]["current_limit_a"] == 5.0
+        assert stage.config["scenario"] == "pendulum" and stage.config["model"]["current_limit_a"] == 10.0
         self.k = stage.config["controller"]["gains"]
         self.views = None
 

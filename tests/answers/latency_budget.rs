@@ -41,7 +41,7 @@ fn the_budget_line_says_what_the_summary_says() {
 fn a_delay_sweep_bisects_to_the_margin_and_gives_it_in_ms() {
     let dir = fresh_dir("bisect");
     let output = looplab()
-        .args(["sweep", "pendulum", "--duration", "20", "--param", "faults.0.delay_ticks"])
+        .args(["sweep", "pendulum", "--duration", "30", "--param", "faults.0.delay_ticks"])
         .args(["--from", "25", "--to", "35", "--step", "5"])
         .args(["--set", "sensors.encoder.quantum=0", "--set", "sensors.wheel_speed.noise_std=0"])
         .args(["--fault", "delay controller by 0 ticks at 2s", "--out"])

@@ -19,11 +19,16 @@ fn run_failing_on_limits(name: &str, args: &[&str]) -> (std::process::Output, Su
     (output, summary, dir)
 }
 
-/// Upright at θ₀ = 0, the bias δ = 0.1 makes the observer command the full current the wrong
-/// way: the pendulum falls, swings over (|θ| up to 5.2 rad), and the run completes.
+/// Upright at θ₀ = 0 with the drive held to its continuous ±5 A
+/// (launch/pendulum/1-continuous-5a.toml), the bias δ = 0.1 makes the observer command the full
+/// current the wrong way: the pendulum falls, swings over (|θ| up to 5.2 rad), and the run
+/// completes.
 #[test]
 fn a_fallen_pendulum_is_lost_and_fails_the_run_with_fail_on_limits() {
-    let (output, s, dir) = run_failing_on_limits("fallen", &["--duration", "2", "--set", "plant.initial.theta=0"]);
+    let (output, s, dir) = run_failing_on_limits(
+        "fallen",
+        &["--duration", "2", "--set", "plant.initial.theta=0", "--set", "model.current_limit_a=5.0"],
+    );
     let stdout = String::from_utf8_lossy(&output.stdout);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(1), "{stdout}\n{stderr}");

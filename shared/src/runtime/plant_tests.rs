@@ -1,5 +1,5 @@
 //! The plant's pure core, driven by explicit times: no clock, no process. The pendulum at
-//! 1 kHz: one period is 1 ms, its input range ±5 A, the command timeout 20 ms.
+//! 1 kHz: one period is 1 ms, its input range ±10 A, the command timeout 20 ms.
 
 use super::*;
 use crate::config::launch::Override;
@@ -131,7 +131,7 @@ fn a_non_finite_or_out_of_range_command_is_rejected_and_the_last_valid_one_held(
     publish(&mut core);
     core.accept(&command(0, 1.0), due(0) + 100);
     core.advance().unwrap();
-    for (k, u) in [(1, f64::NAN), (2, f64::INFINITY), (3, 5.5), (4, -5.01)] {
+    for (k, u) in [(1, f64::NAN), (2, f64::INFINITY), (3, 10.5), (4, -10.01)] {
         publish(&mut core);
         let record = core.accept(&command(k, u), due(k) + 100);
         assert_eq!((record.rejected, record.deadline_miss), (1, 0), "{u}");
@@ -141,7 +141,7 @@ fn a_non_finite_or_out_of_range_command_is_rejected_and_the_last_valid_one_held(
     assert_eq!(core.counters.rejected_commands, 4);
     assert_eq!(applied(&mut core), 1.0);
     // The range is closed: its ends are valid.
-    let record = core.accept(&command(5, -5.0), due(5) + 100);
+    let record = core.accept(&command(5, -10.0), due(5) + 100);
     assert_eq!(record.rejected, 0);
 }
 

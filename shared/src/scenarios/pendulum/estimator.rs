@@ -16,7 +16,8 @@
 //! instead; the Routh conditions then hold for every c in (0, 1], the upper half plane. The
 //! default poles (−16, −20, −24) settle the bias error in about 0.4 s, the paper's "0.5 s
 //! transient"; slower poles (−12, −15, −20: 0.5 s) let the pendulum fall from the default
-//! start (δ = 0.1, θ = 0.05) because the ±5 A limit cannot hold the early wrong commands.
+//! start (δ = 0.1, θ = 0.05) when the drive is held to its continuous ±5 A, which cannot hold
+//! the early wrong commands (at its ±10 A peak they stand).
 //!
 //! `no-bias` treats the reading as the angle: a two-state observer on (θ, θ̇) with the
 //! known torque but no gravity term, x̂̇₁ = x̂₂ − l₁ (x̂₁ − y), x̂̇₂ = b I − l₂ (x̂₁ − y). At rest

@@ -332,6 +332,10 @@ struct PendulumMetrics {
     current_limit: f64,
     /// Loops whose command was at the current limit.
     saturated: u64,
+    /// Σ I² over the loops and their count: the run's RMS current, which the drive's continuous
+    /// rating bounds (launch/pendulum.toml, `current_limit_a`).
+    current_square_sum: f64,
+    loops: u64,
     observer: bool,
     dt: f64,
     last: Option<(f64, f64, f64, f64)>,
@@ -345,13 +349,23 @@ struct PendulumMetrics {
 }
 
 impl Metrics for PendulumMetrics {
-    crate::model::scenario::frozen_fields!(saturated, last, theta_max_abs, bias_last_outside, recent);
+    crate::model::scenario::frozen_fields!(
+        saturated,
+        current_square_sum,
+        loops,
+        last,
+        theta_max_abs,
+        bias_last_outside,
+        recent
+    );
 
     fn observe(&mut self, row: &Row) {
         let (theta, wheel_speed, bias_estimate) = (row.state[0], row.state[2], row.estimate[3]);
         if row.command[0].abs() >= self.current_limit {
             self.saturated += 1;
         }
+        self.current_square_sum += row.command[0] * row.command[0];
+        self.loops += 1;
         self.last = Some((row.t, theta, wheel_speed, bias_estimate));
         self.theta_max_abs = max_keeping_nan(self.theta_max_abs, self.reference.error(row.t, row.state));
         if (bias_estimate - self.bias_true).abs() >= self.bias_band {
@@ -375,6 +389,7 @@ impl Metrics for PendulumMetrics {
         m.insert("theta_mean_last_1s_rad".into(), self.recent.iter().map(|r| r.1).sum::<f64>() / n);
         m.insert("wheel_speed_mean_last_1s_rad_s".into(), self.recent.iter().map(|r| r.2).sum::<f64>() / n);
         m.insert("current_at_limit_s".into(), self.saturated as f64 * self.dt);
+        m.insert("current_rms_a".into(), (self.current_square_sum / self.loops.max(1) as f64).sqrt());
         m.insert("bias_true_rad".into(), self.bias_true);
         m.insert("bias_estimate_final_rad".into(), bias_estimate);
         // Settled means inside the band from some time on; a run that ends outside it (or a
