@@ -47,7 +47,8 @@ pub struct Loop {
 
 pub struct Options {
     /// One vertex: the nominal model (ρ = 1, κ = 0); `--polytope` imposes the LMIs at the ±30 %
-    /// vertices with one Q, Y (infeasible for every loop but φ, θ with Table 2's cones).
+    /// vertices with one Q, Y (infeasible with Table 2's cones for every loop, φ, θ's only at
+    /// Table 2's α = −7).
     pub nominal: bool,
     /// `--combined`: x and the swing as one loop on the pendulum, in `combined_region` (default:
     /// two loops as (51) lists them, the swing on ë = −ũ).
