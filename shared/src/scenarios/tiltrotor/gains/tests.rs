@@ -3,15 +3,31 @@
 //! below the bound the tool reported, so a mistyped gain fails.
 
 use super::*;
-use crate::scenarios::tiltrotor::controller::ControllerSection;
 use nalgebra::DVector;
 
 const G_OVER_L: f64 = 9.81 / 0.5;
 
-fn section() -> ControllerSection {
+/// The launch file's `[controller]` gains, read as numbers (not through `controller`, which
+/// imports this module).
+struct Gains {
+    xy_gains: Vec<f64>,
+    swing_gains: Vec<f64>,
+    z_gains: Vec<f64>,
+    attitude_gains: Vec<f64>,
+    yaw_gains: Vec<f64>,
+}
+
+fn section() -> Gains {
     let file: toml::Table =
         toml::from_str(include_str!("../../../../../launch/tiltrotor.toml")).expect("launch/tiltrotor.toml parses");
-    file["controller"].clone().try_into().expect("[controller]")
+    let key = |k: &str| -> Vec<f64> { file["controller"][k].clone().try_into().expect("a list of numbers") };
+    Gains {
+        xy_gains: key("xy_gains"),
+        swing_gains: key("swing_gains"),
+        z_gains: key("z_gains"),
+        attitude_gains: key("attitude_gains"),
+        yaw_gains: key("yaw_gains"),
+    }
 }
 
 /// One loop of (51): model, Table 3's weights, its region and the tool's bounds.
