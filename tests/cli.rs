@@ -285,6 +285,12 @@ fn bad_tiltrotor_keys_are_one_clear_error() {
         &["key `disturbance.pulses.0.1`"],
     );
     rejects(&["tiltrotor", "--set", "estimator.r_position_m=0"], &["key `estimator.r_position_m`", "positive"]);
+    // Gains that destabilise their loop's design model (poles 3.63, −0.31 ± 0.42i).
+    rejects(&["tiltrotor", "--set", "controller.xy_gains=[1.0, 2.0, 3.0]"], &["key `controller.xy_gains`", "Re s < 0"]);
+    rejects(
+        &["tiltrotor", "--set", "controller.swing_gains=[-1.0, 2.0]"],
+        &["key `controller.swing_gains.0`", "positive"],
+    );
 }
 
 /// A run with no --out goes to runs/<time>-<scenario>, and runs/latest points at the newest;

@@ -24,19 +24,19 @@
 //! - Limits: f in [0, thrust_max] with ḟ zeroed at a bound, τ_α within ±torque_max;
 //!   every integrator is frozen while an actuator saturates (and the outer ones also while σ
 //!   of (46) saturates).
-//! - The gains come from poles (`gains`).
+//! - The gains are the launch file's, from the H₂/H∞ synthesis of `gains` (the
+//!   services/tiltrotor-gains tool).
 //! - ψ's error is not wrapped (the stand-in reference stays within ±π/4).
 //!
-//! Measured on the full plant (the launch file's poles, ±30 % draw): both kinds fly the
-//! stand-in and keep the load bounded; why the attitude poles are fast and the prefilter slow
-//! is in `gains`.
+//! Measured on the full plant (the launch file's gains, ±30 % draws): both kinds fly the
+//! stand-in and keep the load bounded; why the prefilter stays slow is in `gains`.
 
 use nalgebra::Vector2;
 use serde::Deserialize;
 
 use super::control_model::{InnerModel, OUTPUTS, OuterModel, ext};
 use super::dynamics::rotation;
-use super::gains::{chain_gains, swing_gains};
+use super::gains::chain_poles;
 use super::layout;
 use super::params::Params;
 use super::reference::TiltReference;
@@ -55,52 +55,65 @@ pub enum Kind {
     Nlpt2l,
 }
 
-/// `[controller]`: the kind and each loop's closed-loop poles (real, rad/s; see `gains` for the
-/// Table 2 region each must lie in).
+/// `[controller]`: the kind and each loop's gains K = [K_I, K_p, K_d, …] of (49)–(50) and
+/// (38)–(41) (see `gains` for their synthesis and the Table 2 region of each loop).
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ControllerSection {
     pub kind: Kind,
-    /// x and y: (∫e, e, ė).
-    pub xy_poles: [f64; 3],
-    /// The swing loop of NLLS-2L: (∫ḋ, ḋ).
-    pub swing_poles: [f64; 2],
-    /// z: (∫e, e, ė, ë, e⃛).
-    pub z_poles: [f64; 5],
+    /// x and y: [K_I, K_p, K_d] on (∫e, e, ė).
+    pub xy_gains: [f64; 3],
+    /// The swing terms of NLLS-2L: [K_Id, K_pd] on (∫ḋ, ḋ).
+    pub swing_gains: [f64; 2],
+    /// z: [K_I, K_p, K_d, K_dd, K_ddd] on (∫e, e, ė, ë, e⃛).
+    pub z_gains: [f64; 5],
     /// φ and θ.
-    pub attitude_poles: [f64; 5],
-    pub yaw_poles: [f64; 5],
+    pub attitude_gains: [f64; 5],
+    pub yaw_gains: [f64; 5],
     /// ω of the (s + ω)⁴ prefilter on φ_Ref, θ_Ref, rad/s.
     pub prefilter_rad_s: f64,
 }
 
 impl ControllerSection {
-    /// The poles by key, for the checks.
-    pub fn poles(&self) -> [(&'static str, &[f64]); 5] {
+    /// The chains' gains by key, for the checks.
+    pub fn chains(&self) -> [(&'static str, &[f64]); 4] {
         [
-            ("xy_poles", &self.xy_poles),
-            ("swing_poles", &self.swing_poles),
-            ("z_poles", &self.z_poles),
-            ("attitude_poles", &self.attitude_poles),
-            ("yaw_poles", &self.yaw_poles),
+            ("xy_gains", &self.xy_gains),
+            ("z_gains", &self.z_gains),
+            ("attitude_gains", &self.attitude_gains),
+            ("yaw_gains", &self.yaw_gains),
         ]
     }
 }
 
-/// The fastest pole or prefilter the 100 Hz loop is allowed: sτ ≤ 1.
+/// The fastest pole or prefilter the 100 Hz loop is allowed: |s|τ ≤ 1.
 const MAX_POLE_TICKS: f64 = 1.0;
 
-/// Every pole real and stable, no faster than 1/τ; the prefilter positive and no faster.
+/// Each chain's closed loop on its design model (e⁽ⁿ⁾ = Ke) stable, no pole faster than 1/τ; the
+/// swing gains positive (the swing loop on ë = −u is then stable); the prefilter positive and
+/// no faster.
 pub fn check(c: &LaunchConfig, s: &ControllerSection) -> Result<(), LaunchError> {
     let fastest = MAX_POLE_TICKS / c.dt();
-    for (name, poles) in s.poles() {
-        for (i, p) in poles.iter().enumerate() {
-            if !(p.is_finite() && *p < 0.0 && -p <= fastest) {
-                return Err(c.error(
-                    &format!("controller.{name}.{i}"),
-                    format!("must be a negative real pole no faster than 1/τ = {fastest} rad/s, got {p}"),
-                ));
-            }
+    for (name, gains) in s.chains() {
+        let poles = chain_poles(gains);
+        let finite = gains.iter().all(|g| g.is_finite());
+        if !finite || poles.iter().any(|p| p.re >= 0.0 || p.norm() > fastest) {
+            let shown: Vec<String> = poles.iter().map(|p| format!("{:.3}{:+.3}i", p.re, p.im)).collect();
+            return Err(c.error(
+                &format!("controller.{name}"),
+                format!(
+                    "must be finite gains whose closed-loop poles have Re s < 0 and |s| ≤ 1/τ = {fastest} rad/s, got {gains:?} (poles {})",
+                    shown.join(", ")
+                ),
+            ));
+        }
+    }
+    for (i, g) in s.swing_gains.iter().enumerate() {
+        if !(g.is_finite() && *g > 0.0) {
+            return Err(c.error(
+                &format!("controller.swing_gains.{i}"),
+                format!("must be a positive gain (K_Id, K_pd > 0 damp the swing), got {g}"),
+            ));
         }
     }
     crate::config::validate::in_range(c, "controller.prefilter_rad_s", s.prefilter_rad_s, 1e-3..=fastest, "rad/s")
@@ -188,7 +201,7 @@ impl TwoLoop {
         thrust_max: f64,
         torque_max: f64,
     ) -> Self {
-        let attitude = chain_gains(section.attitude_poles);
+        let attitude = section.attitude_gains;
         let hover = nominal.hover_thrust();
         TwoLoop {
             nominal: nominal.clone(),
@@ -197,10 +210,10 @@ impl TwoLoop {
             tick_s,
             thrust_max,
             torque_max,
-            inner_gains: [chain_gains(section.z_poles), attitude, attitude, chain_gains(section.yaw_poles)],
-            xy_gains: chain_gains(section.xy_poles),
+            inner_gains: [section.z_gains, attitude, attitude, section.yaw_gains],
+            xy_gains: section.xy_gains,
             swing_gains: match section.kind {
-                Kind::Nlls2l => swing_gains(section.swing_poles),
+                Kind::Nlls2l => section.swing_gains,
                 Kind::Nlpt2l => [0.0; 2],
             },
             prefilter_rad_s: section.prefilter_rad_s,
