@@ -173,15 +173,17 @@ fn real_time_reports_the_fix_age_beside_the_loop_latency() {
 
 /// The swing claim over draws and seeds the comparison above does not use (issue 34): the
 /// three (draw, seed) pairs where NLLS-2L swung the load more than NLPT-2L with the
-/// pole-placement gains (ratios 0.60–0.79 in x). With the H2/H∞ gains of the launch file the
+/// pole-placement gains (ratios 0.60–0.79 in x), and draw 23, whose vehicle Table 2's φ, θ disk
+/// (radius 110) lost (the launch file's radius 60 keeps it). With the H2/H∞ gains of the launch file the
 /// NLPT/NLLS load-velocity ratios are as measured below (paper 2.36, 1.47; over 20 draws × 3
-/// seeds they are 1.95–3.57 and 1.55–3.20, lower with NLLS-2L in both axes in 60 of 60); a 10 %
+/// seeds they are 2.03–3.51 and 1.52–3.26, lower with NLLS-2L in both axes in 60 of 60); a 10 %
 /// lower ratio fails. The tilt efforts stay within the paper's ±5 % (0.998, 0.994), z's RMSE is
 /// the same for both, and NLPT-2L tracks x and y better, as in the paper (0.85, 0.68).
 #[test]
 fn the_swing_claim_holds_over_other_draws_and_seeds() {
     // (draw, seed, measured NLPT/NLLS ratio of rmse_load_vx, of rmse_load_vy).
-    const CASES: [(u64, u64, f64, f64); 3] = [(12, 2, 1.957, 2.435), (7, 1, 2.552, 1.679), (18, 2, 1.952, 2.416)];
+    const CASES: [(u64, u64, f64, f64); 4] =
+        [(12, 2, 2.052, 2.574), (7, 1, 2.765, 1.641), (18, 2, 2.037, 2.556), (23, 1, 3.342, 1.898)];
     let runs: Vec<_> = std::thread::scope(|s| {
         let handles: Vec<_> = CASES
             .iter()
@@ -200,6 +202,9 @@ fn the_swing_claim_holds_over_other_draws_and_seeds() {
     for ((draw, seed, vx, vy), (nlls, nlpt)) in CASES.iter().zip(&runs) {
         let ratio = |name: &str| nlpt.metric(name) / nlls.metric(name);
         let case = format!("draw {draw}, seed {seed}");
+        for run in [nlls, nlpt] {
+            assert_eq!(run.summary["limits"]["verdict"], "within_limits", "{case}: {}", run.summary["limits"]);
+        }
         for (name, measured) in [("rmse_load_vx_m_s", vx), ("rmse_load_vy_m_s", vy)] {
             assert!(ratio(name) > 0.9 * measured, "{case}: {name} ratio {} (measured {measured})", ratio(name));
         }

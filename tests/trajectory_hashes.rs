@@ -99,19 +99,19 @@ const CASES: &[(&str, &[&str], &str)] = &[
     (
         "launch/tiltrotor.toml",
         &["launch/tiltrotor.toml"],
-        "bfb1aa2ec75dacbacf6bffccd6e8925f3ecaa34eb4ec185972b83004524e6b9a",
+        "39d8438a26c0d62bf7d841fd8a4e8f7b620547520e2feb18083e766d226d21f5",
     ),
-    ("tiltrotor (by name)", &["tiltrotor"], "bfb1aa2ec75dacbacf6bffccd6e8925f3ecaa34eb4ec185972b83004524e6b9a"),
+    ("tiltrotor (by name)", &["tiltrotor"], "39d8438a26c0d62bf7d841fd8a4e8f7b620547520e2feb18083e766d226d21f5"),
     // Sets only mode and the kind it already has: the same bytes as launch/tiltrotor.toml.
     (
         "launch/tiltrotor/1-nlls-2l.toml",
         &["launch/tiltrotor/1-nlls-2l.toml"],
-        "bfb1aa2ec75dacbacf6bffccd6e8925f3ecaa34eb4ec185972b83004524e6b9a",
+        "39d8438a26c0d62bf7d841fd8a4e8f7b620547520e2feb18083e766d226d21f5",
     ),
     (
         "launch/tiltrotor/2-nlpt-2l.toml",
         &["launch/tiltrotor/2-nlpt-2l.toml"],
-        "cc9cf62ff035861373aea0c75c0a8ef3b1760bc130bd67019232e5315367d4d8",
+        "d0fe1621f97b086610599281d2d12504e8adacaa76fbb5e28758ce0c355f3afd",
     ),
     // Added with the flying inverted pendulum (issue 14), recorded on its commit: 2000 loops at 1 kHz.
     // The default is case (ii); cases 1 and 2 differ only in duration, overridden here.

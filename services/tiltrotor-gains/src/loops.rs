@@ -60,6 +60,8 @@ pub struct Options {
     pub only: Option<String>,
     /// φ, θ's α: −15 (a choice, see the launch file); Table 2's is −7.
     pub attitude_alpha: f64,
+    /// φ, θ's disk radius about −7: 60 (a choice, see the launch file); Table 2's is 110.
+    pub attitude_radius: f64,
 }
 
 impl Options {
@@ -70,6 +72,7 @@ impl Options {
             combined_region: "hull".into(),
             only: None,
             attitude_alpha: -15.0,
+            attitude_radius: 60.0,
         };
         let mut it = args.iter();
         while let Some(a) = it.next() {
@@ -77,10 +80,13 @@ impl Options {
                 "--polytope" => o.nominal = false,
                 "--combined" => o.combined = true,
                 "--attitude-alpha" => o.attitude_alpha = it.next().and_then(|a| a.parse().ok()).expect("α, rad/s"),
+                "--attitude-radius" => {
+                    o.attitude_radius = it.next().and_then(|a| a.parse().ok()).expect("r, rad/s")
+                }
                 "--only" => o.only = Some(it.next().expect("a loop").clone()),
                 "--combined-region" => o.combined_region = it.next().expect("a region").clone(),
                 other => panic!(
-                    "unknown argument {other} (--polytope, --combined, --combined-region x|swing|hull, --attitude-alpha A, --only LOOP)"
+                    "unknown argument {other} (--polytope, --combined, --combined-region x|swing|hull, --attitude-alpha A, --attitude-radius R, --only LOOP)"
                 ),
             }
         }
@@ -247,7 +253,7 @@ pub fn all(o: &Options) -> Vec<Loop> {
     five_loop(
         "φ, θ",
         &attitude,
-        Region { alpha: o.attitude_alpha, centre: -7.0, radius: 110.0, cone: pi / 4.0 },
+        Region { alpha: o.attitude_alpha, centre: -7.0, radius: o.attitude_radius, cone: pi / 4.0 },
         "attitude_gains",
     );
     five_loop("ψ", &five, Region { alpha: -3.0, centre: -3.0, radius: 20.0, cone: pi / 10.0 }, "yaw_gains");

@@ -17,7 +17,8 @@
 //!
 //! The design models (A, B_u over the polytope) are in `loops`. The defaults are the launch
 //! file's: each loop on its nominal model, x and the swing apart as (51) lists them, φ, θ's α
-//! at −15 rad/s; `--polytope`, `--combined` and `--attitude-alpha -7` give the alternatives
+//! at −15 rad/s and its disk's radius 60; `--polytope`, `--combined`, `--attitude-alpha -7` and
+//! `--attitude-radius 110` give the alternatives
 //! the scenario's README measures. The TOML goes to stdout, each loop's poles to stderr; the
 //! exit status is 1 if any loop has no solution.
 

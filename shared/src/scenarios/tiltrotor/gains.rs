@@ -39,7 +39,8 @@
 //!
 //! Speeds (the synthesis, not chosen): x −1.01, −1.51, −2.99; swing −1.74 ± 0.13j; z −1.17 ±
 //! 0.07j … −79.9 (|s|τ = 0.8 at τ = 0.01 s, the edge of its disk); ψ −3.2 ± 0.8j … −20.1;
-//! φ, θ −15.9 … −70.7 with α = −15 (the launch file says why not Table 2's −7). The φ_Ref, θ_Ref
+//! φ, θ −17.5 ± 11.7j … −46.5 with α = −15 and a disk of radius 60 (the launch file says why not
+//! Table 2's −7 and 110). The φ_Ref, θ_Ref
 //! prefilter (25 rad/s) must stay slow: it also low-passes the path α → f_x^B → θ_Ref (the tilt
 //! that pitches the body also pushes it, and (46) compensates that push); at 40 rad/s the
 //! vehicle was lost (measured with the pole-placement stand-ins).

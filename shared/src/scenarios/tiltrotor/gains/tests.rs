@@ -116,10 +116,11 @@ fn designs() -> Vec<Design> {
 /// (√γ̂, the H₂ bound) of x y, swing, z, φ θ, ψ as `tiltrotor-gains` printed them (the launch
 /// file's comments).
 const BOUNDS: [(f64, f64); 5] =
-    [(2.184358, 4.063625), (1.765541, 2.805185), (1.321691, 8.985782), (1.523385, 18.626394), (3.016288, 12.235121)];
+    [(2.184358, 4.063625), (1.765541, 2.805185), (1.321691, 8.985782), (1.933035, 17.828620), (3.016288, 12.235121)];
 
-/// φ, θ's region as designed: Table 2's with α = −15 (the launch file says why).
-const ATTITUDE_DESIGN_REGION: Region = Region { alpha: -15.0, ..ATTITUDE_REGION };
+/// φ, θ's region as designed: Table 2's with α = −15 and the disk's radius 60 (the launch file
+/// says why).
+const ATTITUDE_DESIGN_REGION: Region = Region { alpha: -15.0, radius: 60.0, ..ATTITUDE_REGION };
 
 impl Design {
     fn closed_loop(&self) -> DMatrix<f64> {
