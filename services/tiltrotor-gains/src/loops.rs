@@ -80,9 +80,7 @@ impl Options {
                 "--polytope" => o.nominal = false,
                 "--combined" => o.combined = true,
                 "--attitude-alpha" => o.attitude_alpha = it.next().and_then(|a| a.parse().ok()).expect("α, rad/s"),
-                "--attitude-radius" => {
-                    o.attitude_radius = it.next().and_then(|a| a.parse().ok()).expect("r, rad/s")
-                }
+                "--attitude-radius" => o.attitude_radius = it.next().and_then(|a| a.parse().ok()).expect("r, rad/s"),
                 "--only" => o.only = Some(it.next().expect("a loop").clone()),
                 "--combined-region" => o.combined_region = it.next().expect("a region").clone(),
                 other => panic!(
