@@ -226,6 +226,7 @@ impl Metrics for TiltrotorMetrics {
     crate::model::scenario::frozen_fields!(
         rows,
         prior_x_errors,
+        prior_x_errors_fig4,
         d_hat_z,
         corrections,
         fix_ages,
