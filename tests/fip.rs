@@ -183,12 +183,7 @@ fn the_experiments_9_72_cm_is_the_offset_of_a_vertical_force_the_filter_does_not
         }
         (sets.clone(), run_in_process("fip-exp-zp", &args))
     };
-    let runs: Vec<(Vec<String>, common::Run)> = std::thread::scope(|scope| {
-        let second = scope.spawn(|| cases[3..].iter().map(run_one).collect::<Vec<_>>());
-        let mut runs: Vec<_> = cases[..3].iter().map(run_one).collect();
-        runs.extend(second.join().unwrap());
-        runs
-    });
+    let runs = common::on_two_threads(&cases, run_one);
     // The lab's vehicle: m_T = 0.285 kg, k_p = 9.
     let (total_mass, k_p) = (0.285, 9.0);
     for (sets, r) in &runs[..3] {

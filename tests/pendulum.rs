@@ -156,13 +156,7 @@ fn run_cases(name: &str, target: &str, cases: &[Vec<String>]) -> Vec<common::Run
         }
         run_in_process(name, &args)
     };
-    let half = cases.len().div_ceil(2);
-    std::thread::scope(|scope| {
-        let second = scope.spawn(|| cases[half..].iter().map(run_one).collect::<Vec<_>>());
-        let mut runs: Vec<_> = cases[..half].iter().map(run_one).collect();
-        runs.extend(second.join().unwrap());
-        runs
-    })
+    common::on_two_threads(cases, run_one)
 }
 
 /// The longest stretch of loops whose applied current is above `amps`, in seconds.

@@ -44,12 +44,7 @@ fn the_lkfui_error_band_and_disturbance_spread_match_the_paper() {
         let errors: Vec<f64> = t.col("est.x_prior_m").iter().zip(t.col("x_m")).map(|(prior, x)| prior - x).collect();
         (errors, r.metric("d_hat_z_std_n"))
     };
-    let (first, second) = cases.split_at(cases.len() / 2);
-    let windows: Vec<(Vec<f64>, f64)> = std::thread::scope(|s| {
-        let a = s.spawn(|| first.iter().map(run_window).collect::<Vec<_>>());
-        let b = s.spawn(|| second.iter().map(run_window).collect::<Vec<_>>());
-        a.join().unwrap().into_iter().chain(b.join().unwrap()).collect()
-    });
+    let windows = common::on_two_threads(&cases, run_window);
     let errors: Vec<f64> = windows.iter().flat_map(|(e, _)| e.iter().copied()).collect();
     assert!(errors.iter().all(|e| e.is_finite()) && errors.len() == 24 * 1000);
     let sigma = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
