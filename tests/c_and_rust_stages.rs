@@ -16,7 +16,7 @@ const REPO: &str = env!("CARGO_MANIFEST_DIR");
 const OTHER_GAINS: &str = "controller.gains=[-420.0, -61.5, -1.25]";
 
 /// Compiles one C program against the library into its own fresh folder; returns the program.
-fn compile_c(name: &str, source: &Path) -> PathBuf {
+pub(crate) fn compile_c(name: &str, source: &Path) -> PathBuf {
     let lib = built();
     let dir = fresh_dir(name);
     std::fs::create_dir_all(&dir).unwrap();

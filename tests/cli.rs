@@ -232,6 +232,10 @@ fn out_of_range_and_non_finite_inputs_are_one_clear_error() {
         &["key `faults.0.delay_s`", "less than the run's duration_s"],
     );
     rejects(
+        &["pendulum", "--explain-over", "-5"],
+        &["--set explain_over_us=-5.0", "key `explain_over_us`", "a positive number of µs"],
+    );
+    rejects(
         &["pendulum", "--set", "supervision.backoff_s=2e19"],
         &["--set supervision.backoff_s=2e19", "key `supervision.backoff_s`", "0 to 60 seconds"],
     );
@@ -397,6 +401,7 @@ fn in_process_implies_lockstep_and_refuses_real_time_and_faults_done_from_outsid
         (&["pendulum", "--mode", "realtime"][..], "only lockstep runs in one process"),
         (&["pendulum", "--mode", "lockstep", "--fault", "stop controller at 1s for 100ms"][..], "`stop controller"),
         (&["pendulum", "--set", "realtime.mlock=true"][..], "[realtime]"),
+        (&["pendulum", "--trace-sched"][..], "trace_sched names the processes"),
     ] {
         let out_dir = fresh_dir("in-process-refused");
         let output = looplab().arg("run").args(args).arg("--in-process").arg("--out").arg(&out_dir).output().unwrap();

@@ -13,7 +13,7 @@ use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::model::catalog::Catalog;
 use crate::runtime::ipc;
 use crate::scenarios;
-use crate::tools::{ToolError, bench, compare, diff, export, plot, replay, sweep};
+use crate::tools::{ToolError, bench, compare, diff, export, perfetto, plot, replay, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -97,13 +97,21 @@ Runs of other scenarios, rates, durations, loop counts or columns cannot be comp
     /// bench.json and PNG charts
     Bench(bench::BenchArgs),
     /// Write a file for an existing run folder from its files: --mcap writes run.mcap (for
-    /// Foxglove or PlotJuggler), as every run does, for a run folder that has none
+    /// Foxglove or PlotJuggler), as every run does, for a run folder that has none; --perfetto
+    /// writes run.perfetto-trace (open it in ui.perfetto.dev): each loop's stages and hops as
+    /// slices per process, a flow per loop, latency counters, deadline misses, faults, restarts
     Export {
         /// The run folder (runs/<time>-<scenario> or a run's --out)
         run_dir: PathBuf,
         /// Write run.mcap
-        #[arg(long, required = true)]
+        #[arg(long, required_unless_present = "perfetto")]
         mcap: bool,
+        /// Write run.perfetto-trace, a Perfetto trace in CLOCK_MONOTONIC time
+        #[arg(long)]
+        perfetto: bool,
+        /// Where to write the Perfetto trace (default: RUN_DIR/run.perfetto-trace)
+        #[arg(long, requires = "perfetto", value_name = "PATH")]
+        out: Option<PathBuf>,
         /// Replace a run.mcap that is there already (the monitor's own keeps more than the files)
         #[arg(long)]
         force: bool,
@@ -219,6 +227,19 @@ struct LaunchArgs {
     /// Noise seed (same as --set seed=N)
     #[arg(long)]
     seed: Option<u64>,
+    /// Give a cause to every loop over this end-to-end latency, µs, as every deadline miss gets
+    /// one (same as --set explain_over_us=US)
+    #[arg(long = "explain-over", value_name = "US", allow_negative_numbers = true)]
+    explain_over: Option<f64>,
+    /// Real time: run a probe beside the loop, a bare timer at the plant's priority and the
+    /// loop's rate, and set its wake-up latency beside the plant's tick (same as --set probe=true)
+    #[arg(long)]
+    probe: bool,
+    /// Record the kernel's scheduler events (root or CAP_SYS_ADMIN: tracefs) and name the task
+    /// that ran while a loop process waited on the run queue; kept as sched.trace (same as --set
+    /// trace_sched=true)
+    #[arg(long = "trace-sched")]
+    trace_sched: bool,
     /// Override any key of the launch file by its dotted path, for example
     /// --set sensors.encoder.bias=0.05 or --set estimator.kind=no-bias. Repeatable.
     #[arg(long = "set", value_name = "KEY=VALUE")]
@@ -341,14 +362,19 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         },
         Some(Command::Sweep(args)) => sweep(args, catalog),
         Some(Command::Bench(args)) => report_failure(bench::run(&args, catalog)),
-        Some(Command::Export { run_dir, mcap: _, force }) => match export::write_mcap(&run_dir, catalog, force) {
-            Ok(path) => {
-                say!("wrote {}", path.display());
-                ExitCode::SUCCESS
+        Some(Command::Export { run_dir, mcap, perfetto: write_trace, out, force }) => {
+            let mcap_file = || export::write_mcap(&run_dir, catalog, force);
+            let trace_file = || perfetto::write_perfetto(&run_dir, out.as_deref());
+            let files: [(bool, &ExportFile<'_>); 2] = [(mcap, &mcap_file), (write_trace, &trace_file)];
+            for (_, write) in files.into_iter().filter(|(wanted, _)| *wanted) {
+                match write() {
+                    Ok(path) => say!("wrote {}", path.display()),
+                    Err(ToolError::BadInput(why)) => return bad_input(why),
+                    Err(ToolError::Failed(e)) => return report_failure(Err(e)),
+                }
             }
-            Err(ToolError::BadInput(why)) => bad_input(why),
-            Err(ToolError::Failed(e)) => report_failure(Err(e)),
-        },
+            ExitCode::SUCCESS
+        }
         Some(Command::Plot { run_dir: Some(run_dir), .. }) => figures(plot::run::plot_run(&run_dir, catalog)),
         Some(Command::Plot { paper: Some(scenario), out, .. }) => {
             figures(plot::paper::paper_figures(catalog, &scenario, out.as_deref()))
@@ -467,6 +493,9 @@ fn list(catalog: &Catalog) {
     );
 }
 
+/// One file `looplab export` writes: its path once written.
+type ExportFile<'a> = dyn Fn() -> Result<PathBuf, ToolError> + 'a;
+
 fn bad_input(message: impl std::fmt::Display) -> ExitCode {
     tell!("error: {message}");
     ExitCode::from(EXIT_BAD_INPUT)
@@ -523,6 +552,15 @@ fn overrides(mode: Option<&str>, launch: &LaunchArgs) -> Result<Vec<Override>, l
     }
     if let Some(s) = launch.seed {
         texts.push(format!("seed={s}"));
+    }
+    if let Some(us) = launch.explain_over {
+        texts.push(format!("explain_over_us={us:?}"));
+    }
+    if launch.probe {
+        texts.push("probe=true".into());
+    }
+    if launch.trace_sched {
+        texts.push("trace_sched=true".into());
     }
     texts.extend(launch.set.iter().cloned());
     texts.iter().map(|t| Override::parse(t)).chain(launch.fault.iter().map(|f| Override::fault(f))).collect()

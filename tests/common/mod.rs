@@ -77,6 +77,14 @@ pub struct Run {
 }
 
 impl Run {
+    /// The run in `dir`, finished, whose launcher the test started itself.
+    pub fn at(dir: PathBuf) -> Run {
+        use std::os::unix::process::ExitStatusExt;
+        let output = Output { status: std::process::ExitStatus::from_raw(0), stdout: vec![], stderr: vec![] };
+        let (summary, typed) = (read_summary(&dir), load_summary(&dir));
+        Run { dir, output, summary, typed }
+    }
+
     /// summary.json, typed.
     pub fn summary(&self) -> &Summary {
         &self.typed
@@ -194,15 +202,22 @@ impl Table {
     }
 }
 
-/// Every cell of loops.csv but `t_s` is a whole number or empty (a part that did not arrive), so
-/// a reader can take the stamps as integers; `t_s` is a number. Returns the number of rows.
+/// Every cell of loops.csv but `t_s` and `cause` is a whole number or empty (a part that did not
+/// arrive), so a reader can take the stamps as integers; `t_s` is a number, `cause` words or
+/// empty. Returns the number of rows.
 pub fn assert_loops_csv_integers(dir: &Path) -> usize {
     let loops = Table::read(&dir.join("loops.csv"));
-    let t = loops.columns["t_s"];
+    let (t, cause) = (loops.columns["t_s"], loops.columns["cause"]);
     for (line, row) in loops.rows.iter().enumerate() {
         assert_eq!(row.len(), loops.columns.len(), "loops.csv line {}", line + 2);
         for (i, cell) in row.iter().enumerate() {
-            let ok = if i == t { cell.parse::<f64>().is_ok() } else { cell.is_empty() || cell.parse::<u64>().is_ok() };
+            let ok = if i == t {
+                cell.parse::<f64>().is_ok()
+            } else if i == cause {
+                cell.bytes().all(|b| b.is_ascii_lowercase() || b" :->".contains(&b))
+            } else {
+                cell.is_empty() || cell.parse::<u64>().is_ok()
+            };
             assert!(ok, "loops.csv line {}, column {}: {cell:?}", line + 2, i + 1);
         }
     }

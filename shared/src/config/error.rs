@@ -4,11 +4,14 @@
 use std::fmt;
 
 /// The top-level keys every launch file shares; the rest belong to the scenario.
-pub const COMMON_KEYS: [&str; 14] = [
+pub const COMMON_KEYS: [&str; 17] = [
     "scenario",
     "mode",
     "rate_hz",
     "deadline_us",
+    "explain_over_us",
+    "probe",
+    "trace_sched",
     "duration_s",
     "seed",
     "sensors",

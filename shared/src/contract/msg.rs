@@ -219,6 +219,22 @@ impl LoopTrace {
     }
 }
 
+/// What the writer of a message knows of its own scheduling for this loop (`runtime::sched`):
+/// how long its thread sat on the run queue, runnable while another task had its CPU. Each loop
+/// process sets its own on what it sends (the plant: on the state, for the tick's wake-up, and on
+/// the loop record, for the command's), so the monitor reads each role's from that role's message.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("looplab::SchedStamp")]
+#[repr(C)]
+pub struct SchedStamp {
+    /// Run-queue time from its last read to its input's arrival (a stage: the wait before it got
+    /// the CPU for this input; the plant: before it woke for this tick or this command), ns.
+    pub queued_ns: u32,
+    /// Run-queue time while it computed this loop's output, ns: read only when the computation
+    /// took over `runtime::sched::COMPUTE_READ_NS`, else 0 (it then counts in the next wait).
+    pub compute_queued_ns: u32,
+}
+
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("looplab::Header")]
 #[repr(C)]
@@ -236,6 +252,8 @@ pub struct Header {
     /// message only carries the loop on; stages pass it through and the plant holds its command.
     pub lost: u32,
     pub _reserved: u32,
+    /// The writer's own scheduling in this loop.
+    pub sched: SchedStamp,
 }
 
 impl Header {
@@ -459,7 +477,8 @@ pub fn layout_fingerprint() -> &'static str {
         describe! {
             LoopTrace { plant_publish, sensors_receive, sensors_publish, estimator_receive, estimator_publish,
                 controller_receive, controller_publish, plant_receive }
-            Header { k, t, trace, incarnations, lost, _reserved }
+            SchedStamp { queued_ns, compute_queued_ns }
+            Header { k, t, trace, incarnations, lost, _reserved, sched }
             TickTiming { scheduled_ns, wake_ns, period_ns }
             PlantCounters { deadline_misses, rejected_commands, skipped_ticks, stale_ticks, lost_commands }
             PlantState { header, x, u_applied, timing, counters }
@@ -482,12 +501,12 @@ mod tests {
     fn messages_are_fixed_size_and_small() {
         // Sizes are part of the contract between processes; a change here changes the wire
         // format (iceoryx2 also refuses mismatched layouts at connect time).
-        assert_eq!(std::mem::size_of::<Header>(), 104);
-        assert_eq!(std::mem::size_of::<PlantState>(), 104 + 8 * (MAX_STATE + MAX_INPUT) + 64);
+        assert_eq!(std::mem::size_of::<Header>(), 112);
+        assert_eq!(std::mem::size_of::<PlantState>(), 112 + 8 * (MAX_STATE + MAX_INPUT) + 64);
         assert_eq!(std::mem::size_of::<SensorReading>(), 8 * MAX_SENSOR_DIM + 24);
-        assert_eq!(std::mem::size_of::<Command>(), 104 + 8 * MAX_INPUT);
-        assert_eq!(std::mem::size_of::<Measurements>(), 104 + MAX_SENSORS * (8 * MAX_SENSOR_DIM + 24) + 8 * MAX_INPUT);
-        assert_eq!(std::mem::size_of::<Measurements>(), 1384);
+        assert_eq!(std::mem::size_of::<Command>(), 112 + 8 * MAX_INPUT);
+        assert_eq!(std::mem::size_of::<Measurements>(), 112 + MAX_SENSORS * (8 * MAX_SENSOR_DIM + 24) + 8 * MAX_INPUT);
+        assert_eq!(std::mem::size_of::<Measurements>(), 1392);
     }
 
     #[test]

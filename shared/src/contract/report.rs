@@ -93,6 +93,23 @@ pub struct Stats {
     pub mean: Option<f64>,
 }
 
+/// The late loops of one cause, for the report and summary.json.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct CauseTally {
+    /// Loops with this primary cause.
+    pub loops: u64,
+    /// The smallest and largest primary part among them, ns (None: none was measured, as for
+    /// loops with no command).
+    pub min_part_ns: Option<u64>,
+    pub max_part_ns: Option<u64>,
+    /// The primary parts added up, ns.
+    pub total_part_ns: u64,
+    /// With a scheduler trace (`--trace-sched`), for `queued` causes: the task that ran instead,
+    /// and in how many of these loops.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub behind: BTreeMap<String, u64>,
+}
+
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct MonitorReport {
     /// Loops written with their loop record (whole loops, plant to plant). A record that comes
@@ -136,6 +153,13 @@ pub struct MonitorReport {
     /// The error against the scenario's limits over every loop recorded (the run's verdict).
     #[serde(default)]
     pub limits: crate::contract::limits::LimitsWatch,
+    /// Every deadline miss (real time: a period whose command did not reach the plant by its
+    /// deadline, a skipped tick included), by primary cause (`monitor::cause`).
+    #[serde(default)]
+    pub miss_causes: BTreeMap<String, CauseTally>,
+    /// Every loop whose end-to-end latency was over `explain_over_us`, by primary cause.
+    #[serde(default)]
+    pub slow_causes: BTreeMap<String, CauseTally>,
 }
 
 /// What the loops' own stamps tell of the other host: each loop that goes there and back is an

@@ -392,7 +392,7 @@ fn render_title(frame: &mut Frame, area: Rect, view: &View) {
 }
 
 fn render_latency(frame: &mut Frame, area: Rect, view: &View) {
-    let block = Block::bordered().title(" Latency, µs: the last second of loops, and the whole run's max ");
+    let block = Block::bordered().title(" Latency, µs, of loops with a command: the last second, the run's max ");
     let inner = block.inner(area);
     frame.render_widget(block, area);
     let names = HOPS.iter().map(|(name, ..)| hop_title(name)).chain(["end to end".into(), "tick period error".into()]);
@@ -593,7 +593,7 @@ mod tests {
         assert_eq!(
             lines,
             [
-                "┌ Latency, µs: the last second of loops, and the whole run's max ──────────────┐",
+                "┌ Latency, µs, of loops with a command: the last second, the run's max ────────┐",
                 "│                               p50       p99       max   run max  max of each │",
                 "│plant → sensors                2.0      12.0      20.0      25.0 ▂▄█          │",
                 "│sensors compute                2.0      12.0      20.0      25.0 ▂▄█          │",

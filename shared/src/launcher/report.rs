@@ -1,11 +1,12 @@
 //! What the user sees at the end of a run: the report printed from its summary, the error
 //! line and the exit code.
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 // The scenarios' old path to this type, until issue 11 moves it below them.
 use crate::config::launch::Mode;
-use crate::contract::report::{HOPS, MissingLoops, Stats};
+use crate::contract::report::{CauseTally, HOPS, MissingLoops, Stats};
 use crate::launcher::outcome::{EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Outcome};
 pub use crate::launcher::summary::ErrorMeasureInfo;
 use crate::launcher::summary::Summary;
@@ -66,6 +67,24 @@ fn stats_row(out: &mut String, label: &str, s: &Stats) {
         micros(s.p999),
         micros(s.max)
     );
+}
+
+/// The loop's timer beside the OS's own: the probe's p99 wake-up latency and the plant's tick's.
+fn probe_line(s: &Summary, probe: &crate::launcher::probe::ProbeSummary) -> String {
+    let p99 = |st: &Stats| st.p99.map_or("n/a".to_owned(), |ns| format!("{:.0} µs", ns as f64 / 1e3));
+    let ratio = match (s.jitter_ns.plant_wake_latency.p99, probe.wake_latency_ns.p99) {
+        (Some(plant), Some(os)) if os > 0 => format!(" ({:.1}× the probe's)", plant as f64 / os as f64),
+        _ => String::new(),
+    };
+    let how = if probe.priority > 0 { format!("{} {}", probe.policy, probe.priority) } else { probe.policy.clone() };
+    let note = probe.note.as_ref().map_or(String::new(), |n| format!("; {n}"));
+    format!(
+        "  the OS alone woke the probe p99 {} late ({how}, every {:.0} µs, half a period after each tick); \
+         the plant's tick p99 {}{ratio}{note}",
+        p99(&probe.wake_latency_ns),
+        probe.interval_ns as f64 / 1e3,
+        p99(&s.jitter_ns.plant_wake_latency),
+    )
 }
 
 /// With `[realtime]`: how the kernel scheduled each loop process once it was ready (its last
@@ -133,11 +152,31 @@ pub fn render(s: &Summary) -> String {
         Mode::Realtime => deadline_text(s),
         Mode::Lockstep => "n/a (lockstep)".into(),
     };
+    // Loops the plant ran: a skipped tick was integrated, but no loop ran for it.
     let _ = writeln!(
         out,
-        "  {status}: {} of {} loops in {:.2} s ({:.0} loops/s) · deadline misses {misses} · rejected commands {}",
-        s.loops, s.loops_planned, s.wall_time_s, s.loops_per_s, s.rejected_commands
+        "  {status}: {} of {} loops ran in {:.2} s ({:.0} loops/s) · deadline misses {misses} · rejected commands {}",
+        s.loops - s.skipped_ticks,
+        s.loops_planned,
+        s.wall_time_s,
+        s.loops_per_s,
+        s.rejected_commands
     );
+    if let Some(line) = causes_line("why the deadline misses", s.deadline_misses, &s.misses_by_cause) {
+        let _ = writeln!(out, "{line}");
+    }
+    if let (Some(steal), Mode::Realtime) = (s.steal_share, s.mode) {
+        let _ = writeln!(
+            out,
+            "  machine: the hypervisor took {:.1} % of the CPU time during the run (steal: `timer` and `compute` include it)",
+            steal * 100.0
+        );
+    }
+    if let Some(slow) = &s.slow_loops {
+        let over = format!("why the loops over {} µs end to end", slow.over_us);
+        let count = slow.by_cause.values().map(|c| c.loops).sum();
+        let _ = writeln!(out, "{}", causes_line(&over, count, &slow.by_cause).unwrap_or(format!("  {over}: none")));
+    }
     let _ = writeln!(out, "  control: {}", s.limits.line());
     let _ = writeln!(out, "  {}", s.latency_budget.line());
     let _ = writeln!(
@@ -174,12 +213,19 @@ pub fn render(s: &Summary) -> String {
         }
     }
     stats_row(&mut out, "END TO END", &s.latency_ns.end_to_end);
+    if let Some(line) = with_command_line(s) {
+        let _ = writeln!(out, "{line}");
+    }
     if let Some(network) = &s.network {
         stats_row(&mut out, "link round trip", &network.round_trip_ns);
     }
     if s.jitter_ns.plant_tick.count > 0 || s.jitter_ns.plant_wake_latency.count > 0 {
         stats_row(&mut out, "tick period error |T−dt|", &s.jitter_ns.plant_tick);
         stats_row(&mut out, "tick wake-up latency", &s.jitter_ns.plant_wake_latency);
+    }
+    if let Some(probe) = &s.probe {
+        stats_row(&mut out, "probe wake-up latency", &probe.wake_latency_ns);
+        let _ = writeln!(out, "{}", probe_line(s, probe));
     }
     for (sensor, stats) in &s.data_age_ns {
         stats_row(&mut out, &format!("data age: {sensor}"), stats);
@@ -243,11 +289,56 @@ pub fn render(s: &Summary) -> String {
     out
 }
 
-/// Real time: "1508 of 10000 (15.1 %), deadline 1.000 ms".
+/// Under the latencies, where some loops have none: "    over the 9801 loops with a command;
+/// 102 had none, 97 ticks skipped" (every view of a latency says it so: `tools::plot::latency`).
+fn with_command_line(s: &Summary) -> Option<String> {
+    if s.loops_without_command == 0 && s.skipped_ticks == 0 {
+        return None;
+    }
+    let skipped = if s.skipped_ticks > 0 { format!(", {} ticks skipped", s.skipped_ticks) } else { String::new() };
+    Some(format!(
+        "    over the {} loops with a command; {} had none{skipped}",
+        s.latency_ns.end_to_end.count, s.loops_without_command
+    ))
+}
+
+/// Real time: "1508 of 10000 (15.1 %, 217 ticks skipped), deadline 1.000 ms".
 fn deadline_text(s: &Summary) -> String {
     let share = s.deadline_miss_share.unwrap_or(s.deadline_misses as f64 / s.loops.max(1) as f64);
     let deadline = s.deadline_us.map_or(String::new(), |us| format!(", deadline {:.3} ms", us / 1e3));
-    format!("{} of {} ({:.1} %){deadline}", s.deadline_misses, s.loops, share * 100.0)
+    let skipped = if s.skipped_ticks > 0 { format!(", {} ticks skipped", s.skipped_ticks) } else { String::new() };
+    format!("{} of {} ({:.1} %{skipped}){deadline}", s.deadline_misses, s.loops, share * 100.0)
+}
+
+/// "  why the deadline misses (25): 14 timer (600–900 µs), 8 queued: controller (300–700 µs), …":
+/// each cause's count and the range of its part of those loops' response time. None when no
+/// loop was explained.
+fn causes_line(what: &str, count: u64, causes: &BTreeMap<String, CauseTally>) -> Option<String> {
+    if causes.is_empty() {
+        return None;
+    }
+    let mut by_count: Vec<_> = causes.iter().collect();
+    by_count.sort_by(|a, b| b.1.loops.cmp(&a.1.loops).then(a.0.cmp(b.0)));
+    let us = |ns: u64| format!("{:.0}", ns as f64 / 1e3);
+    let parts: Vec<String> = by_count
+        .into_iter()
+        .map(|(cause, tally)| {
+            let mut says = match (tally.min_part_ns, tally.max_part_ns) {
+                (Some(min), Some(max)) if us(min) == us(max) => vec![format!("{} µs", us(max))],
+                (Some(min), Some(max)) => vec![format!("{}–{} µs", us(min), us(max))],
+                _ => vec![],
+            };
+            // The task the scheduler trace shows running instead most often.
+            if let Some((task, n)) = tally.behind.iter().max_by_key(|(_, n)| **n) {
+                says.push(format!("behind {task} in {n}"));
+            }
+            match says.is_empty() {
+                true => format!("{} {cause}", tally.loops),
+                false => format!("{} {cause} ({})", tally.loops, says.join("; ")),
+            }
+        })
+        .collect();
+    Some(format!("  {what} ({count}; the largest part of each one's response time): {}", parts.join(", ")))
 }
 
 /// The loops without a record, for the report's monitor line.
@@ -603,7 +694,7 @@ mod tests {
         .into();
         let text = render(&s);
         let lines: Vec<&str> = text.lines().collect();
-        assert!(lines[2].starts_with("  completed: 1000 of 1000 loops in 1.00 s (1000 loops/s)"), "{}", lines[2]);
+        assert!(lines[2].starts_with("  completed: 1000 of 1000 loops ran in 1.00 s (1000 loops/s)"), "{}", lines[2]);
         // Lockstep has no deadline: no count that would read as a result.
         assert!(lines[2].contains(" · deadline misses n/a (lockstep) · "), "{}", lines[2]);
         let realtime = render(&Summary {
@@ -615,6 +706,38 @@ mod tests {
         });
         let line = realtime.lines().nth(2).unwrap();
         assert!(line.contains(" · deadline misses 27 of 1000 (2.7 %), deadline 1.000 ms · "), "{realtime}");
+        // Skipped ticks are misses too, and every miss has a cause.
+        let tally = |loops, min, max| CauseTally { loops, min_part_ns: min, max_part_ns: max, ..Default::default() };
+        let explained = render(&Summary {
+            mode: Mode::Realtime,
+            deadline_misses: 30,
+            skipped_ticks: 3,
+            deadline_us: Some(1000.0),
+            deadline_miss_share: Some(0.03),
+            misses_by_cause: [
+                ("timer".to_owned(), tally(20, Some(600_000), Some(900_400))),
+                (
+                    "queued: controller".to_owned(),
+                    CauseTally {
+                        behind: [("hog (pid 7, nice 0)".to_owned(), 6)].into(),
+                        ..tally(7, Some(1_000_100), Some(999_900))
+                    },
+                ),
+                ("skipped: estimator".to_owned(), tally(3, None, None)),
+            ]
+            .into(),
+            ..s.clone()
+        });
+        let lines_explained: Vec<&str> = explained.lines().collect();
+        assert!(lines_explained[2].starts_with("  completed: 997 of 1000 loops ran"), "{}", lines_explained[2]);
+        assert!(
+            lines_explained[2].contains(" · deadline misses 30 of 1000 (3.0 %, 3 ticks skipped), deadline 1.000 ms")
+        );
+        assert_eq!(
+            lines_explained[3],
+            "  why the deadline misses (30; the largest part of each one's response time): 20 timer (600–900 µs), 7 \
+             queued: controller (1000 µs; behind hog (pid 7, nice 0) in 6), 3 skipped: estimator"
+        );
         let header = lines.iter().position(|l| l.trim_start().starts_with("process ")).expect("restarts table");
         assert_eq!(cells(lines[header]), ["process", "died at", "cleaned", "backoff", "started", "ready"]);
         assert_eq!(cells(lines[header + 1]), ["sensors", "1500.3", "4.0", "10.0", "12.5", "-"]);

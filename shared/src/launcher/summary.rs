@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize, Serializer};
 use crate::config::faults::FaultKind;
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::protocol::{BridgeReport, PlantReport, StageReport, WaitCounts};
-use crate::contract::report::{FaultEffect, MissingLoops, MonitorReport, Stats};
+use crate::contract::report::{CauseTally, FaultEffect, MissingLoops, MonitorReport, Stats};
 use crate::contract::role::Role;
 use crate::launcher::budget::{self, LatencyBudget};
 use crate::launcher::child::Start;
@@ -73,9 +73,33 @@ pub struct Summary {
     /// without them (`supervision.on_death = "continue"`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lost_stages: Vec<LostStage>,
-    /// Real time: loops whose state went out but whose command did not reach the plant by the
-    /// deadline (late, or never). Lockstep has no deadline: always 0 there.
+    /// Real time: loop periods whose command did not reach the plant by the deadline: late,
+    /// never (a loop without a command), or a tick the plant never woke for (`skipped_ticks`).
+    /// Lockstep has no deadline: always 0 there.
     pub deadline_misses: u64,
+    /// Real time: of `deadline_misses`, the loops whose state went out (the rest are skipped
+    /// ticks).
+    #[serde(default)]
+    pub late_or_no_command: u64,
+    /// Real time: every deadline miss by its primary cause (`timer`, `queued: controller`,
+    /// `compute: estimator`, `transport: estimator->controller`, `fault: stop controller`,
+    /// `skipped: controller`, `unknown`): how many, and the smallest, largest and total of that
+    /// cause's part of their response time (from tick due to command in), ns. The counts add up
+    /// to `deadline_misses` where the monitor saw every loop.
+    #[serde(default)]
+    pub misses_by_cause: BTreeMap<String, CauseTally>,
+    /// With `explain_over_us`: every loop over that end-to-end latency, by primary cause.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slow_loops: Option<SlowLoops>,
+    /// Of the machine's CPU time during the run, the share the hypervisor gave to something else
+    /// (steal, /proc/stat): a loop on a virtual machine misses more when it is high. None where
+    /// it was not measured (an in-process run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steal_share: Option<f64>,
+    /// With `trace_sched`: the scheduler trace kept, and how many `queued` loops it named a task
+    /// for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sched_trace: Option<crate::launcher::sched_trace::SchedTraceReport>,
     /// Real time: how long after its tick was due each loop's command had to reach the plant,
     /// µs (`deadline_us`, by default one loop period). None in lockstep, which has no deadline.
     #[serde(default)]
@@ -140,6 +164,17 @@ pub struct Summary {
     /// With a stage on another host: the link, the other host's clock and the crossing topics.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub network: Option<Network>,
+    /// With `probe` (real time): how late the OS woke a bare timer beside the loop, at the
+    /// plant's priority and the loop's rate (`launcher::probe`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe: Option<crate::launcher::probe::ProbeSummary>,
+}
+
+/// The loops over `explain_over_us` end to end, by primary cause.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
+pub struct SlowLoops {
+    pub over_us: f64,
+    pub by_cause: BTreeMap<String, CauseTally>,
 }
 
 impl Summary {
@@ -275,6 +310,31 @@ pub struct Machine {
     /// The kernel's release (`uname -r`).
     pub kernel: String,
     pub hostname: String,
+}
+
+/// The machine's CPU time, from /proc/stat's `cpu` line (USER_HZ ticks): all of it, and the part
+/// the hypervisor gave to something else while this machine could have run (steal).
+#[derive(Debug, Clone, Copy)]
+pub struct CpuTimes {
+    total: u64,
+    steal: u64,
+}
+
+impl CpuTimes {
+    /// Now; None where /proc/stat cannot be read.
+    pub fn now() -> Option<Self> {
+        let stat = std::fs::read_to_string("/proc/stat").ok()?;
+        let line = stat.lines().find(|l| l.starts_with("cpu "))?;
+        // user nice system idle iowait irq softirq steal [guest guest_nice: already in user, nice]
+        let ticks: Vec<u64> = line.split_whitespace().skip(1).take(8).filter_map(|n| n.parse().ok()).collect();
+        (ticks.len() == 8).then(|| CpuTimes { total: ticks.iter().sum(), steal: ticks[7] })
+    }
+
+    /// Of the CPU time since `self`, the share stolen (0 to 1); None if no time passed.
+    pub fn steal_share_until(self, later: CpuTimes) -> Option<f64> {
+        let total = later.total.checked_sub(self.total).filter(|&t| t > 0)?;
+        Some(later.steal.saturating_sub(self.steal) as f64 / total as f64)
+    }
 }
 
 impl Machine {
@@ -452,9 +512,15 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
             && log.lost.is_empty(),
         stopped_because: StopReason::of(outcome, plant.stopped_early),
         lost_stages: log.lost.clone(),
-        deadline_misses: counters.deadline_misses,
+        deadline_misses: counters.deadline_misses + counters.skipped_ticks,
+        late_or_no_command: counters.deadline_misses,
+        misses_by_cause: monitor.miss_causes.clone(),
+        slow_loops: config.explain_over_us.map(|over_us| SlowLoops { over_us, by_cause: monitor.slow_causes.clone() }),
+        sched_trace: None,
+        steal_share: None,
         deadline_us: realtime.then(|| config.deadline_ns() as f64 / 1e3),
-        deadline_miss_share: realtime.then(|| counters.deadline_misses as f64 / plant.loops.max(1) as f64),
+        deadline_miss_share: realtime
+            .then(|| (counters.deadline_misses + counters.skipped_ticks) as f64 / plant.loops.max(1) as f64),
         rejected_commands: counters.rejected_commands,
         skipped_ticks: counters.skipped_ticks,
         stale_ticks: counters.stale_ticks,
@@ -491,6 +557,8 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         restart_steps: log.restarts.iter().map(|r| restart_steps(r, log)).collect(),
         shared_memory,
         network: network::build(config, &reports.bridges, starts, &monitor),
+        // The supervisor's, set once the run is over.
+        probe: None,
     }
 }
 
@@ -627,6 +695,11 @@ pub(crate) mod tests {
             stopped_because: None,
             lost_stages: vec![],
             deadline_misses: 0,
+            late_or_no_command: 0,
+            misses_by_cause: BTreeMap::new(),
+            slow_loops: None,
+            sched_trace: None,
+            steal_share: None,
             deadline_us: None,
             deadline_miss_share: None,
             rejected_commands: 0,
@@ -659,6 +732,7 @@ pub(crate) mod tests {
             restart_steps: vec![],
             shared_memory: SharedMemoryCheck { clean: true, ..Default::default() },
             network: None,
+            probe: None,
         }
     }
 

@@ -50,6 +50,9 @@ struct Awaiting {
 /// goes on from the last one's.
 #[derive(Serialize, Deserialize)]
 pub struct FaultTracker {
+    kind: FaultKind,
+    /// The process it is done to (None: not a loop process, such as a bridge).
+    role: Option<Role>,
     /// The process's slot in `Header::incarnations`, if it has one.
     slot: Option<usize>,
     from: u64,
@@ -101,8 +104,11 @@ impl FaultTracker {
                     later_starts: starts.iter().copied().filter(|&s| s > from).collect(),
                     loops,
                 });
+                let role = f.process.parse::<Role>().ok();
                 Self {
-                    slot: f.process.parse::<Role>().ok().and_then(Role::slot),
+                    kind: f.kind,
+                    role,
+                    slot: role.and_then(Role::slot),
                     from,
                     end,
                     window_end,
@@ -150,6 +156,21 @@ impl FaultTracker {
             }
             _ => self.take(seen, measure),
         }
+    }
+
+    /// The fault's kind, if it is of `role` and its outage covers loop `k`: from its injection
+    /// (the planned tick until the real one is known) until commands are back in time, within
+    /// its window (up to the next fault). Loop k must have been observed.
+    pub fn blames(&self, k: u64, role: Role) -> Option<FaultKind> {
+        let covers = k >= self.from && k < self.window_end && self.back.is_none_or(|back| k < back);
+        (self.role == Some(role) && covers && !self.not_injected).then_some(self.kind)
+    }
+
+    /// The kill or stop of a loop process whose outage covers loop `k`, if this is one: no loop
+    /// can get its command through a process that is not running, whatever else held it up.
+    pub fn outage(&self, k: u64) -> Option<(FaultKind, Role)> {
+        let role = self.role.filter(|r| r.in_loop())?;
+        (self.kind.from_outside() && self.blames(k, role).is_some()).then_some((self.kind, role))
     }
 
     /// The launcher injected the fault before loop `k` (real time): its effect is judged from

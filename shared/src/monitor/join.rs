@@ -4,7 +4,7 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::ops::{Index, IndexMut};
 
-use crate::contract::msg::{Command, Estimate, LoopRecord, Measurements, PlantState};
+use crate::contract::msg::{Command, Estimate, Header, LoopRecord, Measurements, PlantState};
 use crate::contract::report::HOPS;
 use crate::contract::role::Topic;
 
@@ -51,19 +51,33 @@ impl LoopParts {
         }
     }
 
+    /// The header of the part from `topic`, if it is here.
+    pub fn header(&self, topic: Topic) -> Option<Header> {
+        match topic {
+            Topic::State => self.state.map(|m| m.header),
+            Topic::Measurements => self.measurements.map(|m| m.header),
+            Topic::Estimate => self.estimate.map(|m| m.header),
+            Topic::Command => self.command.map(|m| m.header),
+            Topic::Loop => self.record.map(|m| m.header),
+        }
+    }
+
     /// Plant publish of the state to the command reaching the plant, from the loop record.
     pub fn end_to_end_ns(&self) -> Option<u64> {
         self.record.map(|r| r.header.trace.end_to_end_ns())
     }
 
-    /// Whether the loop missed its deadline (real time, `wall_clock`): its record says so, or
-    /// its state went out and no command ever reached the plant. None where that is not known
-    /// (neither part arrived) and in lockstep, which has no deadline. The plant counts the same
-    /// loops (`PlantCore::advance`).
+    /// Whether the loop missed its deadline (real time, `wall_clock`): its record says so, its
+    /// state went out and no command ever reached the plant, or nothing of it came at all (a
+    /// tick the plant never woke for). None where that is not known (a part other than the state
+    /// and the record arrived) and in lockstep, which has no deadline. The plant counts the same
+    /// loops (`PlantCore::advance`: late or no command; `skipped_ticks`: no tick).
     pub fn deadline_missed(&self, wall_clock: bool) -> Option<bool> {
+        let nothing = self.measurements.is_none() && self.estimate.is_none() && self.command.is_none();
         match (&self.record, &self.state) {
             (Some(r), _) => Some(r.deadline_miss != 0),
             (None, Some(_)) if wall_clock => Some(true),
+            (None, None) if wall_clock && nothing => Some(true),
             _ => None,
         }
     }
@@ -182,6 +196,12 @@ impl Joiner {
     /// arrived, the loops still waiting for parts go as they are.
     pub fn next_remaining(&mut self) -> Option<(u64, LoopParts)> {
         self.newest_any().is_some_and(|newest| self.next_k <= newest).then(|| self.pop())
+    }
+
+    /// The first loop still held, after those handed out, that has a part from `topic`: what a
+    /// stage sent next after a loop it skipped.
+    pub fn next_with(&self, topic: Topic) -> Option<&LoopParts> {
+        self.pending.iter().chain(self.far.values()).find(|parts| parts.has(topic))
     }
 
     fn pop(&mut self) -> (u64, LoopParts) {

@@ -4,7 +4,7 @@
 //! - [`process`]: the monitor process (iceoryx2 readers, polling, the writer thread, status).
 //! - [`recording`]: the recorder it feeds, usable without a process; [`recorder`]: the recorder
 //!   on a thread of its own, fed in [`batches`] (an in-process run).
-//! - [`join`]: the five messages of each loop joined by k; [`stats`]: the latency histograms;
+//! - [`join`]: the five messages of each loop joined by k; [`cause`]: why a late loop was late; [`stats`]: the latency histograms;
 //!   [`fault_effect`]: what each fault did; [`stall`]: stalled processes found from the data.
 //! - [`crossing`]: the hops to and from another host, corrected with the other host's clock as
 //!   [`clock_fit`] fits it from the loops' own stamps.
@@ -14,6 +14,7 @@
 //! - [`injections`]: when the launcher really injected each kill and stop (real time).
 
 pub mod batches;
+pub mod cause;
 pub mod clock_fit;
 pub mod crossing;
 pub mod distribution;

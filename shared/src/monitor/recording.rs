@@ -8,16 +8,17 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 
 use crate::config::launch::{LaunchConfig, Mode};
-use crate::contract::msg::{Command, Estimate, MONITOR_BUFFER, Measurements, PlantCounters};
+use crate::contract::msg::{Command, Estimate, Header, MONITOR_BUFFER, Measurements, PlantCounters};
 use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
-use crate::contract::role::Role;
+use crate::contract::role::{Role, Topic};
 use crate::model::layout::Layout;
 use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
+use crate::monitor::cause::{self, AroundSkip, Explanation};
 use crate::monitor::crossing::Crossing;
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::injections::{self, Injection};
-use crate::monitor::join::{Joiner, LoopParts, Sample};
+use crate::monitor::join::{Joiner, LoopParts, PerTopic, Sample};
 use crate::monitor::live::Live;
 use crate::monitor::resume::{self, Frozen, Thawed};
 use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
@@ -71,6 +72,13 @@ pub struct Recording {
     /// The newest measurements, estimate and command seen: what each stage's output holds at a
     /// loop it gave none (a stopped or dead stage), for the metrics.
     held: (Option<Measurements>, Option<Estimate>, Option<Command>),
+    /// Real time: a loop can miss its deadline.
+    wall_clock: bool,
+    /// Loops over this end-to-end latency are explained too (`explain_over_us`), ns.
+    explain_over_ns: Option<u64>,
+    /// The header of the newest message written from each topic: what a stage sent last before
+    /// a loop it skipped.
+    last_outputs: PerTopic<Option<Header>>,
 }
 
 impl Recording {
@@ -132,6 +140,9 @@ impl Recording {
             injections: None,
             injections_failed: None,
             held: (None, None, None),
+            wall_clock,
+            explain_over_ns: config.explain_over_ns(),
+            last_outputs: PerTopic::default(),
         })
     }
 
@@ -294,7 +305,7 @@ impl Recording {
                 loops_recorded: self.report.records,
                 loops_written: self.joiner.next_k(),
                 end_to_end_p99_ns: self.stats.end_to_end.quantile(0.99),
-                deadline_misses: self.last_counters.deadline_misses,
+                deadline_misses: self.last_counters.deadline_misses + self.last_counters.skipped_ticks,
                 live: self.live.as_mut().map(|live| live.take(&self.stats)),
             };
             callback(&status)?;
@@ -368,6 +379,37 @@ impl Recording {
         Ok(report)
     }
 
+    /// Explains loop `k` if it missed its deadline (real time: late, no command, or a tick the
+    /// plant never woke for) or took longer end to end than `explain_over_us`, and counts it.
+    fn explain(&mut self, k: u64, parts: &LoopParts) -> Option<Explanation> {
+        let missed = parts.deadline_missed(self.wall_clock) == Some(true);
+        let slow = self.explain_over_ns.is_some_and(|limit| parts.end_to_end_ns().is_some_and(|ns| ns > limit));
+        if !(missed || slow) {
+            return None;
+        }
+        let (faults, joiner, last_outputs) = (&self.faults, &self.joiner, &self.last_outputs);
+        let explanation = cause::explain(
+            parts,
+            faults.iter().find_map(|f| f.outage(k)),
+            |role| faults.iter().find_map(|f| f.blames(k, role)),
+            |stage| {
+                let topic = stage.output().expect("a stage has an output");
+                AroundSkip {
+                    before: last_outputs[topic],
+                    after: joiner.next_with(topic).and_then(|next| next.header(topic)),
+                }
+            },
+        );
+        let name = explanation.cause.to_string();
+        if missed {
+            self.report.miss_causes.entry(name.clone()).or_default().add(&explanation);
+        }
+        if slow {
+            self.report.slow_causes.entry(name).or_default().add(&explanation);
+        }
+        Some(explanation)
+    }
+
     /// Writes loop `k` (whatever arrived of it).
     fn write(&mut self, k: u64, parts: &LoopParts) -> Result<()> {
         // k / rate is the closest double to the exact time (k·dt prints 0.009000000000000001).
@@ -392,7 +434,13 @@ impl Recording {
         for fault in &mut self.faults {
             fault.observe(k, parts, &self.measure);
         }
-        let joined = JoinedLoop { k, t, parts };
+        let cause = self.explain(k, parts);
+        for topic in Topic::ALL {
+            if let Some(header) = parts.header(topic) {
+                self.last_outputs[topic] = Some(header);
+            }
+        }
+        let joined = JoinedLoop { k, t, parts, cause };
         for sink in &mut self.sinks {
             sink.loop_joined(&joined)?;
         }
@@ -487,9 +535,10 @@ mod tests {
         let trajectory = std::fs::read_to_string(dir.join("trajectory.csv")).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
         assert_eq!(rows.len(), 6);
-        // Lockstep: no record, no tick timing, the cells stay empty.
-        assert_eq!(rows[2], format!("2,0.002{}", ",".repeat(14)));
-        assert_eq!(rows[3], "3,0.003,0,0,0,0,0,0,0,0,0,0,0,,,");
+        // Lockstep: no record, no tick timing, the cells stay empty; the run-queue waits of the
+        // parts that came, and no cause (lockstep misses no deadline).
+        assert_eq!(rows[2], format!("2,0.002{},0,0,0,0,0,0,0,,,,", ",".repeat(14)));
+        assert_eq!(rows[3], "3,0.003,0,0,0,0,0,0,0,0,0,0,0,,,,0,0,0,0,0,0,0,0,,,");
         assert_eq!(trajectory.lines().count(), 7);
     }
 

@@ -13,8 +13,13 @@ pub struct LoopStats {
     pub hops: [Distribution; HOPS.len()],
     /// |actual tick period − dt|, for the ticks the plant woke for on its clock.
     pub plant_tick_jitter: Distribution,
-    /// Wake-up time − scheduled tick time.
+    /// Wake-up time − the time the first tick it served was due: its own, or, after ticks the
+    /// plant skipped, the first skipped one's (that much later it woke for them).
     pub plant_wake_latency: Distribution,
+    /// The plant's `skipped_ticks` in the newest state seen: the next state's tells how many
+    /// ticks were skipped before it.
+    #[serde(default)]
+    skipped_ticks: u64,
     /// Per sensor, in the launch file's order.
     pub data_age: Vec<Distribution>,
     period_ns: i64,
@@ -32,6 +37,7 @@ impl LoopStats {
             hops: Default::default(),
             plant_tick_jitter: Distribution::default(),
             plant_wake_latency: Distribution::default(),
+            skipped_ticks: 0,
             data_age: (0..sensors).map(|_| Distribution::default()).collect(),
             period_ns: (dt * 1e9).round() as i64,
             wall_clock,
@@ -55,9 +61,14 @@ impl LoopStats {
             let timing = state.timing;
             // Tick 0 is published at start, not on a timer wake-up; in lockstep the plant has
             // no clock and every timing is zero.
+            let skipped = state.counters.skipped_ticks.saturating_sub(self.skipped_ticks);
+            self.skipped_ticks = self.skipped_ticks.max(state.counters.skipped_ticks);
             if timing.period_ns > 0 {
                 self.plant_tick_jitter.record(self.tick_period_error(timing.period_ns));
-                self.plant_wake_latency.record(timing.wake_ns.saturating_sub(timing.scheduled_ns));
+                // Tick k's due time is `scheduled_ns`; the first skipped tick's, that many
+                // periods before.
+                let due = timing.scheduled_ns.saturating_sub(skipped * self.period_ns as u64);
+                self.plant_wake_latency.record(timing.wake_ns.saturating_sub(due));
             }
         }
         let (Some(e2e), Some(hops)) = (parts.end_to_end_ns(), parts.hops_ns()) else {
@@ -133,5 +144,23 @@ mod tests {
         assert_eq!(lockstep.plant_tick_jitter.stats().count, 0, "no clock in lockstep");
         assert_eq!(lockstep.end_to_end.stats().max, Some(400_000));
         assert_eq!(lockstep.hops[6].stats().count, 1);
+    }
+
+    #[test]
+    fn a_tick_after_skipped_ticks_woke_late_from_the_first_ones_due_time() {
+        let mut stats = LoopStats::new(1, 0.001, true);
+        let mut tick = |k: u64, wake_late_ns: u64, skipped_ticks: u64| {
+            let timing =
+                TickTiming { scheduled_ns: k * 1_000_000, wake_ns: k * 1_000_000 + wake_late_ns, period_ns: 1 };
+            let mut parts = loop_at(k, 0.0, timing);
+            parts.state.as_mut().unwrap().counters.skipped_ticks = skipped_ticks;
+            stats.observe(k as f64 * 0.001, &parts);
+        };
+        tick(1, 20_000, 0);
+        // Ticks 2 to 4 skipped: tick 5 woke 30 µs after its own due time, 3 ms + 30 µs after tick 2's.
+        tick(5, 30_000, 3);
+        tick(6, 40_000, 3);
+        let wake = &stats.plant_wake_latency;
+        assert_eq!((wake.stats().count, wake.stats().min, wake.max()), (3, Some(20_000), Some(3_030_000)));
     }
 }

@@ -41,6 +41,11 @@ pub fn refusal(config: &LaunchConfig) -> Option<String> {
             "[realtime] sets the priority of the loop's processes, and one process has none of its own".into(),
         );
     }
+    if config.trace_sched {
+        return Some(
+            "trace_sched names the processes that waited for the CPU, and one process has none of its own".into(),
+        );
+    }
     if let Some(plant) = &config.stages.plant {
         return Some(format!(
             "plant.python runs the plant as a Python process of its own (`{}`); run it as five processes",

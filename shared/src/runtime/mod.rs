@@ -15,6 +15,7 @@ pub mod recorded;
 pub mod relay;
 pub mod run_file;
 pub mod run_storage;
+pub mod sched;
 pub mod shared_file;
 pub mod shm_secret;
 pub mod signals;

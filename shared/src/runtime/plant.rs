@@ -31,6 +31,7 @@ use crate::model::scenario::Scenario;
 use crate::runtime::child::{Context, WAIT_SLICE, emit, line_written, wait_for_line, wait_for_lines};
 use crate::runtime::ipc::Wake;
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
+use crate::runtime::sched::{RunQueue, clamp};
 use crate::runtime::snapshot::{ModelSnapshot, Snapshot};
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
@@ -311,6 +312,9 @@ struct PlantProcess {
     snapshot: Snapshot<SnapshotData>,
     /// The plant model's own bytes for the same tick, where it serialises itself (an FMU).
     model_snapshot: Option<ModelSnapshot>,
+    run_queue: RunQueue,
+    /// Its run-queue wait before the last wake-up, stamped on what that wake-up sends.
+    woke: SchedStamp,
 }
 
 impl std::ops::Deref for PlantProcess {
@@ -328,14 +332,16 @@ impl std::ops::DerefMut for PlantProcess {
 
 impl PlantProcess {
     fn publish_state(&mut self, timing: TickTiming) -> Result<()> {
-        let msg = self.core.state_message(timing, now_ns());
+        let mut msg = self.core.state_message(timing, now_ns());
+        msg.header.sched = self.woke;
         self.state_out.send(&msg)?;
         self.save();
         Ok(())
     }
 
     fn accept(&mut self, command: &Command) -> Result<()> {
-        let record = self.core.accept(command, now_ns());
+        let mut record = self.core.accept(command, now_ns());
+        record.header.sched = self.woke;
         self.loop_out.send(&record)
     }
 
@@ -345,7 +351,9 @@ impl PlantProcess {
         Ok(())
     }
 
+    /// Takes every command in; called once per wake-up, which it reads the run-queue wait of.
     fn drain(&mut self, commands: &TopicSubscriber<Command>) -> Result<()> {
+        self.woke = SchedStamp { queued_ns: clamp(self.run_queue.since_last()), compute_queued_ns: 0 };
         let mut cleared = false;
         while let Some(command) = commands.next(&mut cleared)? {
             self.accept(&command)?;
@@ -406,6 +414,8 @@ pub fn run_with(context: &Context, plant: Box<dyn crate::model::scenario::Plant>
         loop_out: context.ipc.publisher(Topic::Loop, Wake::Never)?,
         snapshot: Snapshot::open(&context.run_id, Role::Plant.name())?,
         model_snapshot: None,
+        run_queue: RunQueue::open(),
+        woke: SchedStamp::default(),
     };
     let restored = context.incarnation > 0 && p.snapshot.read().map(|s| p.core.restore(&s)).is_some();
     p.open_model_snapshot(&context.run_id, restored.then_some(p.k))?;

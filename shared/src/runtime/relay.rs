@@ -14,6 +14,7 @@ use crate::runtime::child::emit;
 use crate::runtime::child::{Context, WAIT_SLICE};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::playback::Playback;
+use crate::runtime::sched::RunQueue;
 use crate::runtime::snapshot::Snapshot;
 use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
@@ -51,6 +52,7 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
     let period_ns = (context.config.dt() * 1e9).round() as u64;
     let mut waiter = Waiter::new(wait_settings, role, realtime, period_ns);
     let mut arrivals = ArrivalModel::new(period_ns);
+    let mut run_queue = RunQueue::open();
     while !context.stop.requested() {
         let due = last_k.and_then(|k| arrivals.due(k + 1));
         let slice_end = now_ns() + WAIT_SLICE.as_nanos() as u64;
@@ -73,6 +75,7 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
                 (None, None) => break,
             };
             let received = now_ns();
+            let waited = run_queue.since_last();
             let header = *input.header();
             arrivals.observe(header.k, header.trace.get(Stamp::PlantPublish), received);
             if let Some(journal) = in_flight.as_mut() {
@@ -89,7 +92,11 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
                 std::thread::sleep(hold);
             }
             if let Some(mut out) = handled.output {
-                out.header_mut().trace.stamp(role, received, now_ns());
+                // A long computation's own read, before the publish stamp: it is part of the stage.
+                let sched = run_queue.stamp(waited, received, now_ns());
+                let out_header = out.header_mut();
+                out_header.trace.stamp(role, received, now_ns());
+                out_header.sched = sched;
                 publisher.send(&out)?;
                 last_k = Some(header.k);
             }

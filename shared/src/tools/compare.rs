@@ -2,9 +2,10 @@
 //! end, deadline misses, loops, wait strategy and mode, the scenario's metrics) with ratios
 //! against the first run, and their latency distributions on one chart.
 //!
-//! Latencies are the exact percentiles of loops.csv's samples, the ones the chart draws (the
-//! run's report takes them from its HDR histogram, within 0.1 %). A ratio is the quotient of
-//! the two numbers printed, so that a reader can check it.
+//! Latencies are of loops.csv's samples, over the loops whose command reached the plant, taken
+//! through the monitor's histogram: the numbers of the run's report, to the digit. The loops
+//! without a command are counted beside them. A ratio is the quotient of the two numbers
+//! printed, so that a reader can check it.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -12,17 +13,22 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 
 use crate::config::wait::WaitSettings;
+use crate::contract::report::Stats;
 use crate::contract::role::Role;
 use crate::launcher::summary::Summary;
 use crate::tools::ToolError;
-use crate::tools::plot::latency::{self, END_TO_END, Panel, Series, nearest_rank};
+use crate::tools::plot::latency::{self, END_TO_END, Panel, Series, missed_count, stats_of};
 use crate::tools::run_folder::RunFolder;
 
 /// The files of a run folder compare reads.
 const INPUTS: [&str; 3] = ["summary.json", "loops.csv", "launch.toml"];
 
-/// The percentiles compared, as (label, per mille).
-const PERCENTILES: [(&str, u64); 4] = [("p50", 500), ("p99", 990), ("p99.9", 999), ("max", 1000)];
+/// A field of the report's statistics.
+type StatsField = fn(&Stats) -> Option<u64>;
+
+/// The percentiles compared, as (label, its field).
+const PERCENTILES: [(&str, StatsField); 4] =
+    [("p50", |s| s.p50), ("p99", |s| s.p99), ("p99.9", |s| s.p999), ("max", |s| s.max)];
 
 /// The width of a ratio ("×0.0042"), after each run's value but the first's.
 const RATIO_WIDTH: usize = 8;
@@ -34,7 +40,7 @@ struct Run {
     summary: Summary,
     /// The wait strategy in words ("adaptive", "block (controller spin), pinned").
     wait: String,
-    /// Per hop, then end to end, from loops.csv.
+    /// Per hop (compute time included), then end to end, from loops.csv.
     latencies: Vec<Series>,
 }
 
@@ -145,7 +151,9 @@ fn panels(runs: &[Run]) -> Vec<Panel> {
         series: series(end_to_end, true),
         deadlines_ns: deadlines.clone(),
     };
-    let hops = runs[0].latencies[..end_to_end].iter().enumerate().map(|(h, (hop, _))| Panel {
+    let transport =
+        runs[0].latencies[..end_to_end].iter().enumerate().filter(|(_, (hop, _))| latency::is_transport(hop));
+    let hops = transport.map(|(h, (hop, _))| Panel {
         title: format!("hop {hop}"),
         series: series(h, false),
         deadlines_ns: deadlines.clone(),
@@ -192,8 +200,6 @@ pub fn metric_text(value: f64) -> String {
 fn micros_text(ns: Option<u64>) -> String {
     match ns {
         None => "-".into(),
-        // Among the loops whose command never came.
-        Some(latency::MISSED) => "missed".into(),
         Some(ns) => format!("{:.1}", ns as f64 / 1e3),
     }
 }
@@ -279,10 +285,11 @@ fn control_text(s: &Summary) -> String {
 
 /// The table's lines: latency per hop and end to end, the loop, the scenario's metrics.
 fn lines(runs: &[Run]) -> Vec<Line> {
-    let mut lines = vec![Line::Heading("latency, µs (from loops.csv)")];
+    let mut lines = vec![Line::Heading("latency, µs (from loops.csv; over the loops with a command, as the report)")];
     for (h, (series, _)) in runs[0].latencies.iter().enumerate() {
-        for (p, (percentile, per_mille)) in PERCENTILES.iter().enumerate() {
-            let values = runs.iter().map(|r| micros_text(nearest_rank(&r.latencies[h].1, *per_mille))).collect();
+        let stats: Vec<Stats> = runs.iter().map(|r| stats_of(&r.latencies[h].1)).collect();
+        for (p, (percentile, field)) in PERCENTILES.iter().enumerate() {
+            let values = stats.iter().map(|s| micros_text(field(s))).collect();
             let name = match (p, series.as_str()) {
                 (0, END_TO_END) => "END TO END",
                 (0, hop) => hop,
@@ -292,10 +299,20 @@ fn lines(runs: &[Run]) -> Vec<Line> {
         }
     }
     let each = |f: &dyn Fn(&Summary) -> String| runs.iter().map(|r| f(&r.summary)).collect::<Vec<_>>();
+    let end_to_end: Vec<&[u64]> = runs.iter().map(|r| &r.latencies[r.latencies.len() - 1].1[..]).collect();
     lines.extend([
-        Line::Heading("loop"),
+        Line::Heading("loop (deadline misses: late, no command or a skipped tick; share of loops)"),
         Line::Numbers("  loops".into(), each(&|s| s.loops.to_string())),
+        // A skipped tick was integrated, but no loop ran for it.
+        Line::Numbers("  loops ran".into(), each(&|s| (s.loops - s.skipped_ticks).to_string())),
+        Line::Numbers("  with a command".into(), end_to_end.iter().map(|e| stats_of(e).count.to_string()).collect()),
+        Line::Numbers("  without a command".into(), end_to_end.iter().map(|e| missed_count(e).to_string()).collect()),
+        Line::Numbers("  ticks skipped".into(), each(&|s| s.skipped_ticks.to_string())),
         Line::Numbers("  deadline misses".into(), each(&|s| s.deadline_misses.to_string())),
+        Line::Numbers(
+            "  deadline misses, %".into(),
+            each(&|s| s.deadline_miss_share.map_or("-".into(), |share| format!("{:.1}", share * 100.0))),
+        ),
         Line::Numbers("  loops/s".into(), each(&|s| format!("{:.0}", s.loops_per_s))),
         Line::Words("  wait strategy".into(), runs.iter().map(|r| r.wait.clone()).collect()),
         Line::Words("  mode".into(), each(&|s| s.mode.name().to_owned())),

@@ -59,7 +59,7 @@ pub fn write_mcap(run_dir: &Path, catalog: &Catalog, force: bool) -> Result<Path
     let mut recording = McapRecording::create(&path, &config, &layout, Detail::Files)?;
     for row in 0..loops.k.len() {
         let (k, t, parts) = joined(row)?;
-        recording.loop_joined(&JoinedLoop { k, t, parts: &parts })?;
+        recording.loop_joined(&JoinedLoop { k, t, parts: &parts, cause: None })?;
     }
     recording.finish_with(&effects)?;
     Ok(path)

@@ -1,10 +1,12 @@
-//! Layer 7, the tools built on the launcher: `looplab sweep`, `looplab bench`, `looplab export`,
+//! Layer 7, the tools built on the launcher: `looplab sweep`, `looplab bench`, `looplab export`
+//! (run.mcap; run.perfetto-trace: `perfetto`),
 //! `looplab compare`, and the figures (`plot`).
 
 pub mod bench;
 pub mod compare;
 pub mod diff;
 pub mod export;
+pub mod perfetto;
 pub mod plot;
 pub mod replay;
 pub mod run_folder;

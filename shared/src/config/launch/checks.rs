@@ -8,7 +8,7 @@ use crate::config::faults::{
     FAULT_KINDS, FaultKind, FaultSpec, MAX_BACKOFF_S, MAX_RESTARTS, MAX_STOP_S, MAX_TIMEOUT_S, ON_DEATH_CONTINUE_ROLES,
     OnDeath, Supervision,
 };
-use crate::config::launch::types::{LaunchConfig, MAX_DURATION_S, MAX_LOOPS, MAX_RATE_HZ, Origins, PerComponent};
+use crate::config::launch::types::{LaunchConfig, MAX_DURATION_S, MAX_LOOPS, MAX_RATE_HZ, Mode, Origins, PerComponent};
 use crate::config::realtime::MAX_PRIORITY;
 use crate::config::wait::{MAX_WAIT_US, WaitSettings};
 use crate::contract::msg::MAX_SENSORS;
@@ -33,6 +33,14 @@ pub(super) fn check_common(c: &LaunchConfig) -> Result<(), LaunchError> {
                 ),
             ));
         }
+    }
+    if let Some(us) = c.explain_over_us
+        && !(us.is_finite() && us > 0.0 && us <= 3.6e9)
+    {
+        return Err(c.error("explain_over_us", format!("must be a positive number of µs, at most an hour, got {us}")));
+    }
+    if c.probe && c.mode == Mode::Lockstep {
+        return Err(c.error("probe", "measures timer wake-ups beside a real-time loop, and lockstep has no timer: use mode = \"realtime\" or leave it out"));
     }
     if !(c.duration_s.is_finite() && c.duration_s > 0.0 && c.duration_s <= MAX_DURATION_S) {
         return Err(c.error(

@@ -34,6 +34,15 @@ struct CommonKeys {
     /// None: one loop period.
     #[serde(default)]
     deadline_us: Option<f64>,
+    /// None: only the deadline misses are explained.
+    #[serde(default)]
+    explain_over_us: Option<f64>,
+    /// false: no probe beside the loop.
+    #[serde(default)]
+    probe: bool,
+    /// false: no scheduler trace.
+    #[serde(default)]
+    trace_sched: bool,
     duration_s: f64,
     seed: u64,
     #[serde(default)]
@@ -290,6 +299,9 @@ fn from_document(
         mode: common.mode,
         rate_hz: common.rate_hz,
         deadline_us: common.deadline_us,
+        explain_over_us: common.explain_over_us,
+        probe: common.probe,
+        trace_sched: common.trace_sched,
         duration_s: common.duration_s,
         seed: common.seed,
         sensors,

@@ -111,6 +111,15 @@ pub struct LaunchConfig {
     /// the loop counts as a deadline miss, µs. None: one loop period (the command is in before
     /// the next tick is due).
     pub deadline_us: Option<f64>,
+    /// Every loop whose end-to-end latency is over this, µs, gets a cause too, as every deadline
+    /// miss does (`looplab run --explain-over US`). None: the misses only.
+    pub explain_over_us: Option<f64>,
+    /// Real time: a probe beside the loop measures how late the OS wakes a bare timer at the
+    /// plant's priority and the loop's rate (`looplab run --probe`; `launcher::probe`).
+    pub probe: bool,
+    /// Record the kernel's scheduler events for the run and name the task that ran while a loop
+    /// process waited (`looplab run --trace-sched`; `launcher::sched_trace`).
+    pub trace_sched: bool,
     pub duration_s: f64,
     pub seed: u64,
     /// Sorted by name: this order is the order of readings in every `Measurements` message.
@@ -173,6 +182,12 @@ impl LaunchConfig {
             Some(us) => (us * 1e3).round() as u64,
             None => self.period_ns(),
         }
+    }
+
+    /// `explain_over_us` in ns.
+    pub fn explain_over_ns(&self) -> Option<u64> {
+        // Positive and at most an hour (checked at load).
+        self.explain_over_us.map(|us| (us * 1e3).round() as u64)
     }
 
     /// The loop period in ns, as the plant's schedule has it.

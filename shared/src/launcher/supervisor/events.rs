@@ -78,6 +78,9 @@ impl Supervisor<'_> {
             ChildEvent::Ready => self.ready(role, incarnation),
             ChildEvent::Started { start_ns, .. } => {
                 self.log.plant_start_ns.get_or_insert(start_ns);
+                if let Some(probe) = &mut self.probe {
+                    probe.begin(start_ns);
+                }
             }
             ChildEvent::Paused { k } => self.pause_at(k),
             ChildEvent::Stall { process, since_ns, detected_ns } => {

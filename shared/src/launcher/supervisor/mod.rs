@@ -22,14 +22,16 @@ use std::time::{Duration, Instant};
 use anyhow::{Result, anyhow};
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 
-use crate::config::launch::LaunchConfig;
+use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::clock::now_ns;
 use crate::contract::role::Role;
 use crate::launcher::child::{self, Binaries, ChildArgs, ChildLine, Program, Start};
 use crate::launcher::outcome::Exit;
 use crate::launcher::outcome::Outcome;
+use crate::launcher::probe::Probe;
 use crate::launcher::run_dir::{begin_run, new_run_id};
-use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
+use crate::launcher::sched_trace::{self, SchedTrace, TRACEFS};
+use crate::launcher::summary::{self, CpuTimes, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
 use crate::runtime::ipc;
 use crate::runtime::signals::StopFlag;
@@ -137,6 +139,8 @@ struct Supervisor<'a> {
     /// process's resources can wait on the file system, and nothing of the supervision may.
     cleaner: Option<Sender<Role>>,
     live: Live,
+    /// `--probe`: the OS's own timer beside the loop, begun at the plant's `started`.
+    probe: Option<Probe>,
 }
 
 impl<'a> Supervisor<'a> {
@@ -194,13 +198,19 @@ impl<'a> Supervisor<'a> {
             stop,
             cleaner: Some(cleaner),
             live,
+            probe: (config.probe && config.mode == Mode::Realtime).then(|| Probe::start(config)),
         };
+        let cpu_at_start = CpuTimes::now();
+        // Recording before any process starts, so that every loop's waits are in it.
+        let sched_trace =
+            config.trace_sched.then(|| SchedTrace::start(Path::new(TRACEFS), &supervisor.run_id, config.duration_s));
         let spawned = supervisor.start_all();
         let outcome = match spawned {
             Ok(()) => supervisor.supervise(),
             Err(e) => Outcome::Failed(format!("{e:#}")),
         };
         supervisor.stop_all();
+        let probe = supervisor.probe.take().map(Probe::finish);
         supervisor.live.close();
         let outcome = match outcome {
             Outcome::Completed => supervisor.check_ends(),
@@ -222,7 +232,7 @@ impl<'a> Supervisor<'a> {
         let starts: BTreeMap<Role, Vec<Start>> =
             supervisor.processes.iter().map(|p| (p.role, p.runs.clone())).collect();
         supervisor.log.faults = supervisor.faults.seen().to_vec();
-        let summary = summary::build(SummaryInputs {
+        let mut summary = summary::build(SummaryInputs {
             config,
             scenario,
             run_id: &supervisor.run_id,
@@ -239,6 +249,18 @@ impl<'a> Supervisor<'a> {
                 foreign: cleanup.foreign,
             },
         });
+        summary.probe = probe;
+        summary.steal_share = cpu_at_start.zip(CpuTimes::now()).and_then(|(start, end)| start.steal_share_until(end));
+        if let Some(trace) = sched_trace {
+            let pids = starts.iter().map(|(role, runs)| (*role, runs.iter().map(|r| r.pid).collect())).collect();
+            let named = trace
+                .map_err(anyhow::Error::msg)
+                .and_then(|trace| trace.finish(run_dir))
+                .and_then(|trace| sched_trace::name_who_ran(&mut summary, &trace, run_dir, &pids));
+            if let Err(e) = named {
+                summary.notes.insert(0, format!("{e:#}"));
+            }
+        }
         // A summary that cannot be written (a full disk, the folder removed) does not hide why
         // the run ended: the report is still printed, with both.
         let outcome = match (summary::write(&summary, run_dir), outcome) {

@@ -36,15 +36,53 @@ impl LoopsCsv {
 }
 
 /// Where loops.csv's columns lie, for readers that read it by position: k and t first, then the
-/// loop trace's stamps in order, end to end, deadline miss, rejected, and the tick's scheduled
-/// time, wake-up and period.
+/// loop trace's stamps in order, end to end, deadline miss, rejected, the tick's scheduled
+/// time, wake-up and period, then each loop process's run-queue waits, and the cause of a late
+/// loop with its part of the response time.
 pub mod column {
     use crate::contract::msg::LoopTrace;
     pub const FIRST_STAMP: usize = 2;
     pub const END_TO_END: usize = FIRST_STAMP + LoopTrace::STAMP_NAMES.len();
     pub const DEADLINE_MISS: usize = END_TO_END + 1;
     pub const TICK_PERIOD: usize = DEADLINE_MISS + 4;
-    pub const COUNT: usize = TICK_PERIOD + 1;
+    pub const FIRST_QUEUED: usize = TICK_PERIOD + 1;
+    pub const CAUSE: usize = FIRST_QUEUED + super::QUEUED_COLUMNS.len();
+    pub const COUNT: usize = CAUSE + 3;
+}
+
+/// The run-queue waits (`contract::msg::SchedStamp`) of each loop, ns: the plant's before it woke
+/// for the tick and for the command, each stage's before it got its input and while it computed
+/// (0 unless its computation took over `runtime::sched::COMPUTE_READ_NS`).
+pub const QUEUED_COLUMNS: [&str; 8] = [
+    "plant_tick_queued_ns",
+    "sensors_queued_ns",
+    "sensors_compute_queued_ns",
+    "estimator_queued_ns",
+    "estimator_compute_queued_ns",
+    "controller_queued_ns",
+    "controller_compute_queued_ns",
+    "plant_command_queued_ns",
+];
+
+/// The waits of [`QUEUED_COLUMNS`], each where its message came.
+fn queued(parts: &crate::monitor::join::LoopParts) -> [Option<u32>; QUEUED_COLUMNS.len()] {
+    let (state, meas, est, cmd, record) = (
+        parts.state.map(|m| m.header.sched),
+        parts.measurements.map(|m| m.header.sched),
+        parts.estimate.map(|m| m.header.sched),
+        parts.command.map(|m| m.header.sched),
+        parts.record.map(|m| m.header.sched),
+    );
+    [
+        state.map(|s| s.queued_ns),
+        meas.map(|s| s.queued_ns),
+        meas.map(|s| s.compute_queued_ns),
+        est.map(|s| s.queued_ns),
+        est.map(|s| s.compute_queued_ns),
+        cmd.map(|s| s.queued_ns),
+        cmd.map(|s| s.compute_queued_ns),
+        record.map(|s| s.queued_ns),
+    ]
 }
 
 /// The header of `loops.csv`: every column but `t_s` holds a whole number (or nothing).
@@ -55,6 +93,8 @@ pub fn columns() -> Vec<String> {
         ["end_to_end_ns", "deadline_miss", "rejected", "tick_scheduled_ns", "tick_wake_ns", "tick_period_ns"]
             .map(String::from),
     );
+    columns.extend(QUEUED_COLUMNS.map(String::from));
+    columns.extend(["cause", "cause_part_ns", "response_ns"].map(String::from));
     columns
 }
 
@@ -93,6 +133,26 @@ impl RunSink for LoopsCsv {
         }
         match joined.tick_timing() {
             Some(tm) => [tm.scheduled_ns, tm.wake_ns, tm.period_ns].into_iter().for_each(|ns| cell(row, ns)),
+            None => row.extend_from_slice(b",,,"),
+        }
+        for wait in queued(joined.parts) {
+            row.push(b',');
+            if let Some(ns) = wait {
+                push_int(row, u64::from(ns));
+            }
+        }
+        // Causes are plain words, colons, spaces and "->": nothing CSV must quote.
+        match &joined.cause {
+            Some(explanation) => {
+                row.push(b',');
+                row.extend_from_slice(explanation.cause.to_string().as_bytes());
+                for ns in [explanation.part_ns, explanation.response_ns] {
+                    row.push(b',');
+                    if let Some(ns) = ns {
+                        push_int(row, ns);
+                    }
+                }
+            }
             None => row.extend_from_slice(b",,,"),
         }
         row.push(b'\n');

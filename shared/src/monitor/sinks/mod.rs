@@ -17,6 +17,7 @@ use crate::config::launch::LaunchConfig;
 use crate::contract::msg::TickTiming;
 use crate::contract::report::MonitorReport;
 use crate::model::layout::Layout;
+use crate::monitor::cause::Explanation;
 use crate::monitor::join::LoopParts;
 use crate::runtime::run_file::{self, Existing};
 
@@ -41,6 +42,8 @@ pub struct JoinedLoop<'a> {
     /// Simulation time of tick k.
     pub t: f64,
     pub parts: &'a LoopParts,
+    /// Why it was late: a deadline miss (real time) or a loop over `explain_over_us`.
+    pub cause: Option<Explanation>,
 }
 
 impl JoinedLoop<'_> {

@@ -124,17 +124,17 @@ mod tests {
 
         let mut sink = TrajectoryCsv::open(&setup(false)).unwrap();
         let whole = whole_loop();
-        sink.loop_joined(&JoinedLoop { k: 0, t: 0.0, parts: &whole }).unwrap();
+        sink.loop_joined(&JoinedLoop { k: 0, t: 0.0, parts: &whole, cause: None }).unwrap();
         let partial = LoopParts { measurements: None, estimate: None, ..whole_loop() };
-        sink.loop_joined(&JoinedLoop { k: 1, t: 0.001, parts: &partial }).unwrap();
+        sink.loop_joined(&JoinedLoop { k: 1, t: 0.001, parts: &partial, cause: None }).unwrap();
         // No command: the applied input is still there.
         let silent = LoopParts { command: None, ..whole_loop() };
-        sink.loop_joined(&JoinedLoop { k: 2, t: 0.002, parts: &silent }).unwrap();
+        sink.loop_joined(&JoinedLoop { k: 2, t: 0.002, parts: &silent, cause: None }).unwrap();
         sink.finish(&MonitorReport::default()).unwrap();
         drop(sink);
         // A restarted monitor appends, without a second header.
         let mut sink = TrajectoryCsv::open(&setup(true)).unwrap();
-        sink.loop_joined(&JoinedLoop { k: 5, t: 0.005, parts: &LoopParts::default() }).unwrap();
+        sink.loop_joined(&JoinedLoop { k: 5, t: 0.005, parts: &LoopParts::default(), cause: None }).unwrap();
         sink.finish(&MonitorReport::default()).unwrap();
 
         let text = std::fs::read_to_string(dir.join("trajectory.csv")).unwrap();

@@ -147,6 +147,24 @@ struct LoopAccumulator {
     misses: u64,
     cpu_s: BTreeMap<Role, f64>,
     seconds: f64,
+    /// Per run, the plant's tick wake-up latency and the probe's beside it: (p50, p99), µs.
+    tick_wake: Vec<[f64; 2]>,
+    probe_wake: Vec<[f64; 2]>,
+}
+
+/// A run's (p50, p99) in µs, if it has them.
+fn p50_p99(s: &crate::contract::report::Stats) -> Option<[f64; 2]> {
+    Some([s.p50? as f64 / 1e3, s.p99? as f64 / 1e3])
+}
+
+/// The median over runs of each of (p50, p99): quantiles of separate runs do not merge exactly.
+fn median_of(runs: &[[f64; 2]]) -> Option<[f64; 2]> {
+    let median = |i: usize| {
+        let mut v: Vec<f64> = runs.iter().map(|r| r[i]).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    (!runs.is_empty()).then(|| [median(0), median(1)])
 }
 
 impl LoopAccumulator {
@@ -155,6 +173,8 @@ impl LoopAccumulator {
         self.loops += summary.loops;
         self.misses += summary.deadline_misses;
         self.seconds += summary.duration_s;
+        self.tick_wake.extend(p50_p99(&summary.jitter_ns.plant_wake_latency));
+        self.probe_wake.extend(summary.probe.as_ref().and_then(|p| p50_p99(&p.wake_latency_ns)));
         for p in &summary.processes {
             *self.cpu_s.entry(p.name).or_default() += p.cpu_s;
         }
@@ -182,6 +202,8 @@ impl LoopAccumulator {
             controller_compute_us: hop(5, 6),
             cpu_percent,
             loop_cpu_percent,
+            tick_wake_us: median_of(&self.tick_wake),
+            probe_wake_us: median_of(&self.probe_wake),
             e2e,
         }
     }
@@ -311,6 +333,8 @@ fn looplab_run(
         format!("duration_s={seconds:?}"),
         format!("wait.strategy={}", c.strategy.name()),
         format!("wait.pin={}", c.pin),
+        // Always: the OS's own timer beside each loop, for the table's timer lines.
+        "probe=true".to_string(),
     ];
     sets.extend(own.cloned());
     let mut overrides: Vec<Override> = sets.iter().map(|s| Override::parse(s)).collect::<Result<_, _>>()?;

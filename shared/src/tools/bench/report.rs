@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use super::{BLOCK_C, BLOCK_PYTHON, anatomy, own_stage};
 use crate::contract::role::Role;
-use crate::tools::plot::latency::nearest_rank;
+use crate::tools::plot::latency::stats_of;
 
 /// A latency distribution, µs.
 #[derive(Debug, Clone, Default, Serialize)]
@@ -26,13 +26,12 @@ impl Dist {
         Self::scaled(sorted, 1e-3)
     }
 
-    /// Nearest-rank percentiles, as the charts' legends give them, so that table and chart agree.
+    /// Percentiles as a run's report and the charts' legends give them (the monitor's histogram),
+    /// so that table, chart and report agree.
     pub(super) fn scaled(sorted: &[u64], unit: f64) -> Self {
-        if sorted.is_empty() {
-            return Self::default();
-        }
-        let at = |per_mille| nearest_rank(sorted, per_mille).map_or(0.0, |v| v as f64 * unit);
-        Self { n: sorted.len(), p50: at(500), p90: at(900), p99: at(990), p999: at(999), max: at(1000) }
+        let s = stats_of(sorted);
+        let at = |ns: Option<u64>| ns.map_or(0.0, |v| v as f64 * unit);
+        Self { n: s.count as usize, p50: at(s.p50), p90: at(s.p90), p99: at(s.p99), p999: at(s.p999), max: at(s.max) }
     }
 }
 
@@ -53,6 +52,10 @@ pub struct LoopBench {
     pub cpu_percent: BTreeMap<String, f64>,
     /// Of the loop's processes (the monitor apart).
     pub loop_cpu_percent: f64,
+    /// The plant's tick wake-up latency, (p50, p99) µs, the median of the rounds.
+    pub tick_wake_us: Option<[f64; 2]>,
+    /// The probe's beside it (`launcher::probe`: the OS alone, at the plant's priority), likewise.
+    pub probe_wake_us: Option<[f64; 2]>,
     #[serde(skip)]
     pub(super) e2e: Vec<u64>,
 }
@@ -162,7 +165,12 @@ pub(super) fn render(r: &BenchReport) -> String {
     let floor4 = r.floor_one_way_us.get("spin").map_or(f64::NAN, |d| 4.0 * d.p50);
     let baseline = r.loops.iter().find(|l| l.name.starts_with("unix")).map_or(f64::NAN, |l| l.end_to_end_us.p50);
     let limit = r.physical_limit_us.unwrap_or(f64::NAN);
-    let _ = writeln!(s, "\n  loop: end to end (µs); floor = 4 spin hops = {floor4:.2} µs");
+    // As a run's report counts them.
+    let _ = writeln!(
+        s,
+        "\n  loop: end to end (µs, over the loops with a command; misses: late, no command or a skipped tick, \
+         of every loop); floor = 4 spin hops = {floor4:.2} µs"
+    );
     if let (Some(raw), Some(limit)) = (&r.floor_raw_one_way_ns, r.physical_limit_us) {
         let _ = writeln!(
             s,
@@ -205,6 +213,25 @@ pub(super) fn render(r: &BenchReport) -> String {
             "    {:<36}{:>8.1}{:>8.1}{:>8.1}{:>8.1}{:>10.1}",
             l.name, h[0].p50, h[1].p50, h[2].p50, h[3].p50, l.stage_compute_us.p50
         );
+    }
+    let _ = writeln!(
+        s,
+        "    timer wake-up latency (µs, p50 / p99, the median of the rounds): the plant's tick; the probe beside it \
+         (the OS alone, at the plant's priority)"
+    );
+    for l in &r.loops {
+        if let (Some(tick), Some(probe)) = (l.tick_wake_us, l.probe_wake_us) {
+            let _ = writeln!(
+                s,
+                "    {:<36}{:>8.1}{:>8.1}   probe {:>7.1}{:>8.1}   ({:.1}× at p99)",
+                l.name,
+                tick[0],
+                tick[1],
+                probe[0],
+                probe[1],
+                tick[1] / probe[1]
+            );
+        }
     }
     own_stage::render(&mut s, "looplab block", &r.loops, &[BLOCK_PYTHON, BLOCK_C]);
     if let Some(monitor) =

@@ -79,7 +79,10 @@ pub fn plot_faults(
         let in_view: Vec<f64> = misses.iter().copied().filter(|t| window.contains(t)).collect();
         let top = latency.iter().flat_map(|c| &c.points).map(|p| p.1).fold(deadline_us.unwrap_or(0.0), f64::max) * 1.06;
         let title = match deadline_us {
-            Some(_) => format!("end to end · {} deadline misses in view (crosses: late or no command)", in_view.len()),
+            Some(_) => format!(
+                "end to end · {} deadline misses in view (crosses: late, no command or a skipped tick)",
+                in_view.len()
+            ),
             None => "end to end, each loop with a command (lockstep: no deadline)".into(),
         };
         let mut latency_panel = Panel::new(title, "latency, µs", latency);

@@ -10,8 +10,9 @@ use plotters::coord::combinators::{BindKeyPoints, LogCoord, WithKeyPoints};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::contract::report::HOPS;
+use crate::contract::report::{HOPS, Stats};
 use crate::launcher::summary::Summary;
+use crate::monitor::distribution::Distribution;
 use crate::tools::ToolError;
 use crate::tools::plot::{FONT, colour, legend_mark, plot_error, png};
 use crate::tools::run_folder::{RunFolder, Table};
@@ -19,9 +20,9 @@ use crate::tools::run_folder::{RunFolder, Table};
 /// A series: its name and its samples in ns, sorted.
 pub type Series = (String, Vec<u64>);
 
-/// The sample of a loop whose command never reached the plant: +∞. It sorts after every
-/// latency, so an end-to-end curve plateaus at the share of such loops and a percentile that
-/// falls among them reads "missed".
+/// The sample of a loop whose state went out but whose command never reached the plant: not a
+/// latency. It sorts after every latency and is left out of the percentiles and the curve (as
+/// the report leaves it out), but kept in the series so that each view counts it beside them.
 pub const MISSED: u64 = u64::MAX;
 
 /// The name of the end-to-end series.
@@ -30,37 +31,45 @@ pub const END_TO_END: &str = "end to end";
 /// The file a run's latency figure is written to, in the run folder.
 pub const RUN_FIGURE: &str = "latency-cdf.png";
 
-/// The hops from one process to the next (plant→sensors, ...): [`HOPS`] less the stages'
-/// compute time, as (name, the sender's publish stamp, the receiver's receive stamp).
-fn transport_hops() -> impl Iterator<Item = (String, usize, usize)> {
-    HOPS.iter()
-        .filter(|(name, _, _)| name.contains("_to_"))
-        .map(|(name, from, to)| (name.replace("_to_", "→"), *from, *to))
+/// Every hop of [`HOPS`], as (name, from stamp, to stamp): from one process to the next
+/// ("plant→sensors") and each stage's compute time ("sensors compute").
+fn named_hops() -> impl Iterator<Item = (String, usize, usize)> {
+    HOPS.iter().map(|(name, from, to)| (name.replace("_to_", "→").replace('_', " "), *from, *to))
 }
 
-/// A run's latencies from its loops.csv, sorted, in ns: one series per hop from one process to
-/// the next (receive − the previous process's publish), then end to end. Every loop with a loop
-/// record counts, as in summary.json; a loop flagged a deadline miss without one (its command
-/// never came) counts in end to end as [`MISSED`].
+/// Whether a series of [`latencies_from_loops`] is a hop from one process to the next (the
+/// charts draw those and end to end; the stages' compute time is in compare's table).
+pub fn is_transport(name: &str) -> bool {
+    name.contains('→')
+}
+
+/// A run's latencies from its loops.csv, sorted, in ns: one series per hop of [`HOPS`] (each
+/// stage's compute time, and receive − the previous process's publish), then end to end. Each is
+/// over the loops whose command reached the plant (a loop record), as summary.json's; a loop
+/// whose state went out but whose command never came is in end to end as [`MISSED`], counted
+/// beside the latencies and never among them. A tick the plant skipped (no state: a deadline
+/// miss too, but no loop ran) is in none.
 ///
 /// loops.csv rather than latency.hlog: it has every loop's exact value, so the chart reaches
-/// down to the single slowest loop and its percentiles are those of the samples drawn; the
-/// histogram log keeps three significant digits in buckets and splits them by second.
+/// down to the single slowest loop; its percentiles are taken through the monitor's
+/// [`Distribution`], so that they are the report's to the digit.
 pub fn read_run_latencies(run_dir: &Path) -> Result<Vec<Series>, ToolError> {
     latencies_from_loops(&RunFolder::open(run_dir, &["loops.csv"])?.table("loops.csv")?)
 }
 
 /// [`read_run_latencies`] on a loops.csv, read by column name.
 pub fn latencies_from_loops(loops: &Table) -> Result<Vec<Series>, ToolError> {
-    let hops: Vec<(String, usize, usize)> = transport_hops().collect();
+    let hops: Vec<(String, usize, usize)> = named_hops().collect();
     let stamps = loops.stamps()?;
     let end_to_end = loops.column::<u64>("end_to_end_ns")?;
     let missed = loops.column::<u64>("deadline_miss")?;
+    // A loop whose state went out has its tick's timing; a skipped tick has none.
+    let ticked = loops.column::<u64>("tick_scheduled_ns")?;
     let mut samples: Vec<Vec<u64>> = vec![Vec::new(); hops.len() + 1];
     // A loop without a record has empty cells.
     for (row, end_to_end) in end_to_end.iter().enumerate() {
         let Some(end_to_end) = *end_to_end else {
-            if missed[row] == Some(1) {
+            if missed[row] == Some(1) && ticked[row].is_some() {
                 samples[hops.len()].push(MISSED);
             }
             continue;
@@ -84,16 +93,18 @@ pub fn latencies_from_loops(loops: &Table) -> Result<Vec<Series>, ToolError> {
         .collect())
 }
 
-/// The nearest-rank percentile of sorted samples: the smallest sample that at least
-/// `per_mille` / 1000 of the samples are at or below. None when there are none.
-pub fn nearest_rank(sorted: &[u64], per_mille: u64) -> Option<u64> {
-    let rank = (sorted.len() as u64 * per_mille).div_ceil(1000).max(1);
-    sorted.get(rank as usize - 1).copied()
-}
-
-/// The loops at +∞ among sorted samples.
+/// The loops without a command ([`MISSED`]) among sorted samples.
 pub fn missed_count(sorted: &[u64]) -> usize {
     sorted.len() - sorted.partition_point(|v| *v != MISSED)
+}
+
+/// The statistics of sorted samples as the report gives them: over the loops with a command
+/// (those before the [`MISSED`] ones), through the monitor's [`Distribution`] (HDR percentiles
+/// within the exact extremes), so that every view prints the report's numbers.
+pub fn stats_of(sorted: &[u64]) -> Stats {
+    let mut distribution = Distribution::default();
+    sorted[..sorted.len() - missed_count(sorted)].iter().for_each(|ns| distribution.record(*ns));
+    distribution.stats()
 }
 
 /// The run's deadline in ns (real time), from its summary.
@@ -109,6 +120,7 @@ pub fn run_latency_chart(loops: &Table, summary: &Summary, name: &str) -> Result
         series.retain(|(name, _)| name == END_TO_END);
         format!("loop latency end to end · {name} · in one process: hops n/a (not IPC)")
     } else {
+        series.retain(|(name, _)| is_transport(name) || name == END_TO_END);
         format!("loop latency per hop and end to end · {name}")
     };
     Ok(Panel { title, series, deadlines_ns: deadline_ns(summary).into_iter().collect() })
@@ -213,9 +225,9 @@ pub struct Panel {
 /// Latency distributions on log-log axes: for each series, the share of samples at or above each
 /// latency, down to the single slowest (1/N). The tail reads downwards (1 %, 0.1 %, ...) instead
 /// of being squeezed into the top of a linear CDF. A series of one value is a vertical line (a
-/// floor). A series with loops at +∞ ([`MISSED`]) plateaus at their share up to the chart's
-/// right edge. Each deadline is a dashed vertical line. Below the chart, a legend with each
-/// series' p50, p99 and max.
+/// floor). A series' loops without a command ([`MISSED`]) are not drawn: its shares are of the
+/// loops with one, and its legend says how many had none. Each deadline is a dashed vertical
+/// line. Below the chart, a legend with each series' p50, p99 and max.
 pub fn cdf(path: &Path, title: &str, series: &[Series], deadlines_ns: &[u64]) -> Result<()> {
     let root = png(path, (900, 520 + legend_height(series.len(), LARGE)))?;
     draw_cdf(&root, title, series, deadlines_ns, LARGE)?;
@@ -249,32 +261,24 @@ pub fn cdf_panels(path: &Path, panels: &[Panel]) -> Result<()> {
 type Area<'a> = DrawingArea<crate::tools::plot::PngBackend<'a>, Shift>;
 
 /// A series' points on the chart, (µs, share at or above), as steps: at most 2000 points, and
-/// every point of the last 1 % (the tail). Loops at +∞ hold the curve at their share from the
-/// slowest finite sample to `x_end`.
-pub fn cdf_points(samples: &[u64], floor_share: f64, x_end: f64) -> Vec<(f64, f64)> {
+/// every point of the last 1 % (the tail). Shares are of the loops with a command, as the
+/// percentiles are; the [`MISSED`] ones are left out.
+pub fn cdf_points(samples: &[u64], floor_share: f64) -> Vec<(f64, f64)> {
     let us = |ns: u64| (ns as f64 / 1e3).max(0.01);
-    let n = samples.len();
-    let finite = n - missed_count(samples);
+    let n = samples.len() - missed_count(samples);
     let share = |j: usize| (n - j) as f64 / n as f64;
-    let mut points: Vec<(f64, f64)> = match finite {
+    match n {
         0 => vec![],
-        1 if n == 1 => vec![(us(samples[0]), floor_share), (us(samples[0]), 1.0)],
+        1 => vec![(us(samples[0]), floor_share), (us(samples[0]), 1.0)],
         _ => {
-            let step = finite.div_ceil(2000).max(1);
-            let tail = finite.saturating_sub(n.div_ceil(100));
-            let kept: Vec<usize> = (0..tail).step_by(step).chain(tail..finite).collect();
+            let step = n.div_ceil(2000).max(1);
+            let tail = n.saturating_sub(n.div_ceil(100));
+            let kept: Vec<usize> = (0..tail).step_by(step).chain(tail..n).collect();
             let steps =
                 kept.windows(2).flat_map(|w| [(us(samples[w[1]]), share(w[0])), (us(samples[w[1]]), share(w[1]))]);
             std::iter::once((us(samples[0]), 1.0)).chain(steps).collect()
         }
-    };
-    if finite < n {
-        // Past the slowest loop that got its command, the share of those that never did.
-        let plateau = share(finite);
-        let from = points.last().map_or(0.01, |p| p.0);
-        points.extend([(from, plateau), (x_end, plateau)]);
     }
-    points
 }
 
 fn draw_cdf(area: &Area, title: &str, series: &[Series], deadlines_ns: &[u64], sizes: Sizes) -> Result<()> {
@@ -288,7 +292,7 @@ fn draw_cdf(area: &Area, title: &str, series: &[Series], deadlines_ns: &[u64], s
     let hi = hi.chain(deadlines_ns.iter().map(|d| us(*d))).fold(0.0, f64::max);
     // No samples at all: an empty chart over 1 to 10 µs.
     let (lo, hi) = if lo <= hi { (lo, hi) } else { (1.0, 10.0) };
-    let most = series.iter().map(|(_, s)| s.len()).max().unwrap_or(1).max(10) as f64;
+    let most = series.iter().map(|(_, s)| finite(s)).max().unwrap_or(1).max(10) as f64;
     let floor_share = 0.8 / most;
     let mut chart = ChartBuilder::on(&plot)
         .caption(title, (FONT, sizes.caption))
@@ -308,7 +312,7 @@ fn draw_cdf(area: &Area, title: &str, series: &[Series], deadlines_ns: &[u64], s
         .draw()
         .map_err(plot_error)?;
     for (i, (_, samples)) in series.iter().enumerate() {
-        let points = cdf_points(samples, floor_share, hi * 1.25);
+        let points = cdf_points(samples, floor_share);
         chart.draw_series(LineSeries::new(points, colour(i).stroke_width(2))).map_err(plot_error)?;
     }
     // Left of its line, which may be at the chart's right edge.
@@ -326,28 +330,20 @@ fn draw_cdf(area: &Area, title: &str, series: &[Series], deadlines_ns: &[u64], s
     draw_legend(&legend, left, series, sizes)
 }
 
-/// A percentile's value as the legend says it: a latency, or "missed" where it falls among the
-/// loops whose command never came.
-pub fn latency_or_missed(ns: u64) -> String {
-    if ns == MISSED { "missed".into() } else { duration_label(ns) }
-}
-
-/// What the legend says of a series after its name: p50, p99, max, and the loops at +∞ (no
-/// command came) where there are any, as a share of the series' loops.
+/// What the legend says of a series after its name: p50, p99 and max as the report gives them
+/// ([`stats_of`]), and, where some loops had no command, over how many loops they are and how
+/// many had none.
 pub fn legend_stats(samples: &[u64]) -> Vec<String> {
-    let mut stats: Vec<String> = match samples {
-        [] => vec!["no samples".into()],
-        [one] => vec![latency_or_missed(*one)],
-        _ => [("p50", 500), ("p99", 990), ("max", 1000)]
-            .iter()
-            .filter_map(|(name, per_mille)| {
-                nearest_rank(samples, *per_mille).map(|v| format!("{name} {}", latency_or_missed(v)))
-            })
-            .collect(),
+    let s = stats_of(samples);
+    let label = |ns: Option<u64>| ns.map_or("-".into(), duration_label);
+    let mut stats: Vec<String> = match s.count {
+        0 => vec!["no samples".into()],
+        1 => vec![label(s.max)],
+        _ => vec![format!("p50 {}", label(s.p50)), format!("p99 {}", label(s.p99)), format!("max {}", label(s.max))],
     };
     let missed = missed_count(samples);
     if missed > 0 {
-        stats.push(format!("{missed} without a command ({:.1} %)", missed as f64 * 100.0 / samples.len() as f64));
+        stats.push(format!("over the {} loops with a command; {missed} had none", s.count));
     }
     stats
 }
@@ -473,54 +469,67 @@ mod tests {
     }
 
     #[test]
-    fn loops_without_a_command_are_at_infinity_and_the_curve_plateaus_at_their_share() {
+    fn loops_without_a_command_are_counted_beside_the_latencies_not_among_them() {
         // 8 loops got a command (1 to 8 µs), 2 never did.
         let mut samples: Vec<u64> = (1..=8).map(|us| us * 1000).collect();
         samples.extend([MISSED, MISSED]);
         assert_eq!(missed_count(&samples), 2);
-        let points = cdf_points(&samples, 0.01, 500.0);
+        let points = cdf_points(&samples, 0.01);
         assert_eq!(points.first(), Some(&(1.0, 1.0)));
-        // The slowest finite loop, then the plateau at 2 of 10 out to the chart's edge.
-        assert_eq!(points[points.len() - 3..], [(8.0, 0.3), (8.0, 0.2), (500.0, 0.2)]);
-        assert_eq!(legend_stats(&samples), ["p50 5.00 µs", "p99 missed", "max missed", "2 without a command (20.0 %)"]);
-        // Every loop missed: a flat line at 100 %.
-        assert_eq!(cdf_points(&[MISSED], 0.01, 500.0), [(0.01, 1.0), (500.0, 1.0)]);
+        // Shares of the 8 with a command: the slowest is the last 1 of 8.
+        assert_eq!(points[points.len() - 2..], [(8.0, 0.25), (8.0, 0.125)]);
+        // HDR's bucket of 4000 reports its highest value, as the report does.
+        let s = stats_of(&samples);
+        assert_eq!((s.count, s.p50, s.p99, s.max), (8, Some(4001), Some(8000), Some(8000)));
+        assert_eq!(
+            legend_stats(&samples),
+            ["p50 4.00 µs", "p99 8.00 µs", "max 8.00 µs", "over the 8 loops with a command; 2 had none"]
+        );
+        // Every loop without a command: nothing to draw.
+        assert_eq!(cdf_points(&[MISSED], 0.01), []);
+        assert_eq!(legend_stats(&[MISSED]), ["no samples", "over the 0 loops with a command; 1 had none"]);
     }
 
     #[test]
-    fn nearest_rank_percentiles_are_samples() {
-        let samples: Vec<u64> = (1..=2000).collect();
-        assert_eq!(nearest_rank(&samples, 500), Some(1000));
-        assert_eq!(nearest_rank(&samples, 990), Some(1980));
-        assert_eq!(nearest_rank(&samples, 999), Some(1998));
-        assert_eq!(nearest_rank(&samples, 1000), Some(2000));
-        assert_eq!(nearest_rank(&[7, 9, 30], 500), Some(9));
-        assert_eq!(nearest_rank(&[7, 9, 30], 999), Some(30));
-        assert_eq!(nearest_rank(&[42], 0), Some(42));
-        assert_eq!(nearest_rank(&[], 500), None);
+    fn percentiles_are_the_reports() {
+        // The monitor's histogram, to the digit: HDR buckets within the exact extremes.
+        let samples: Vec<u64> = (1..=2000).map(|i| i * 997).collect();
+        let mut d = Distribution::default();
+        samples.iter().for_each(|ns| d.record(*ns));
+        assert_eq!(stats_of(&samples), d.stats());
     }
 
     #[test]
     fn hops_come_from_the_stamps_of_loops_csv() {
-        // k, t, 8 stamps, end to end, deadline miss, rejected, tick timing; loop 1 has no record.
+        // k, t, 8 stamps, end to end, deadline miss, rejected, tick timing; loop 1 has no record
+        // (and no flag: not known), loop 3 got no command, loop 4 was a skipped tick.
         let stamps: Vec<String> =
             crate::contract::msg::LoopTrace::STAMP_NAMES.iter().map(|s| format!("{s}_ns")).collect();
-        let header = format!("k,t_s,{},end_to_end_ns,deadline_miss,rejected,ts,tw,tp\n", stamps.join(","));
+        let header =
+            format!("k,t_s,{},end_to_end_ns,deadline_miss,rejected,tick_scheduled_ns,tw,tp\n", stamps.join(","));
         let text = header
             + "\
                     0,0,1000,1500,1600,2600,2700,4700,4800,9000,8000,0,0,900,950,0\n\
                     1,0.001,,,,,,,,,,,,1900,1950,1000\n\
-                    2,0.002,3000,3100,3300,3400,3500,3600,3700,3800,800,0,0,2900,2950,1000\n";
+                    2,0.002,3000,3100,3300,3400,3500,3600,3700,3800,800,0,0,2900,2950,1000\n\
+                    3,0.003,,,,,,,,,,1,0,3900,3950,1000\n\
+                    4,0.004,,,,,,,,,,1,0,,,\n";
         let series = latencies_from_loops(&Table::parse("loops.csv", &text).unwrap()).unwrap();
         let expected: Vec<Series> = vec![
             ("plant→sensors".into(), vec![100, 500]),
+            ("sensors compute".into(), vec![100, 200]),
             ("sensors→estimator".into(), vec![100, 1000]),
+            ("estimator compute".into(), vec![100, 100]),
             ("estimator→controller".into(), vec![100, 2000]),
+            ("controller compute".into(), vec![100, 100]),
             ("controller→plant".into(), vec![100, 4200]),
-            ("end to end".into(), vec![800, 8000]),
+            ("end to end".into(), vec![800, 8000, MISSED]),
         ];
         assert_eq!(series, expected);
-        assert_eq!(legend_stats(&series[4].1), ["p50 0.80 µs", "p99 8.00 µs", "max 8.00 µs"]);
+        assert_eq!(
+            legend_stats(&series[7].1),
+            ["p50 0.80 µs", "p99 8.00 µs", "max 8.00 µs", "over the 2 loops with a command; 1 had none"]
+        );
         let bad = Table::parse("loops.csv", &text.replacen("9000", "x", 1)).unwrap();
         let why = latencies_from_loops(&bad).unwrap_err().to_string();
         assert_eq!(

@@ -103,7 +103,7 @@ fn write(path: &Path, detail: Detail, ks: std::ops::Range<u64>, shift: usize, fi
     let written: Vec<LoopParts> = ks.map(|k| awkward_loop(k, &layout, shift)).collect();
     for parts in &written {
         let (k, t) = (parts.state.unwrap().header.k, parts.state.unwrap().header.t);
-        recording.loop_joined(&JoinedLoop { k, t, parts }).unwrap();
+        recording.loop_joined(&JoinedLoop { k, t, parts, cause: None }).unwrap();
     }
     if finish {
         recording.finish_with(&[]).unwrap();
@@ -203,7 +203,7 @@ fn a_restarted_monitors_file_fills_in_and_the_first_message_of_a_loop_wins() {
         McapRecording::create(&dir.path().join("run.mcap"), &lockstep_pendulum(1.0), &layout, Detail::Live).unwrap();
     for parts in &second {
         let k = parts.state.unwrap().header.k;
-        recording.loop_joined(&JoinedLoop { k, t: k as f64 / 1000.0, parts }).unwrap();
+        recording.loop_joined(&JoinedLoop { k, t: k as f64 / 1000.0, parts, cause: None }).unwrap();
     }
     recording.finish_with(&[]).unwrap();
     let recorded = load(dir.path(), &layout, 20).unwrap();
@@ -231,7 +231,7 @@ fn a_killed_monitors_file_reads_up_to_where_it_last_flushed() {
     let written: Vec<LoopParts> = (0..20).map(|k| awkward_loop(k, &layout, 0)).collect();
     let mut flushed_at = 0;
     for (k, parts) in written.iter().enumerate() {
-        recording.loop_joined(&JoinedLoop { k: k as u64, t: k as f64 / 1000.0, parts }).unwrap();
+        recording.loop_joined(&JoinedLoop { k: k as u64, t: k as f64 / 1000.0, parts, cause: None }).unwrap();
         if k == 9 {
             recording.flush().unwrap();
             flushed_at = std::fs::metadata(&path).unwrap().len();
