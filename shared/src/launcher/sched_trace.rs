@@ -11,12 +11,9 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, Result};
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
-
 use crate::contract::role::Role;
-use crate::launcher::summary::Summary;
+use crate::launcher::summary::{SchedTraceReport, Summary};
+use anyhow::{Context as _, Result};
 
 /// Where tracefs lives.
 pub const TRACEFS: &str = "/sys/kernel/tracing";
@@ -232,19 +229,6 @@ impl Trace {
         }
         ran.into_iter().max_by_key(|(_, ns)| *ns).map(|(task, ns)| (task.clone(), ns))
     }
-}
-
-/// What the scheduler trace told of the run (summary.json's `sched_trace`).
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
-pub struct SchedTraceReport {
-    /// The trace in the run folder, as the kernel printed it.
-    pub file: String,
-    /// Events the kernel's buffer could not keep: the trace lacks them.
-    pub lost_events: u64,
-    /// Explained loops with a `queued: <process>` cause, and those of them whose wait the trace
-    /// shows another task running through (its name is in the cause's `behind`).
-    pub queued_loops: u64,
-    pub named: u64,
 }
 
 /// Names, for every explained loop of the run folder's loops.csv whose cause is `queued:

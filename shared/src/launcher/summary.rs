@@ -99,7 +99,7 @@ pub struct Summary {
     /// With `trace_sched`: the scheduler trace kept, and how many `queued` loops it named a task
     /// for.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub sched_trace: Option<crate::launcher::sched_trace::SchedTraceReport>,
+    pub sched_trace: Option<SchedTraceReport>,
     /// Real time: how long after its tick was due each loop's command had to reach the plant,
     /// µs (`deadline_us`, by default one loop period). None in lockstep, which has no deadline.
     #[serde(default)]
@@ -168,6 +168,19 @@ pub struct Summary {
     /// plant's priority and the loop's rate (`launcher::probe`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe: Option<crate::launcher::probe::ProbeSummary>,
+}
+
+/// What the scheduler trace told of the run (summary.json's `sched_trace`).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
+pub struct SchedTraceReport {
+    /// The trace in the run folder, as the kernel printed it.
+    pub file: String,
+    /// Events the kernel's buffer could not keep: the trace lacks them.
+    pub lost_events: u64,
+    /// Explained loops with a `queued: <process>` cause, and those of them whose wait the trace
+    /// shows another task running through (its name is in the cause's `behind`).
+    pub queued_loops: u64,
+    pub named: u64,
 }
 
 /// The loops over `explain_over_us` end to end, by primary cause.

@@ -111,12 +111,17 @@ fn split(out: &mut Vec<Part>, span: u64, queued: u32, role: Role, rest: Cause) {
 }
 
 /// Loop k's response time in parts, in the order they pass; they add up to the response time
-/// exactly. None without a loop record (no command) or with stamps out of order (another
-/// host's clock).
+/// exactly. A command that never reached the plant (a newer one replaced it there) gives the
+/// parts up to its sending. None without a command or with stamps out of order (another host's
+/// clock).
 pub fn decompose(parts: &LoopParts) -> Option<Vec<Part>> {
-    let record = parts.record.as_ref()?;
-    let stamps = record.header.trace.stamps();
-    if stamps.windows(2).any(|w| w[0] > w[1]) || stamps[0] == 0 {
+    let (trace, last) = match (&parts.record, &parts.command) {
+        (Some(record), _) => (record.header.trace, Stamp::PlantReceive.index()),
+        (None, Some(command)) => (command.header.trace, Stamp::ControllerPublish.index()),
+        (None, None) => return None,
+    };
+    let stamps = trace.stamps();
+    if stamps[..=last].windows(2).any(|w| w[0] > w[1]) || stamps[0] == 0 {
         return None;
     }
     let mut out = Vec::with_capacity(2 * HOPS.len() + 3);
@@ -132,7 +137,7 @@ pub fn decompose(parts: &LoopParts) -> Option<Vec<Part>> {
             out.push(Part { cause: Cause::Compute(Role::Plant), ns: stamps[0] - woke });
         }
     }
-    for (hop, &(_, from, to)) in HOPS.iter().enumerate() {
+    for (hop, &(_, from, to)) in HOPS.iter().enumerate().filter(|(_, (_, _, to))| *to <= last) {
         let span = stamps[to] - stamps[from];
         let reader = Stamp::ALL[to].role();
         if Stamp::ALL[from].role() == reader {
@@ -189,9 +194,9 @@ pub fn explain(
         };
         return Explanation { cause: blamed(cause), part_ns, response_ns: None };
     };
-    let response_ns = decomposed.iter().map(|p| p.ns).sum();
+    let response_ns = parts.record.is_some().then(|| decomposed.iter().map(|p| p.ns).sum());
     let primary = by_cause(&decomposed)[0];
-    Explanation { cause: blamed(primary.cause), part_ns: Some(primary.ns), response_ns: Some(response_ns) }
+    Explanation { cause: blamed(primary.cause), part_ns: Some(primary.ns), response_ns }
 }
 
 /// A loop whose command never came: the first stage whose output is missing skipped it. From

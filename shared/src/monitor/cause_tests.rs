@@ -145,6 +145,22 @@ fn a_loop_without_a_command_names_the_stage_that_skipped_it() {
 }
 
 #[test]
+fn a_command_that_never_reached_the_plant_is_explained_up_to_its_sending() {
+    // Command k went out 8 ms late; a newer one replaced it at the plant: no record.
+    let stamps = [2_000, 2_100, 2_200, 2_300, 2_400, 2_500, 8_002_500, 0];
+    let mut parts = loop_of(2_000, stamps, [(0, 0); 4], 0);
+    parts.command.as_mut().unwrap().header.trace = LoopTrace::from_stamps(stamps);
+    parts.record = None;
+    let decomposed = decompose(&parts).unwrap();
+    assert_eq!(decomposed.iter().map(|p| p.ns).sum::<u64>(), 8_002_500 - 1_000);
+    let explained = explain(&parts, None, no_fault, nothing_next);
+    assert_eq!(
+        explained,
+        Explanation { cause: Cause::Compute(Role::Controller), part_ns: Some(8_000_000), response_ns: None }
+    );
+}
+
+#[test]
 fn stamps_from_another_clock_are_not_decomposed() {
     let parts = loop_of(2_000, [2_000, 1_900, 2_200, 2_300, 2_400, 2_500, 2_600, 2_700], [(0, 0); 4], 0);
     assert_eq!(decompose(&parts), None);
