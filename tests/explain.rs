@@ -14,6 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use common::*;
+use looplab_shared::contract::msg::LoopTrace;
 
 const REPO: &str = env!("CARGO_MANIFEST_DIR");
 
@@ -170,17 +171,7 @@ fn a_controller_that_sleeps_in_its_step_is_the_cause_of_the_loops_it_made_late()
 /// waits as `monitor::cause` documents them: (cause, ns) in the order they pass.
 fn parts_of(loops: &Loops, row: usize) -> Option<Vec<(String, u64)>> {
     let stamp = |name: &str| loops.number(row, &format!("{name}_ns"));
-    let names = [
-        "plant_publish",
-        "sensors_receive",
-        "sensors_publish",
-        "estimator_receive",
-        "estimator_publish",
-        "controller_receive",
-        "controller_publish",
-        "plant_receive",
-    ];
-    let stamps: Vec<u64> = names.iter().map(|n| stamp(n)).collect::<Option<_>>()?;
+    let stamps: Vec<u64> = LoopTrace::STAMP_NAMES.iter().map(|n| stamp(n)).collect::<Option<_>>()?;
     let queued = |column: &str| loops.number(row, column).unwrap_or(0);
     let mut parts = vec![];
     let mut split = |span: u64, wait: u64, role: &str, rest: String| {
