@@ -2,12 +2,15 @@
 //! of `tests/netns.rs` and `tests/remote.rs` (network namespaces need root, `ip` from iproute2,
 //! and `nsenter`, `unshare` and `mount` from util-linux). Where it cannot, it sets
 //! `cfg(netns_unavailable)` and those tests are marked ignored, so the skip shows in the test
-//! summary line instead of passing silently.
+//! summary line instead of passing silently. Likewise `cfg(cyclictest_unavailable)` where the build
+//! is not root or `cyclictest` (rt-tests) is missing: tests/probe.rs sets `looplab probe` beside
+//! it, and cyclictest runs only where it may set SCHED_FIFO.
 
 use std::process::Command;
 
 fn main() {
     println!("cargo::rustc-check-cfg=cfg(netns_unavailable)");
+    println!("cargo::rustc-check-cfg=cfg(cyclictest_unavailable)");
     // Decided again when this file changes or the build runs as another user (sudo sets these).
     println!("cargo::rerun-if-changed=services/build.rs");
     for variable in ["USER", "SUDO_UID"] {
@@ -15,6 +18,9 @@ fn main() {
     }
     if !test_hosts_possible() {
         println!("cargo::rustc-cfg=netns_unavailable");
+    }
+    if effective_uid() != Some(0) || Command::new("cyclictest").arg("--help").output().is_err() {
+        println!("cargo::rustc-cfg=cyclictest_unavailable");
     }
 }
 

@@ -89,6 +89,10 @@ if first.clock_snapshot.primary_trace_clock != pb.BUILTIN_CLOCK_MONOTONIC:
 names = {n.iid: n.name for n in first.interned_data.event_names}
 annotation_names = {n.iid: n.name for n in first.interned_data.debug_annotation_names}
 
+clocks = {c.clock_id: c.timestamp for c in first.clock_snapshot.clocks}
+ftrace = {"switches": 0, "wakeups": 0, "cpus": set(), "comms": {}, "woken": set(), "switch_ins": defaultdict(list)}
+last_ftrace_ts = {}
+first_event_ts = None
 tracks, open_slices = {}, defaultdict(list)
 slices = defaultdict(list)            # slice name -> durations
 slices_per_track = defaultdict(int)
@@ -107,9 +111,33 @@ for i, p in enumerate(packets):
                           "pid": d.process.pid if d.HasField("process") else None,
                           "counter": d.HasField("counter")}
         continue
+    if p.HasField("ftrace_events"):
+        # The kernel's scheduler events, as Perfetto's recorder writes them.
+        b = p.ftrace_events
+        if not b.HasField("cpu"):
+            error(f"packet {i}: an ftrace bundle without its CPU")
+        ftrace["cpus"].add(b.cpu)
+        for e in b.event:
+            if e.timestamp < last_ftrace_ts.get(b.cpu, 0):
+                error(f"packet {i}: CPU {b.cpu}'s events go back in time")
+            last_ftrace_ts[b.cpu] = e.timestamp
+            if e.HasField("sched_switch"):
+                s = e.sched_switch
+                ftrace["switches"] += 1
+                ftrace["comms"][s.prev_pid] = s.prev_comm
+                ftrace["comms"][s.next_pid] = s.next_comm
+                ftrace["switch_ins"][s.next_pid].append(e.timestamp)
+            elif e.HasField("sched_wakeup"):
+                ftrace["wakeups"] += 1
+                ftrace["woken"].add(e.sched_wakeup.pid)
+            else:
+                error(f"packet {i}: an ftrace event neither a switch nor a wake-up")
+        continue
     if not p.HasField("track_event"):
         continue
     e = p.track_event
+    if first_event_ts is None:
+        first_event_ts = p.timestamp
     if not p.sequence_flags & pb.TracePacket.SEQ_NEEDS_INCREMENTAL_STATE:
         error(f"packet {i} uses the sequence's state without saying so")
     if p.timestamp < last_ts:
@@ -151,7 +179,13 @@ for uuid, stack in open_slices.items():
     if stack:
         error(f"slices left open on {tracks[uuid]['name']}")
 
-json.dump({"errors": errors, "packets": len(packets), "tracks": list(tracks.values()), "slices": slices,
+if ftrace["switches"] and clocks.get(pb.BUILTIN_CLOCK_BOOTTIME) != clocks.get(pb.BUILTIN_CLOCK_MONOTONIC):
+    error(f"ftrace events, read as BOOTTIME, are not given MONOTONIC's time: {clocks}")
+# Per pid, its switch-ins within the loop's events' span: where the two clocks line up.
+switch_ins_in_span = {pid: sum(first_event_ts <= t <= last_ts for t in ts)
+                      for pid, ts in ftrace.pop("switch_ins").items()} if first_event_ts is not None else {}
+ftrace.update(cpus=sorted(ftrace["cpus"]), woken=sorted(ftrace["woken"]), switch_ins_in_span=switch_ins_in_span)
+json.dump({"errors": errors, "ftrace": ftrace, "packets": len(packets), "tracks": list(tracks.values()), "slices": slices,
            "slices_per_track": slices_per_track, "counters": counters, "instants": instants,
            "flows": len(flow_slices), "flow_slices": sum(flow_slices.values()), "ended_flows": len(ended_flows)},
           sys.stdout)
@@ -220,5 +254,51 @@ fn a_real_time_run_exports_a_perfetto_trace_that_perfettos_definitions_read_back
         assert!(estimator.iter().any(|i| i.starts_with(what)), "no {what:?} in {estimator:?}");
     }
     assert_eq!(instants["launcher"].as_array().unwrap().len(), s.timeline.len());
+    let _ = std::fs::remove_file(&out);
+}
+
+/// A run with `--trace-sched` (it needs root, as the explain test's traced run: the suite runs as
+/// root) exports the kernel's scheduler events: every sched_switch of sched.trace, the wake-ups of
+/// the run's own processes, each process's pid and name, on the loop's clock.
+#[test]
+fn a_traced_runs_export_holds_the_kernels_scheduler_events() {
+    let r = run("perfetto-sched", &["pendulum", "--duration", "2", "--trace-sched"]);
+    let s = r.summary();
+    let sched = std::fs::read_to_string(r.dir.join("sched.trace")).expect("sched.trace (the test runs as root)");
+    let out = fresh_dir("perfetto-sched-trace").with_extension("perfetto-trace");
+    let export = looplab().args(["export"]).arg(&r.dir).arg("--perfetto").arg("--out").arg(&out).output().unwrap();
+    assert!(export.status.success(), "{}", String::from_utf8_lossy(&export.stderr));
+    let trace = read_trace(&out);
+    assert_eq!(trace["errors"], serde_json::json!([]), "Perfetto's rules");
+    let ftrace = &trace["ftrace"];
+
+    // Every switch; the wake-ups of the run's processes, and only theirs.
+    let pids: Vec<u32> = s.processes.iter().map(|p| p.pid).collect();
+    let switches = sched.lines().filter(|l| l.contains(": sched_switch: ")).count() as u64;
+    let wakeups = sched
+        .lines()
+        .filter(|l| l.contains(": sched_wakeup: "))
+        .filter_map(|l| l.split(" pid=").nth(1)?.split(' ').next()?.parse::<u32>().ok())
+        .filter(|pid| pids.contains(pid))
+        .count() as u64;
+    assert!(switches > 1000, "{switches} switches in sched.trace");
+    assert_eq!(ftrace["switches"], switches, "sched_switch events against sched.trace's lines");
+    assert_eq!(ftrace["wakeups"], wakeups, "the run's processes' wake-ups");
+    let woken: Vec<u32> = serde_json::from_value(ftrace["woken"].clone()).unwrap();
+    assert!(woken.iter().all(|pid| pids.contains(pid)), "{woken:?} woken, the run's pids {pids:?}");
+    assert!(!ftrace["cpus"].as_array().unwrap().is_empty());
+
+    // Each of the loop's processes by its pid and its name, switched in on every loop within the
+    // loop's own events (the same clock).
+    let loops = s.latency_ns.end_to_end.count;
+    for role in Role::ALL {
+        let pid = s.processes.iter().find(|p| p.name == role).unwrap().pid;
+        let comm = ftrace["comms"][pid.to_string()].as_str().unwrap_or_default();
+        assert!(comm.starts_with("looplab-"), "{role} (pid {pid}) is {comm:?} in the trace");
+        if role == Role::Plant {
+            let ins = ftrace["switch_ins_in_span"][pid.to_string()].as_u64().unwrap_or(0);
+            assert!(ins * 10 >= loops * 9, "the plant switched in {ins} times in the span of {loops} loops");
+        }
+    }
     let _ = std::fs::remove_file(&out);
 }

@@ -1,23 +1,33 @@
 //! `looplab plot`: a real five-process run with `--plot` writes its figures as PNG into the run
 //! folder; `looplab plot` on something that is not a run folder says so and exits with 2. Each
 //! figure is decoded and checked: not blank, data in every panel (`figure_check`), a check shown
-//! to fail on a figure with an empty panel.
+//! to fail on a figure with an empty panel. The misses' figure counts what the report counts and
+//! colours each miss by its cause.
 
 use crate::common;
 use crate::figure_check;
 
-use common::{FaultKind, fresh_dir, looplab, run};
-use figure_check::{Image, assert_charts, assert_figure, check, data_pixels};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use common::{FaultKind, Table, fresh_dir, looplab, run};
+use figure_check::{Image, MIN_DATA_PIXELS, assert_charts, assert_figure, check, data_pixels};
 use looplab_shared::model::figure::RunColumns;
-use looplab_shared::tools::plot::figure::{Cell, Colour, Curve, FaultMark, Figure, Line, Panel};
-use looplab_shared::tools::plot::run::{APPLIED_LABEL, COMMAND_LABEL, RunData, commands_figure};
+use looplab_shared::tools::plot::figure::{Cell, Colour, Curve, FaultMark, Figure, Line, Panel, rgb};
+use looplab_shared::tools::plot::misses::CauseKind;
+use looplab_shared::tools::plot::run::{
+    APPLIED_LABEL, COMMAND_LABEL, MISSES_FIGURE, RunData, commands_figure, misses_figure,
+};
 
 #[test]
 fn a_real_time_run_with_a_kill_plots_its_figures() {
     let r = run("plot", &["pendulum", "--duration", "1", "--fault", "kill estimator at 0.5s", "--plot"]);
     let stdout = r.stdout();
     // Estimate: four components on a 2×2 grid; commands: one; sensors: two, stacked; tick period: one.
-    for (name, panels) in [("estimate.png", 4), ("commands.png", 1), ("sensors.png", 2), ("tick-period.png", 1)] {
+    // The kill's outage misses deadlines, so misses.png has crosses.
+    let figures =
+        [("estimate.png", 4), ("commands.png", 1), ("sensors.png", 2), ("tick-period.png", 1), (MISSES_FIGURE, 1)];
+    for (name, panels) in figures {
         let path = r.dir.join(name);
         assert!(stdout.contains(&format!("wrote {}", path.display())), "{name} not reported:\n{stdout}");
         assert_figure(&path, panels, false);
@@ -103,6 +113,57 @@ fn a_stopped_controller_leaves_a_gap_in_the_commands_and_the_held_input_beside_i
         .collect();
     assert!(!applied_points.is_empty() && applied_points.iter().all(|(_, u)| *u == held), "{applied_points:?}");
     assert_figure(&r.dir.join("commands.png"), 1, false);
+}
+
+/// The pixels of `path` in exactly this colour.
+fn pixels_of(path: &Path, colour: Colour) -> usize {
+    let c = rgb(colour);
+    Image::read(path).pixels.iter().filter(|p| **p == [c.0, c.1, c.2]).count()
+}
+
+/// A real-time run whose controller is stopped for 300 ms: misses.png's title counts summary.json's
+/// deadline misses, the number the report's headline gives; its legend counts loops.csv's misses
+/// by the kind of their cause (counted here from loops.csv's text); the PNG has data and crosses
+/// in the fault cause's colour, and so has the stop's zoomed figure.
+#[test]
+fn a_stopped_controllers_misses_are_drawn_in_their_causes_colour() {
+    let r = run(
+        "plot-misses",
+        &["pendulum", "--duration", "1.5", "--fault", "stop controller at 0.5s for 300ms", "--plot"],
+    );
+    let s = r.summary();
+    let headline = format!("deadline misses {} of {}", s.deadline_misses, s.loops);
+    assert!(r.stdout().contains(&headline), "no `{headline}` in\n{}", r.stdout());
+
+    let loops = Table::read(&r.dir.join("loops.csv"));
+    let (missed, cause) = (loops.columns["deadline_miss"], loops.columns["cause"]);
+    let mut by_kind: BTreeMap<String, usize> = BTreeMap::new();
+    for row in loops.rows.iter().filter(|row| row[missed] == "1") {
+        *by_kind.entry(row[cause].split(':').next().unwrap().to_owned()).or_default() += 1;
+    }
+    assert!(by_kind.get("fault").is_some_and(|n| *n >= 200), "a 300 ms stop at 1 kHz: {by_kind:?}");
+
+    let data = RunData::read(&r.dir, &looplab_shared::scenarios::builtin()).unwrap();
+    let figure = misses_figure(&data).expect("a real-time run's misses figure");
+    let counted = format!(": {} deadline misses of {} loops (", s.deadline_misses, s.loops);
+    assert!(figure.title.contains(&counted), "no `{counted}` in {}", figure.title);
+    let legend: BTreeMap<String, usize> = figure.panels[0]
+        .curves
+        .iter()
+        .filter(|c| c.line == Line::Crosses)
+        .map(|c| (c.label.clone(), c.points.len()))
+        .collect();
+    let expected: BTreeMap<String, usize> = by_kind.iter().map(|(kind, n)| (format!("{kind} ({n})"), *n)).collect();
+    assert_eq!(legend, expected);
+
+    let path = r.dir.join(MISSES_FIGURE);
+    assert!(r.stdout().contains(&format!("wrote {}", path.display())), "{MISSES_FIGURE} not reported");
+    assert_figure(&path, 1, false);
+    let fault = CauseKind::Fault.colour();
+    assert!(pixels_of(&path, fault) >= MIN_DATA_PIXELS, "no crosses in the fault cause's colour");
+    let zoom = r.dir.join("fault-1-stop-controller.png");
+    assert_figure(&zoom, 2, false);
+    assert!(pixels_of(&zoom, fault) >= MIN_DATA_PIXELS, "the zoom has no crosses in the fault cause's colour");
 }
 
 /// A figure of two panels over 0 to 1 s, the second with `second` as its curves, and a fault

@@ -96,6 +96,14 @@ Runs of other scenarios, rates, durations, loop counts or columns cannot be comp
     /// loop, per wait strategy, plus zero copy, the monitor's cost and lockstep speed; writes
     /// bench.json and PNG charts
     Bench(bench::BenchArgs),
+    /// Measure the OS's own timer wake-up latency, as cyclictest does: a thread sleeps to
+    /// absolute deadlines (clock_nanosleep, TIMER_ABSTIME) at an interval, at a priority, on a
+    /// CPU; prints p50/p99/p99.9/max, and with --json writes them and every wake-up's lateness
+    /// (a histogram in µs). The probe `run --probe` runs beside the loop, on its own
+    #[command(after_help = "Example: as `cyclictest -q -i 1000 -l 10000 -p 1 -a 0 --default-system`\n  \
+looplab probe --interval-us 1000 --loops 10000 --priority 1 --cpu 0\n\
+Exit codes: 0 measured, 2 bad input or a setting the machine refused (--priority needs root or `ulimit -r`).")]
+    Probe(ProbeCli),
     /// Write a file for an existing run folder from its files: --mcap writes run.mcap (for
     /// Foxglove or PlotJuggler), as every run does, for a run folder that has none; --perfetto
     /// writes run.perfetto-trace (open it in ui.perfetto.dev): each loop's stages and hops as
@@ -117,7 +125,7 @@ Runs of other scenarios, rates, durations, loop counts or columns cannot be comp
         force: bool,
     },
     /// Draw a run folder's figures as PNG into it (estimate.png, commands.png, sensors.png,
-    /// tick-period.png), or with --paper reproduce a paper's figure for a scenario
+    /// tick-period.png, misses.png), or with --paper reproduce a paper's figure for a scenario
     #[command(
         after_help = "Examples:\n  looplab plot runs/latest\n  looplab plot --paper pendulum --out /tmp/paper-003\n\
 --paper runs the paper's launch files in lockstep in this process (one run folder each, under --out) and draws: \
@@ -149,6 +157,29 @@ against the stochastic b)."
     /// (internal) one stage of the bench's Unix-socket baseline loop
     #[command(hide = true)]
     BenchUdsStage(bench::uds_loop::StageArgs),
+}
+
+#[derive(Debug, Args)]
+struct ProbeCli {
+    /// The interval between deadlines, µs (10 to 1000000)
+    #[arg(long, value_name = "US", default_value_t = 1000)]
+    interval_us: u64,
+    /// How many deadlines (1 to 100000000)
+    #[arg(long, value_name = "N", default_value_t = 10_000)]
+    loops: u64,
+    /// SCHED_FIFO at this priority (1 to 99; root or `ulimit -r`); without it the normal policy
+    /// with the timer slack tightened to 1 ns, as the loop's blocking waits have it
+    #[arg(long, value_name = "P")]
+    priority: Option<u32>,
+    /// Pin the probe's thread to this CPU (one this process may run on)
+    #[arg(long, value_name = "C")]
+    cpu: Option<usize>,
+    /// Lock the process's memory (mlockall), as cyclictest -m
+    #[arg(long)]
+    mlock: bool,
+    /// Also write what it measured as JSON here: the summary and `histogram_us`, [µs, count]
+    #[arg(long, value_name = "PATH")]
+    json: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -401,10 +432,35 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        Some(Command::Probe(args)) => probe(&args),
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default(), catalog),
     }
+}
+
+/// `looplab probe`: the probe alone; its report, and its JSON if asked.
+fn probe(args: &ProbeCli) -> ExitCode {
+    let options = launcher::probe::ProbeOptions {
+        interval_us: args.interval_us,
+        loops: args.loops,
+        priority: args.priority,
+        cpu: args.cpu,
+        mlock: args.mlock,
+    };
+    let measured = match launcher::probe::run_alone(&options) {
+        Ok(m) => m,
+        Err(why) => return bad_input(why),
+    };
+    say!("{}", measured.render());
+    if let Some(path) = &args.json {
+        let written = serde_json::to_vec_pretty(&measured)
+            .map_err(anyhow::Error::from)
+            .and_then(|json| std::fs::write(path, json).map_err(anyhow::Error::from))
+            .map_err(|e| e.context(format!("cannot write {}", path.display())));
+        return report_failure(written);
+    }
+    ExitCode::SUCCESS
 }
 
 /// `looplab diff`: the table and the verdict; exit 0 within tolerance, 1 beyond, 2 bad input.

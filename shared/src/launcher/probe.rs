@@ -8,7 +8,13 @@
 //! plant's schedule (`started`), and a thread needs no binary of its own. It touches no port and
 //! no file of the loop, and wakes half a period after each tick, when the loop has normally
 //! finished, so that it neither delays the plant's wake-up nor sits on a stage's CPU.
+//!
+//! `looplab probe` runs the same sleeps on their own, as `cyclictest` is run ([`run_alone`]):
+//! an interval, a loop count, a priority and a CPU; it prints p50/p99/p99.9/max and writes every
+//! wake-up's lateness as a histogram in whole µs, as cyclictest's `-h` does, so that the two can
+//! be set side by side (tests/probe.rs does).
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
@@ -21,7 +27,7 @@ use crate::config::launch::LaunchConfig;
 use crate::contract::clock::now_ns;
 use crate::contract::report::Stats;
 use crate::monitor::distribution::Distribution;
-use crate::runtime::wait::{sleep_until, tighten_timer_slack};
+use crate::runtime::wait::{allowed_cpus, pin_to_cpu, sleep_until, tighten_timer_slack};
 
 /// What the probe measured (`summary.json`'s `probe`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -95,8 +101,7 @@ impl Probe {
 }
 
 /// The probe's thread: the plant's policy, a timer asked to be on time, then `loops` deadlines
-/// from half a period after the plant's tick 0. Skips deadlines it woke too late for, as
-/// cyclictest does, counting them.
+/// from half a period after the plant's tick 0.
 fn measure(
     schedule: Receiver<u64>,
     stop: &AtomicBool,
@@ -119,8 +124,26 @@ fn measure(
     };
     // None: the plant never started (the run ended first).
     let Ok(start_ns) = schedule.recv() else { return summary };
-    let mut latency = Distribution::default();
-    let (mut k, mut next) = (0, start_ns + period_ns / 2);
+    let woken = wake_ups(start_ns + period_ns / 2, period_ns, loops, stop);
+    summary.wake_latency_ns = woken.latency.stats();
+    summary.overruns = woken.overruns;
+    summary
+}
+
+/// What `loops` absolute-deadline sleeps measured.
+struct WakeUps {
+    latency: Distribution,
+    /// Each wake-up's lateness in whole µs (rounded down) and how many woke so late.
+    histogram_us: BTreeMap<u64, u64>,
+    overruns: u64,
+}
+
+/// `loops` deadlines every `period_ns` from `first_ns`: sleeps to each (`clock_nanosleep`,
+/// `TIMER_ABSTIME`) and records how late it woke. Skips deadlines it woke too late for, as
+/// cyclictest does, counting them.
+fn wake_ups(first_ns: u64, period_ns: u64, loops: u64, stop: &AtomicBool) -> WakeUps {
+    let mut woken = WakeUps { latency: Distribution::default(), histogram_us: BTreeMap::new(), overruns: 0 };
+    let (mut k, mut next) = (0, first_ns);
     while k < loops && !stop.load(Ordering::Relaxed) {
         sleep_until(next);
         let woke = now_ns();
@@ -128,15 +151,144 @@ fn measure(
         if woke < next {
             continue;
         }
-        latency.record(woke - next);
+        woken.latency.record(woke - next);
+        *woken.histogram_us.entry((woke - next) / 1_000).or_default() += 1;
         (k, next) = (k + 1, next + period_ns);
         while next <= woke && k < loops {
             (k, next) = (k + 1, next + period_ns);
-            summary.overruns += 1;
+            woken.overruns += 1;
         }
     }
-    summary.wake_latency_ns = latency.stats();
-    summary
+    woken
+}
+
+/// `looplab probe`: the probe on its own, as `cyclictest` is run: `loops` deadlines every
+/// `interval_us` from one interval after it starts, at `SCHED_FIFO` `priority` (None: the
+/// normal policy, its timer slack tightened to 1 ns as the in-run probe's), on `cpu` (None: any
+/// the process may use), its memory locked if `mlock`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ProbeOptions {
+    pub interval_us: u64,
+    pub loops: u64,
+    pub priority: Option<u32>,
+    pub cpu: Option<usize>,
+    pub mlock: bool,
+}
+
+/// What `looplab probe` measured (its `--json`): the in-run probe's summary and every wake-up's
+/// lateness as a histogram, for pooling runs and setting beside cyclictest's (`-h`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ProbeRun {
+    #[serde(flatten)]
+    pub summary: ProbeSummary,
+    /// The CPU it was pinned to, if any.
+    pub cpu: Option<usize>,
+    /// Whether its memory was locked (`mlockall`).
+    pub mlock: bool,
+    /// Each wake-up's lateness in whole µs, rounded down as cyclictest's histogram counts it, and
+    /// how many wake-ups: `[µs, count]`, ascending, no empty µs.
+    pub histogram_us: Vec<[u64; 2]>,
+}
+
+impl ProbeRun {
+    /// Its report: what ran where, and p50 / p99 / p99.9 / max of the wake-up latency.
+    pub fn render(&self) -> String {
+        let s = &self.summary;
+        let us = |v: Option<u64>| v.map_or_else(|| "-".to_string(), |ns| format!("{:.1}", ns as f64 / 1e3));
+        let l = &s.wake_latency_ns;
+        format!(
+            "probe: {} wake-ups every {} µs, {} {} (timer slack {} ns), {}{}\n  \
+             wake-up latency µs: p50 {}  p99 {}  p99.9 {}  max {}   ({} overruns)",
+            l.count,
+            s.interval_ns / 1_000,
+            s.policy,
+            s.priority,
+            s.timer_slack_ns,
+            self.cpu.map_or_else(|| "any CPU".to_string(), |c| format!("CPU {c}")),
+            if self.mlock { ", memory locked" } else { "" },
+            us(l.p50),
+            us(l.p99),
+            us(l.p999),
+            us(l.max),
+            s.overruns,
+        )
+    }
+}
+
+/// The largest interval and loop count `looplab probe` takes.
+pub const MAX_INTERVAL_US: u64 = 1_000_000;
+pub const MAX_LOOPS: u64 = 100_000_000;
+
+impl ProbeOptions {
+    /// What is wrong with the options, as one line naming the flag and what it allows.
+    pub fn check(&self) -> Result<(), String> {
+        if !(10..=MAX_INTERVAL_US).contains(&self.interval_us) {
+            return Err(format!("--interval-us {}: allowed 10 to {MAX_INTERVAL_US} (µs)", self.interval_us));
+        }
+        if !(1..=MAX_LOOPS).contains(&self.loops) {
+            return Err(format!("--loops {}: allowed 1 to {MAX_LOOPS}", self.loops));
+        }
+        if let Some(p) = self.priority.filter(|p| !(1..=99).contains(p)) {
+            return Err(format!("--priority {p}: allowed 1 to 99 (SCHED_FIFO); leave it out for the normal policy"));
+        }
+        if let Some(cpu) = self.cpu {
+            let allowed = allowed_cpus();
+            if !allowed.contains(&cpu) {
+                let list: Vec<String> = allowed.iter().map(usize::to_string).collect();
+                return Err(format!("--cpu {cpu}: allowed {} (the CPUs this process may run on)", list.join(", ")));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Runs the probe on a thread of its own, as `options` ask, and returns what it measured. An
+/// error is one line naming the flag the machine refused (`--priority` without the permission,
+/// `--mlock`).
+pub fn run_alone(options: &ProbeOptions) -> Result<ProbeRun, String> {
+    options.check()?;
+    let options = options.clone();
+    let thread = std::thread::Builder::new().name("probe".into()).spawn(move || {
+        if let Some(cpu) = options.cpu {
+            pin_to_cpu(cpu).map_err(|e| format!("--cpu {cpu}: {e}"))?;
+        }
+        if let Some(p) = options.priority {
+            set_fifo(p).map_err(|e| {
+                format!(
+                    "--priority {p}: SCHED_FIFO is not permitted here ({e}): it needs CAP_SYS_NICE (root) or \
+                     `ulimit -r` of at least {p}; leave out --priority to run at the normal policy"
+                )
+            })?;
+        }
+        // SAFETY: mlockall takes plain flags.
+        if options.mlock && unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } != 0 {
+            let e = std::io::Error::last_os_error();
+            return Err(format!("--mlock: locking memory is not permitted here ({e}); leave out --mlock"));
+        }
+        tighten_timer_slack();
+        let (policy, priority) = scheduling();
+        let period_ns = options.interval_us * 1_000;
+        let woken = wake_ups(now_ns() + period_ns, period_ns, options.loops, &AtomicBool::new(false));
+        Ok(ProbeRun {
+            summary: ProbeSummary {
+                wake_latency_ns: woken.latency.stats(),
+                interval_ns: period_ns,
+                offset_ns: 0,
+                policy,
+                priority,
+                timer_slack_ns: timer_slack_ns(),
+                overruns: woken.overruns,
+                note: None,
+            },
+            cpu: options.cpu,
+            mlock: options.mlock,
+            histogram_us: woken.histogram_us.into_iter().map(|(us, n)| [us, n]).collect(),
+        })
+    });
+    thread
+        .map_err(|e| format!("cannot start the probe's thread: {e}"))?
+        .join()
+        .map_err(|_| "the probe's thread panicked".to_string())?
 }
 
 fn set_fifo(priority: u32) -> std::io::Result<()> {
@@ -184,6 +336,26 @@ mod tests {
         let s = probe.finish_after(std::time::Duration::from_millis(200));
         assert_eq!(s.wake_latency_ns.count + s.overruns, 50, "one wake-up or overrun per loop: {s:?}");
         assert_eq!((s.interval_ns, s.offset_ns, s.policy.as_str()), (1_000_000, 500_000, "normal"));
+    }
+
+    #[test]
+    fn the_probe_alone_checks_its_options_and_measures_each_deadline() {
+        let options = ProbeOptions { interval_us: 1_000, loops: 20, priority: None, cpu: None, mlock: false };
+        let run = run_alone(&options).unwrap();
+        let s = &run.summary;
+        assert_eq!(s.wake_latency_ns.count + s.overruns, 20, "{s:?}");
+        assert_eq!(run.histogram_us.iter().map(|[_, n]| n).sum::<u64>(), s.wake_latency_ns.count);
+        assert_eq!((s.interval_ns, s.policy.as_str(), s.timer_slack_ns), (1_000_000, "normal", 1));
+        assert!(run.render().contains("p99.9"), "{}", run.render());
+        for (bad, flag) in [
+            (ProbeOptions { interval_us: 0, ..options.clone() }, "--interval-us 0: allowed 10 to"),
+            (ProbeOptions { loops: 0, ..options.clone() }, "--loops 0: allowed 1 to"),
+            (ProbeOptions { priority: Some(100), ..options.clone() }, "--priority 100: allowed 1 to 99"),
+            (ProbeOptions { cpu: Some(100_000), ..options.clone() }, "--cpu 100000: allowed "),
+        ] {
+            let why = run_alone(&bad).unwrap_err();
+            assert!(why.starts_with(flag) && !why.contains('\n'), "{why}");
+        }
     }
 
     impl Probe {

@@ -120,7 +120,7 @@ pub struct Trace {
 }
 
 /// One line of the trace: (CPU, ns, event, its fields).
-fn parse_line(line: &str) -> Option<(u32, u64, &str, &str)> {
+pub(crate) fn parse_line(line: &str) -> Option<(u32, u64, &str, &str)> {
     // "<comm>-<pid> [<cpu>] <flags> <secs>.<µs>: <event>: <fields>"; a comm may hold anything.
     let open = line.find("] ")?;
     let cpu = line[..open].rsplit('[').next()?.trim().parse().ok()?;
@@ -135,7 +135,7 @@ fn parse_line(line: &str) -> Option<(u32, u64, &str, &str)> {
 }
 
 /// The value of `key=` in `fields`, up to the next of `keys` (a comm may hold spaces).
-fn field<'a>(fields: &'a str, key: &str, next: Option<&str>) -> Option<&'a str> {
+pub(crate) fn field<'a>(fields: &'a str, key: &str, next: Option<&str>) -> Option<&'a str> {
     let from = fields.find(&format!("{key}="))? + key.len() + 1;
     let to = match next {
         Some(next) => fields[from..].find(&format!(" {next}="))? + from,

@@ -24,6 +24,8 @@ pub enum Colour {
     Truth,
     /// An actuator's limits.
     Limit,
+    /// A colour of a map the tool keeps itself (a deadline miss's cause: `tools/plot/misses.rs`).
+    Rgb(u8, u8, u8),
 }
 
 /// How a curve is drawn.
@@ -31,6 +33,8 @@ pub enum Colour {
 pub enum Line {
     Solid(u32),
     Dashed,
+    /// Each point a cross, not joined: events (deadline misses), not a signal.
+    Crosses,
 }
 
 /// One curve of a panel, and its legend entry's text.

@@ -8,8 +8,10 @@
 //!   wake-up, interrupts, and time the hypervisor ran something else);
 //! - `compute: plant`: from its wake-up (or the tick's due time, if it woke earlier for a
 //!   command) to the state going out (integration and snapshot);
-//! - each hop from a writer's publish to its reader's receive: the reader's run-queue wait in
-//!   that time is `queued: <reader>`, the rest `transport: <hop>` (the wake-up itself);
+//! - each hop from a writer's publish to its reader's receive: while the reader stage was still
+//!   computing an earlier loop (until its last output went out), `compute: <reader>` (of that,
+//!   its run-queue wait while computing is `queued: <reader>`); after that, the reader's
+//!   run-queue wait is `queued: <reader>`, the rest `transport: <hop>` (the wake-up itself);
 //! - each stage's computation: its run-queue wait while computing is `queued: <stage>`, the rest
 //!   `compute: <stage>`.
 //!
@@ -111,10 +113,10 @@ fn split(out: &mut Vec<Part>, span: u64, queued: u32, role: Role, rest: Cause) {
 }
 
 /// Loop k's response time in parts, in the order they pass; they add up to the response time
-/// exactly. A command that never reached the plant (a newer one replaced it there) gives the
-/// parts up to its sending. None without a command or with stamps out of order (another host's
-/// clock).
-pub fn decompose(parts: &LoopParts) -> Option<Vec<Part>> {
+/// exactly. `before(stage)` is the stage's last output of an earlier loop. A command that never
+/// reached the plant (a newer one replaced it there) gives the parts up to its sending. None
+/// without a command or with stamps out of order (another host's clock).
+pub fn decompose(parts: &LoopParts, before: impl Fn(Role) -> Option<Header>) -> Option<Vec<Part>> {
     let (trace, last) = match (&parts.record, &parts.command) {
         (Some(record), _) => (record.header.trace, Stamp::PlantReceive.index()),
         (None, Some(command)) => (command.header.trace, Stamp::ControllerPublish.index()),
@@ -144,7 +146,18 @@ pub fn decompose(parts: &LoopParts) -> Option<Vec<Part>> {
             // A stage's computation.
             split(&mut out, span, sched_of(parts, reader).compute_queued_ns, reader, Cause::Compute(reader));
         } else {
-            split(&mut out, span, sched_of(parts, reader).queued_ns, reader, Cause::Transport(hop));
+            // A stage still busy with an earlier loop when this input went out.
+            let earlier = Stamp::published_by(reader).filter(|_| reader != Role::Plant).and_then(|published| {
+                before(reader).map(|h| (h.trace.get(published).saturating_sub(stamps[from]).min(span), h.sched))
+            });
+            let busy = match earlier {
+                Some((busy, sched)) if busy > 0 => {
+                    split(&mut out, busy, sched.compute_queued_ns, reader, Cause::Compute(reader));
+                    busy
+                }
+                _ => 0,
+            };
+            split(&mut out, span - busy, sched_of(parts, reader).queued_ns, reader, Cause::Transport(hop));
         }
     }
     Some(out)
@@ -161,23 +174,17 @@ pub fn by_cause(parts: &[Part]) -> Vec<Part> {
     out
 }
 
-/// A stage's outputs around a loop it skipped: the last one before, the first one after.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct AroundSkip {
-    pub before: Option<Header>,
-    pub after: Option<Header>,
-}
-
 /// Explains loop k. `fault_of(role)` is the fault whose outage covers loop k and is of `role`,
 /// if any: it takes the blame where the primary part is that process's, except that a kill or
 /// stop of a loop process takes it for every loop its outage covers (`outage`: no command can
-/// pass through a process that is not running). `around(stage)` is the stage's outputs around
-/// loop k, for a loop it skipped.
+/// pass through a process that is not running). `before(stage)` and `after(stage)` are the
+/// stage's last output of an earlier loop and first output of a later one.
 pub fn explain(
     parts: &LoopParts,
     outage: Option<(FaultKind, Role)>,
     fault_of: impl Fn(Role) -> Option<FaultKind>,
-    around: impl Fn(Role) -> AroundSkip,
+    before: impl Fn(Role) -> Option<Header>,
+    after: impl Fn(Role) -> Option<Header>,
 ) -> Explanation {
     let blamed = |cause: Cause| match outage
         .or_else(|| cause.process().and_then(|role| fault_of(role).map(|kind| (kind, role))))
@@ -185,11 +192,11 @@ pub fn explain(
         Some((kind, role)) => Cause::Fault(kind, role),
         None => cause,
     };
-    let Some(decomposed) = decompose(parts) else {
+    let Some(decomposed) = decompose(parts, &before) else {
         let (cause, part_ns) = match (&parts.state, &parts.record) {
             // No tick: the plant did not wake for it.
             (None, None) => (Cause::Timer, None),
-            (Some(_), None) => skipped(parts, around),
+            (Some(_), None) => skipped(parts, before, after),
             (_, Some(_)) => (Cause::Unknown, None),
         };
         return Explanation { cause: blamed(cause), part_ns, response_ns: None };
@@ -204,7 +211,11 @@ pub fn explain(
 /// still computing an earlier loop (`compute`, or `queued` if it mostly sat on the run queue
 /// meanwhile), or on the run queue before that next input (`queued`), whichever took most of
 /// that time; else `skipped` (asleep or stopped).
-fn skipped(parts: &LoopParts, around: impl Fn(Role) -> AroundSkip) -> (Cause, Option<u64>) {
+fn skipped(
+    parts: &LoopParts,
+    before: impl Fn(Role) -> Option<Header>,
+    after: impl Fn(Role) -> Option<Header>,
+) -> (Cause, Option<u64>) {
     let Some(stage) = Role::STAGES.into_iter().find(|stage| !parts.has(stage.output().expect("a stage has an output")))
     else {
         return (Cause::Unknown, None);
@@ -215,7 +226,7 @@ fn skipped(parts: &LoopParts, around: impl Fn(Role) -> AroundSkip) -> (Cause, Op
     };
     let (received, published) =
         (Stamp::received_by(stage).expect("a stage"), Stamp::published_by(stage).expect("a stage"));
-    let AroundSkip { before, after } = around(stage);
+    let (before, after) = (before(stage), after(stage));
     let away = after.map(|h| h.trace.get(received).saturating_sub(sent));
     // Still computing an earlier loop when this one's input went out.
     if let Some(before) = before {

@@ -14,7 +14,7 @@ use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::role::{Role, Topic};
 use crate::model::layout::Layout;
 use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
-use crate::monitor::cause::{self, AroundSkip, Explanation};
+use crate::monitor::cause::{self, Explanation};
 use crate::monitor::crossing::Crossing;
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::injections::{self, Injection};
@@ -392,12 +392,10 @@ impl Recording {
             parts,
             faults.iter().find_map(|f| f.outage(k)),
             |role| faults.iter().find_map(|f| f.blames(k, role)),
+            |stage| last_outputs[stage.output().expect("a stage has an output")],
             |stage| {
                 let topic = stage.output().expect("a stage has an output");
-                AroundSkip {
-                    before: last_outputs[topic],
-                    after: joiner.next_with(topic).and_then(|next| next.header(topic)),
-                }
+                joiner.next_with(topic).and_then(|next| next.header(topic))
             },
         );
         let name = explanation.cause.to_string();

@@ -17,6 +17,10 @@ use crate::contract::msg::SchedStamp;
 /// A computation longer than this gets a read of its own at publish (ns).
 pub const COMPUTE_READ_NS: u64 = 10_000;
 
+/// `LOOPLAB_SCHEDSTAT=off` in a loop process's environment: no reads, every stamp zero. What
+/// `looplab bench` runs beside the loop to measure the reads' cost on it.
+pub const OFF_ENV: &str = "LOOPLAB_SCHEDSTAT";
+
 /// The calling thread's cumulative run-queue wait, read from its schedstat.
 pub struct RunQueue {
     /// None where the kernel has no schedstat: every stamp stays zero.
@@ -28,7 +32,8 @@ pub struct RunQueue {
 impl RunQueue {
     /// Opens the calling thread's schedstat; call it on the thread that reads it.
     pub fn open() -> Self {
-        let file = File::open("/proc/thread-self/schedstat").ok();
+        let off = std::env::var_os(OFF_ENV).is_some_and(|value| value == "off");
+        let file = if off { None } else { File::open("/proc/thread-self/schedstat").ok() };
         let mut clock = Self { file, last: 0 };
         clock.last = clock.total_ns().unwrap_or(0);
         clock

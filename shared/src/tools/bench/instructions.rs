@@ -12,7 +12,10 @@
 //! - `hop:N`: N hops of a 488 B state message through the loop's own ports
 //!   (`runtime::ipc`, the same services and settings): send, then receive in place and give the
 //!   chunk back, in one thread, so that no wait adds instructions;
-//! - `hop-monitor:N`: the same with the monitor's passive reader on the topic, its receive included.
+//! - `hop-monitor:N`: the same with the monitor's passive reader on the topic, its receive included;
+//! - `schedstat:N`: N reads of the thread's run-queue wait (`runtime::sched`), as every loop
+//!   process makes once or twice per loop (user space only: the kernel's side of the `pread` is
+//!   not counted; `looplab bench` times the loop without the reads for the whole cost).
 
 use std::path::Path;
 use std::process::Command;
@@ -36,7 +39,7 @@ struct Workload {
     long: u64,
 }
 
-const WORKLOADS: [Workload; 3] = [
+const WORKLOADS: [Workload; 4] = [
     Workload {
         name: "in-process",
         what: "in-process pendulum, every file written",
@@ -55,6 +58,13 @@ const WORKLOADS: [Workload; 3] = [
         name: "hop-monitor",
         what: "the same, the monitor reading too",
         unit: "hop",
+        short: 2_000,
+        long: 12_000,
+    },
+    Workload {
+        name: "schedstat",
+        what: "run-queue read (schedstat pread), user space",
+        unit: "read",
         short: 2_000,
         long: 12_000,
     },
@@ -149,7 +159,8 @@ pub fn workload(spec: &str, run_id: &str, out: &Path, catalog: &Catalog) -> Resu
         "in-process" => in_process(n, out, catalog),
         "hop" => hops(run_id, n, false),
         "hop-monitor" => hops(run_id, n, true),
-        _ => bail!("--count: no workload {name} (in-process, hop, hop-monitor)"),
+        "schedstat" => run_queue_reads(n),
+        _ => bail!("--count: no workload {name} (in-process, hop, hop-monitor, schedstat)"),
     }
 }
 
@@ -187,6 +198,18 @@ fn hops(run_id: &str, n: u64, monitor: bool) -> Result<()> {
         if let Some(monitor) = &monitor {
             monitor.receive()?.ok_or_else(|| anyhow!("hop {k}: nothing reached the monitor"))?;
         }
+    }
+    Ok(())
+}
+
+/// n reads of this thread's run-queue wait, as a loop process makes them.
+fn run_queue_reads(n: u64) -> Result<()> {
+    let mut run_queue = crate::runtime::sched::RunQueue::open();
+    if !run_queue.available() {
+        bail!("this kernel has no /proc/thread-self/schedstat: nothing to count");
+    }
+    for _ in 0..n {
+        std::hint::black_box(run_queue.since_last());
     }
     Ok(())
 }

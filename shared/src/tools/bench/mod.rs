@@ -34,7 +34,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Result, anyhow};
+use anyhow::{Result, anyhow, bail};
 
 use self::own_stage::OwnController;
 use self::pingpong::Transport;
@@ -221,6 +221,9 @@ struct LoopConfig {
     pin: bool,
     /// A controller of the user's own in place of the built-in one.
     own: Option<OwnController>,
+    /// The loop processes read their run-queue wait (`runtime::sched`); off, the same loop
+    /// without those reads: their cost on the loop.
+    schedstat: bool,
 }
 
 impl LoopConfig {
@@ -230,7 +233,7 @@ impl LoopConfig {
     }
 }
 
-const LOOP_CONFIGS: [LoopConfig; 9] = [
+const LOOP_CONFIGS: [LoopConfig; 10] = [
     LoopConfig {
         name: "looplab block",
         label: "block",
@@ -239,6 +242,17 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: false,
         pin: false,
         own: None,
+        schedstat: true,
+    },
+    LoopConfig {
+        name: "looplab block, no run-queue reads",
+        label: "block-no-schedstat",
+        strategy: Strategy::Block,
+        rate_hz: 1000.0,
+        stop_monitor: false,
+        pin: false,
+        own: None,
+        schedstat: false,
     },
     LoopConfig {
         name: "looplab spin",
@@ -248,6 +262,7 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: false,
         pin: false,
         own: None,
+        schedstat: true,
     },
     LoopConfig {
         name: "looplab spin, pinned",
@@ -257,6 +272,7 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: false,
         pin: true,
         own: None,
+        schedstat: true,
     },
     LoopConfig {
         name: "looplab adaptive",
@@ -266,6 +282,7 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: false,
         pin: false,
         own: None,
+        schedstat: true,
     },
     LoopConfig {
         name: "looplab adaptive, pinned",
@@ -275,6 +292,7 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: false,
         pin: true,
         own: None,
+        schedstat: true,
     },
     LoopConfig {
         name: "looplab adaptive 10 kHz",
@@ -284,6 +302,7 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: false,
         pin: false,
         own: None,
+        schedstat: true,
     },
     LoopConfig {
         name: "looplab adaptive, monitor stopped",
@@ -293,6 +312,7 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: true,
         pin: false,
         own: None,
+        schedstat: true,
     },
     LoopConfig {
         name: BLOCK_PYTHON,
@@ -302,6 +322,7 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: false,
         pin: false,
         own: Some(OwnController::Python),
+        schedstat: true,
     },
     LoopConfig {
         name: BLOCK_C,
@@ -311,6 +332,7 @@ const LOOP_CONFIGS: [LoopConfig; 9] = [
         stop_monitor: false,
         pin: false,
         own: Some(OwnController::C),
+        schedstat: true,
     },
 ];
 
@@ -351,6 +373,19 @@ fn looplab_run(
         }
         n += 1;
     };
+    if !c.schedstat {
+        // The switch is the loop processes' environment: a launcher of its own, started with it.
+        let status = std::process::Command::new(std::env::current_exe()?)
+            .args(["run", "pendulum", "-q", "--out"])
+            .arg(&dir)
+            .args(sets.iter().flat_map(|s| ["--set", s.as_str()]))
+            .env(crate::runtime::sched::OFF_ENV, "off")
+            .status()?;
+        if !status.success() {
+            bail!("the run without run-queue reads failed ({status}); its folder: {}", dir.display());
+        }
+        return Ok((crate::launcher::report::read_summary(&dir)?, dir));
+    }
     let dir = crate::launcher::create_run_dir(Some(&dir), "pendulum")?;
     let (summary, outcome) = crate::launcher::run_once(&config, scenario.as_ref(), binaries, &dir, true)?;
     if outcome == Outcome::Interrupted {

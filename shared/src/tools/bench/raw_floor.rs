@@ -84,14 +84,7 @@ pub(super) fn pin_to(cpu: usize) -> libc::cpu_set_t {
 
 /// The first two CPUs this thread may run on, for the two ends of a pinned ping-pong.
 pub(super) fn two_cpus() -> Option<(usize, usize)> {
-    // SAFETY: a zeroed cpu_set_t is a valid empty set that sched_getaffinity fills.
-    let allowed = unsafe {
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set);
-        set
-    };
-    // SAFETY: CPU_ISSET reads inside the set.
-    let mut cpus = (0..libc::CPU_SETSIZE as usize).filter(|&c| unsafe { libc::CPU_ISSET(c, &allowed) });
+    let mut cpus = crate::runtime::wait::allowed_cpus().into_iter();
     Some((cpus.next()?, cpus.next()?))
 }
 

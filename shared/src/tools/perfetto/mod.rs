@@ -24,14 +24,20 @@
 //!   when it has one), each fault's injection, detection, restart and resumption, each restart's
 //!   death and readiness, and the launcher's timeline.
 //!
+//! - the kernel's scheduler events when the run was traced (`--trace-sched`: its `sched.trace`),
+//!   as Perfetto's own recorder writes them (ftrace bundles per CPU: the viewer's CPU tracks and
+//!   thread states): every sched_switch, and the wake-ups of the run's own processes (`sched`
+//!   says why only those, and how their times and states are written).
+//!
 //! summary.json gives the launcher's times in wall-clock ms after tick 0; tick 0's
 //! CLOCK_MONOTONIC time is the plant's schedule (`tick_scheduled_ns` − k × period, exact in real
 //! time). Lockstep has no schedule: there tick 0 is taken as the first state's publish stamp, a
 //! little after the plant's start, so the launcher's events are placed to within that.
 
+mod sched;
 mod wire;
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
@@ -39,6 +45,7 @@ use anyhow::Context as _;
 use crate::contract::msg::LoopTrace;
 use crate::contract::report::HOPS;
 use crate::contract::role::Role;
+use crate::launcher::sched_trace::TRACE_FILE as SCHED_TRACE;
 use crate::launcher::summary::Summary;
 use crate::tools::ToolError;
 use crate::tools::run_folder::{RunFolder, Table};
@@ -134,8 +141,9 @@ mod field {
     pub const ANNOTATION_STRING: u32 = 6;
 }
 
-/// ClockSnapshot.Clock.BuiltinClocks.MONOTONIC.
+/// ClockSnapshot.Clock.BuiltinClocks.MONOTONIC, BOOTTIME.
 const CLOCK_MONOTONIC: u64 = 3;
+const CLOCK_BOOTTIME: u64 = 6;
 /// TracePacket.SequenceFlags.
 const SEQ_INCREMENTAL_STATE_CLEARED: u64 = 1;
 const SEQ_NEEDS_INCREMENTAL_STATE: u64 = 2;
@@ -176,7 +184,13 @@ pub fn write_perfetto(run_dir: &Path, out: Option<&Path>) -> Result<PathBuf, Too
     let folder = RunFolder::open(run_dir, &FILES)?;
     let summary = folder.summary()?;
     let loops = folder.table("loops.csv")?;
-    let bytes = trace(&summary, &loops)?;
+    let sched_path = run_dir.join(SCHED_TRACE);
+    let sched = match std::fs::read_to_string(&sched_path) {
+        Ok(text) => Some(text),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(anyhow::Error::new(e).context(format!("read {}", sched_path.display())).into()),
+    };
+    let bytes = trace(&summary, &loops, sched.as_deref())?;
     let path = out.map_or_else(|| run_dir.join(FILE), Path::to_path_buf);
     let partial = path.with_extension("perfetto-trace.partial");
     std::fs::write(&partial, &bytes).with_context(|| format!("write {}", partial.display()))?;
@@ -184,13 +198,19 @@ pub fn write_perfetto(run_dir: &Path, out: Option<&Path>) -> Result<PathBuf, Too
     Ok(path)
 }
 
-/// The trace of a run: its summary and its loops.csv.
-pub fn trace(summary: &Summary, loops: &Table) -> Result<Vec<u8>, ToolError> {
+/// The trace of a run: its summary, its loops.csv and its scheduler trace (sched.trace's text)
+/// if it has one.
+pub fn trace(summary: &Summary, loops: &Table, sched: Option<&str>) -> Result<Vec<u8>, ToolError> {
     let columns = Columns::read(loops)?;
     let mut trace = Builder::new(summary);
     trace.loops(&columns);
     trace.launcher_events(summary, &columns);
-    Ok(trace.encode())
+    let Some(text) = sched else { return Ok(trace.encode(false)) };
+    let pids: HashSet<u32> = summary.processes.iter().map(|p| p.pid).collect();
+    let events = sched::SchedEvents::parse(text, &pids, &summary.machine.kernel);
+    let mut out = trace.encode(true);
+    events.encode(&mut out, field::TRACE_PACKET, field::SEQUENCE_ID, SEQUENCE);
+    Ok(out)
 }
 
 /// loops.csv's columns, by name.
@@ -586,8 +606,10 @@ impl Builder {
     }
 
     /// The trace's bytes: the sequence's first packet (its incremental state cleared: the clock
-    /// and the interned names), the tracks, then every event in time order.
-    fn encode(mut self) -> Vec<u8> {
+    /// and the interned names), the tracks, then every event in time order. With `ftrace`, the
+    /// clock snapshot gives BOOTTIME, the clock Perfetto reads ftrace events on, MONOTONIC's
+    /// reading (`sched`).
+    fn encode(mut self, ftrace: bool) -> Vec<u8> {
         self.events.sort_unstable_by_key(|e| (e.ts, e.order));
         let mut out = Vec::with_capacity(self.events.len() * 40 + 4096);
         let first_ts = self.events.first().map_or(0, |e| e.ts);
@@ -615,6 +637,13 @@ impl Builder {
                     wire::uint(c, field::CLOCK_ID, CLOCK_MONOTONIC);
                     wire::uint(c, field::CLOCK_TIMESTAMP, first_ts);
                 });
+                // The scheduler's events are MONOTONIC too, read by Perfetto as BOOTTIME: one to one.
+                if ftrace {
+                    wire::message(s, field::SNAPSHOT_CLOCKS, |c| {
+                        wire::uint(c, field::CLOCK_ID, CLOCK_BOOTTIME);
+                        wire::uint(c, field::CLOCK_TIMESTAMP, first_ts);
+                    });
+                }
                 wire::uint(s, field::SNAPSHOT_PRIMARY_CLOCK, CLOCK_MONOTONIC);
             });
         });
@@ -789,7 +818,7 @@ rejected,tick_scheduled_ns,tick_wake_ns,tick_period_ns,cause,controller_runqueue
         s.rate_hz = 1000.0;
         s.deadline_us = Some(1.0);
         let table = Table::parse("loops.csv", LOOPS).unwrap();
-        let bytes = trace(&s, &table).unwrap();
+        let bytes = trace(&s, &table, None).unwrap();
         let packets: Vec<Vec<(u32, Value)>> = fields(&bytes)
             .into_iter()
             .map(|(n, v)| match (n, v) {
@@ -866,6 +895,80 @@ rejected,tick_scheduled_ns,tick_wake_ns,tick_period_ns,cause,controller_runqueue
         // A flow per loop: 8 slices of loop 0 (its plant step ends it), 7 of loops 1 and 2.
         let ending = flows.iter().filter(|(n, _)| *n == 48).count();
         assert_eq!((flows.len(), ending), (8 + 7 + 7, 3));
+    }
+
+    /// The scheduler's events of a traced run: a bundle per CPU, after the loop's packets, on the
+    /// loop's clock (BOOTTIME, which Perfetto reads them on, given MONOTONIC's reading).
+    #[test]
+    fn a_traced_runs_scheduler_events_are_ftrace_bundles_per_cpu() {
+        const SCHED: &str = "\
+# entries-in-buffer/entries-written: 3/3   #P:2
+ looplab-estimat-200     [000] d..2.     0.000001: sched_wakeup: comm=looplab-control pid=300 prio=120 target_cpu=001
+         my hog-400   [001] d..2.     0.000002: sched_switch: prev_comm=my hog prev_pid=400 prev_prio=49 prev_state=R+ ==> next_comm=looplab-control next_pid=300 next_prio=120
+ looplab-control-300     [001] d..2.     0.000003: sched_switch: prev_comm=looplab-control prev_pid=300 prev_prio=120 prev_state=S ==> next_comm=swapper/1 next_pid=0 next_prio=120
+";
+        let mut s = summary();
+        s.rate_hz = 1000.0;
+        s.machine.kernel = "6.1.0-13-amd64".into();
+        let table = Table::parse("loops.csv", LOOPS).unwrap();
+        let plain = trace(&s, &table, None).unwrap();
+        let bytes = trace(&s, &table, Some(SCHED)).unwrap();
+        let packets: Vec<Vec<(u32, Value)>> = fields(&bytes)
+            .into_iter()
+            .map(|(_, v)| match v {
+                Value::Bytes(p) => fields(p),
+                other => panic!("not a packet: {other:?}"),
+            })
+            .collect();
+        let clocks: Vec<(u64, u64)> = fields(bytes_of(&packets[0], field::CLOCK_SNAPSHOT))
+            .iter()
+            .filter(|(n, _)| *n == field::SNAPSHOT_CLOCKS)
+            .map(|(_, c)| match c {
+                Value::Bytes(c) => match (get(&fields(c), 1), get(&fields(c), 2)) {
+                    (Some(Value::Varint(id)), Some(Value::Varint(ts))) => (id, ts),
+                    other => panic!("{other:?}"),
+                },
+                _ => panic!(),
+            })
+            .collect();
+        assert_eq!(clocks, [(CLOCK_MONOTONIC, 1000), (CLOCK_BOOTTIME, 1000)]);
+        // The loop's packets as before (but the clock), then the kernel's release, then a bundle per CPU.
+        let loop_packets = fields(&plain).len();
+        let system = fields(bytes_of(&packets[loop_packets], 45));
+        let utsname = fields(bytes_of(&system, 1));
+        assert_eq!(bytes_of(&utsname, 3), b"6.1.0-13-amd64");
+        let bundles: Vec<Vec<(u32, Value)>> =
+            packets[loop_packets + 1..].iter().map(|p| fields(bytes_of(p, 1))).collect();
+        assert_eq!(bundles.len(), 2);
+        assert_eq!(get(&bundles[0], 1), Some(Value::Varint(0)));
+        assert_eq!(get(&bundles[1], 1), Some(Value::Varint(1)));
+        let events: Vec<Vec<(u32, Value)>> = bundles[1]
+            .iter()
+            .filter(|(n, _)| *n == 2)
+            .map(|(_, e)| match e {
+                Value::Bytes(e) => fields(e),
+                _ => panic!(),
+            })
+            .collect();
+        assert_eq!(events.len(), 2);
+        assert_eq!(get(&events[0], 1), Some(Value::Varint(2_000)), "µs in ns, as printed");
+        assert_eq!(get(&events[0], 2), Some(Value::Varint(400)));
+        let switch = fields(bytes_of(&events[0], 4));
+        assert_eq!(bytes_of(&switch, 1), b"my hog");
+        assert_eq!(get(&switch, 4), Some(Value::Varint(0x100)), "preempted, 4.14 and later");
+        assert_eq!(bytes_of(&switch, 5), b"looplab-control");
+        assert_eq!(get(&switch, 6), Some(Value::Varint(300)));
+        let wakeup: Vec<Vec<(u32, Value)>> = bundles[0]
+            .iter()
+            .filter(|(n, _)| *n == 2)
+            .map(|(_, e)| match e {
+                Value::Bytes(e) => fields(bytes_of(&fields(e), 17)),
+                _ => panic!(),
+            })
+            .collect();
+        assert_eq!(wakeup.len(), 1);
+        assert_eq!(get(&wakeup[0], 2), Some(Value::Varint(300)));
+        assert_eq!(get(&wakeup[0], 5), Some(Value::Varint(1)));
     }
 
     #[test]

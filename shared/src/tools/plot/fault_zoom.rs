@@ -1,7 +1,7 @@
 //! One figure per fault, zoomed on it: `fault-<n>-<kind>-<process>.png`, from a little before
 //! the injection to a little after the loop was whole again (or after the loss, for a stage
 //! that never came back): the scenario's error against its limit, and each loop's end-to-end
-//! latency.
+//! latency with its deadline misses, each in its cause's colour (`misses.rs`).
 
 use std::path::{Path, PathBuf};
 
@@ -10,6 +10,7 @@ use crate::model::figure::{RunColumns, runs};
 use crate::model::scenario::Scenario;
 use crate::tools::ToolError;
 use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel};
+use crate::tools::plot::misses::{crosses_by_cause, read_misses};
 use crate::tools::run_folder::RunFolder;
 
 /// Shown before the injection and after the end of "during", s (at least 50 loops).
@@ -34,10 +35,9 @@ pub fn plot_faults(
         return Ok(vec![]);
     }
     let loops = folder.table("loops.csv")?;
-    let (t_loops, end_to_end, missed) =
-        (loops.floats("t_s")?, loops.floats("end_to_end_ns")?, loops.floats("deadline_miss")?);
+    let (t_loops, end_to_end) = (loops.floats("t_s")?, loops.floats("end_to_end_ns")?);
     let latency_us: Vec<f64> = end_to_end.iter().map(|ns| ns / 1e3).collect();
-    let misses: Vec<f64> = t_loops.iter().zip(&missed).filter(|(_, m)| **m > 0.0).map(|(t, _)| *t).collect();
+    let misses = read_misses(&loops)?;
     // The deadline in µs (real time only; lockstep has none).
     let deadline_us = summary.deadline_us;
     let measure = scenario.error_measure();
@@ -76,11 +76,11 @@ pub fn plot_faults(
             .filter(|run| !run.is_empty())
             .map(|run| Curve::new("end to end", run, Colour::Series(1), Line::Solid(1)))
             .collect();
-        let in_view: Vec<f64> = misses.iter().copied().filter(|t| window.contains(t)).collect();
+        let in_view: Vec<_> = misses.iter().filter(|m| window.contains(&m.t)).collect();
         let top = latency.iter().flat_map(|c| &c.points).map(|p| p.1).fold(deadline_us.unwrap_or(0.0), f64::max) * 1.06;
         let title = match deadline_us {
             Some(_) => format!(
-                "end to end · {} deadline misses in view (crosses: late, no command or a skipped tick)",
+                "end to end · {} deadline misses in view (crosses by cause: late, no command or a skipped tick)",
                 in_view.len()
             ),
             None => "end to end, each loop with a command (lockstep: no deadline)".into(),
@@ -88,7 +88,7 @@ pub fn plot_faults(
         let mut latency_panel = Panel::new(title, "latency, µs", latency);
         if let Some(deadline) = deadline_us {
             latency_panel.bounds = vec![Curve::level("deadline", deadline, &window, Colour::Limit)];
-            latency_panel.marks = in_view.into_iter().map(|t| (t, top)).collect();
+            latency_panel.curves.extend(crosses_by_cause(in_view, |_| top));
         }
         let figure = Figure {
             title: format!("{}: {} (during: {:.3} s to {:.3} s)", scenario.title(), f.fault, f.at_s, during_end),

@@ -62,6 +62,7 @@ pub fn rgb(colour_of: Colour) -> RGBColor {
         Colour::Series(i) => colour(i),
         Colour::Truth => TRUTH,
         Colour::Limit => LIMIT,
+        Colour::Rgb(r, g, b) => RGBColor(r, g, b),
     }
 }
 
@@ -169,10 +170,12 @@ impl Figure {
         for (label, colour, line) in &entries {
             let style = match line {
                 Line::Solid(w) => colour.stroke_width((*w).max(2)),
-                Line::Dashed => colour.stroke_width(2),
+                Line::Dashed | Line::Crosses => colour.stroke_width(2),
             };
             entry(label, &|x| {
-                if *line == Line::Dashed {
+                if *line == Line::Crosses {
+                    area.draw(&Cross::new((x + 14, y), 5, style)).map_err(plot_error)
+                } else if *line == Line::Dashed {
                     for s in [0, 11, 22] {
                         area.draw(&PathElement::new(vec![(x + s, y), (x + s + 6, y)], style)).map_err(plot_error)?;
                     }
@@ -224,13 +227,18 @@ impl Figure {
         for curve in panel.bounds_shown().chain(&panel.curves) {
             let points: Vec<(f64, f64)> =
                 curve.points.iter().copied().filter(|p| p.0 >= self.x.start && p.0 <= self.x.end).collect();
-            let points = thin(points, POINTS_PER_CURVE);
             match curve.line {
-                Line::Solid(width) => thick_line(area, &points, rgb(curve.colour), width)?,
+                Line::Solid(width) => thick_line(area, &thin(points, POINTS_PER_CURVE), rgb(curve.colour), width)?,
                 Line::Dashed => {
+                    let points = thin(points, POINTS_PER_CURVE);
                     chart
                         .draw_series(DashedLineSeries::new(points, 8, 6, rgb(curve.colour).stroke_width(2)))
                         .map_err(plot_error)?;
+                }
+                // Events, not a signal: every one is drawn, where thinning would drop some.
+                Line::Crosses => {
+                    let style = rgb(curve.colour).stroke_width(2);
+                    chart.draw_series(points.iter().map(|p| Cross::new(*p, 5, style))).map_err(plot_error)?;
                 }
             }
         }

@@ -1,12 +1,14 @@
 //! Figures as PNG (plotters' bitmap backend), with an embedded font so a figure renders the same
 //! on a machine with no fonts installed. `figure`: the engine that draws a figure of panels over
 //! time (`model/figure.rs` describes one); `latency`: latency distributions (bench, plot,
-//! compare); `run`: a run folder's figures (`looplab plot`); `paper`: the papers' figures
-//! reproduced, as each scenario declares them.
+//! compare); `run`: a run folder's figures (`looplab plot`); `misses`: the deadline misses by
+//! their cause's kind, one colour map for every figure; `paper`: the papers' figures reproduced,
+//! as each scenario declares them.
 
 pub mod fault_zoom;
 pub mod figure;
 pub mod latency;
+pub mod misses;
 pub mod paper;
 pub mod run;
 pub mod text;

@@ -1,6 +1,6 @@
 //! `looplab plot RUN_DIR`: a run's figures, as PNG in the run folder: truth against estimate,
-//! the commands, each sensor's held values against the truth it measures, and the tick period
-//! error, with every fault marked on the time axis.
+//! the commands, each sensor's held values against the truth it measures, the tick period
+//! error and the deadline misses by cause, with every fault marked on the time axis.
 //!
 //! The CSV files are read by column name through the run folder's reader, the names a run of
 //! the launch file writes (`Layout::trajectory_columns`, `loops::columns`).
@@ -18,6 +18,7 @@ use crate::model::layout::Layout;
 use crate::model::scenario::Scenario;
 use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel, series, steps, tick_label};
 use crate::tools::plot::latency;
+use crate::tools::plot::misses::{Miss, crosses_by_cause, read_misses};
 use crate::tools::run_folder::RunFolder;
 use crate::tools::{RUN_FILES, ToolError};
 
@@ -69,6 +70,8 @@ pub struct RunData {
     /// trajectory.csv, column by column in the layout's order, each read by its name.
     pub trajectory: Vec<Vec<f64>>,
     pub ticks: Ticks,
+    /// The loops loops.csv flags as deadline misses, with their causes.
+    pub misses: Vec<Miss>,
     pub faults: Vec<FaultMark>,
     pub summary: Summary,
 }
@@ -88,12 +91,13 @@ impl RunData {
             period_ns: loops.floats("tick_period_ns")?,
             deadline_miss: loops.floats("deadline_miss")?,
         };
+        let misses = read_misses(&loops)?;
         let faults = summary
             .faults
             .iter()
             .map(|f| FaultMark { t: f.at_s, label: format!("{} {}", <&str>::from(f.kind), f.process) })
             .collect();
-        Ok(RunData { config, scenario, layout, columns, trajectory, ticks, faults, summary })
+        Ok(RunData { config, scenario, layout, columns, trajectory, ticks, misses, faults, summary })
     }
 
     /// A figure of this run over simulation time `x`, titled "<scenario>: <what>", with its faults
@@ -378,8 +382,50 @@ pub fn tick_period_figure(data: &RunData) -> Option<Figure> {
     Some(data.figure_over_time("the plant's tick period error (real time)", vec![panel], data.span()))
 }
 
+/// The file of the deadline misses' figure, in the run folder.
+pub const MISSES_FIGURE: &str = "misses.png";
+
+/// The misses figure's title: the deadline misses as the report and summary.json count them
+/// (late, no command or a skipped tick), and how many of them loops.csv has no row for (around
+/// a monitor's restart, or ticks skipped at the very end), which are not drawn.
+pub fn misses_title(misses: u64, loops: u64, drawn: usize) -> String {
+    if misses == 0 {
+        return format!("no deadline misses in {loops} loops");
+    }
+    let share = misses as f64 * 100.0 / loops.max(1) as f64;
+    let mut title = format!("{misses} deadline misses of {loops} loops ({share:.1} %), by cause");
+    let unrecorded = misses.saturating_sub(drawn as u64);
+    if unrecorded > 0 {
+        title.push_str(&format!(" · {unrecorded} not drawn (no row in loops.csv)"));
+    }
+    title
+}
+
+/// Each deadline miss over the run, a cross in its cause's colour at its response time (tick
+/// due to command at the plant), above the deadline; a miss with no response time (no command,
+/// or a tick the plant skipped) along the top. None in lockstep (no deadline).
+pub fn misses_figure(data: &RunData) -> Option<Figure> {
+    let deadline_ms = data.summary.deadline_us? / 1e3;
+    let response_ms = |m: &Miss| m.response_ns.map(|ns| ns as f64 / 1e6);
+    // The row of misses without a response time: above every one that has one.
+    let highest = data.misses.iter().filter_map(response_ms).fold(deadline_ms, f64::max);
+    let top = highest * 1.15;
+    let span = data.span();
+    // The deadline is a curve, not a bound: it keeps the axis down to it when every miss is on
+    // the top row.
+    let mut curves = vec![Curve::level("deadline", deadline_ms, &span, Colour::Limit)];
+    curves.extend(crosses_by_cause(&data.misses, |m| response_ms(m).unwrap_or(top)));
+    let panel = Panel::new(
+        "each miss at its response time; along the top: no command came, or the tick was skipped",
+        "response time, ms",
+        curves,
+    );
+    let title = misses_title(data.summary.deadline_misses, data.summary.loops, data.misses.len());
+    Some(data.figure_over_time(&title, vec![panel], span))
+}
+
 /// The figures of a run folder, written into it: estimate.png, commands.png, sensors.png, in real
-/// time tick-period.png, and latency-cdf.png. Returns the paths written.
+/// time tick-period.png and misses.png, and latency-cdf.png. Returns the paths written.
 pub fn plot_run(run_dir: &Path, catalog: &Catalog) -> Result<Vec<PathBuf>, ToolError> {
     let data = RunData::read(run_dir, catalog)?;
     let mut written = Vec::new();
@@ -393,6 +439,10 @@ pub fn plot_run(run_dir: &Path, catalog: &Catalog) -> Result<Vec<PathBuf>, ToolE
         None => {
             tell!("tick-period.png: not drawn, a lockstep run has no tick schedule (the plant waits for each command)")
         }
+    }
+    match misses_figure(&data) {
+        Some(figure) => figures.push((MISSES_FIGURE, figure)),
+        None => tell!("{MISSES_FIGURE}: not drawn, a lockstep run has no deadline"),
     }
     for (name, figure) in figures {
         let path = run_dir.join(name);
@@ -433,6 +483,16 @@ mod tests {
         assert_eq!(true_counterpart("x_hat", &state), Some((0, "x")));
         assert_eq!(true_counterpart("x_prior", &state), Some((0, "x")));
         assert_eq!(true_counterpart("bias", &state), None);
+    }
+
+    #[test]
+    fn the_misses_title_counts_them_as_the_report_does() {
+        assert_eq!(misses_title(0, 1000, 0), "no deadline misses in 1000 loops");
+        assert_eq!(misses_title(27, 1000, 27), "27 deadline misses of 1000 loops (2.7 %), by cause");
+        assert_eq!(
+            misses_title(30, 1000, 28),
+            "30 deadline misses of 1000 loops (3.0 %), by cause · 2 not drawn (no row in loops.csv)"
+        );
     }
 
     #[test]
