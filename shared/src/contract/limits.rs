@@ -5,6 +5,12 @@
 
 use serde::{Deserialize, Serialize};
 
+/// The one rule for an error against a limit or a band, for the verdict and each fault's report
+/// alike: beyond when greater (an error equal to the limit is within it) or not a number.
+pub fn beyond(error: f64, limit: f64) -> bool {
+    error.is_nan() || error > limit
+}
+
 /// The error over every loop recorded, in simulation time.
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct LimitsWatch {
@@ -36,7 +42,7 @@ impl LimitsWatch {
             self.worst = Some(error);
             self.worst_at_s = Some(t);
         }
-        if error > limit {
+        if beyond(error, limit) {
             self.exceeded_at_s.get_or_insert(t);
             self.beyond_since_s.get_or_insert(t);
         } else {
@@ -45,5 +51,23 @@ impl LimitsWatch {
         if lost_beyond.is_some_and(|beyond| error >= beyond) {
             self.no_return_at_s.get_or_insert(t);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_error_equal_to_the_limit_is_within_it_and_nan_is_beyond() {
+        assert!(!beyond(0.3, 0.3));
+        assert!(beyond(0.300_000_000_000_000_04, 0.3));
+        assert!(beyond(f64::NAN, 0.3));
+        assert!(beyond(f64::INFINITY, 0.3));
+        let mut watch = LimitsWatch::default();
+        watch.observe(0.0, 0.3, 0.3, None);
+        assert_eq!((watch.exceeded_at_s, watch.beyond_since_s), (None, None));
+        watch.observe(0.001, 0.31, 0.3, None);
+        assert_eq!(watch.exceeded_at_s, Some(0.001));
     }
 }

@@ -187,6 +187,16 @@ pub struct ErrorMeasure {
 }
 
 impl ErrorMeasure {
+    /// Whether `error` is beyond the limit ([`crate::contract::limits::beyond`]: NaN is).
+    pub fn beyond(&self, error: f64) -> bool {
+        crate::contract::limits::beyond(error, self.limit)
+    }
+
+    /// Whether `error` is outside the band it must come back within (NaN is).
+    pub fn outside_band(&self, error: f64) -> bool {
+        crate::contract::limits::beyond(error, self.recovery_band)
+    }
+
     /// The error of the scenario's reference ([`Reference::error`]), so that fault reports
     /// judge against what the controller tracks.
     pub fn of_reference<R: Reference + 'static>(

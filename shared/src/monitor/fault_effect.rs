@@ -229,7 +229,7 @@ impl FaultTracker {
         }
         self.phases.add(if self.back.is_some() { Phase::After } else { Phase::During }, &facts);
         if let Some(error) = error {
-            if (error.is_nan() || error >= measure.limit) && self.effect.limit_exceeded_at_s.is_none() {
+            if measure.beyond(error) && self.effect.limit_exceeded_at_s.is_none() {
                 // Loop index for now; `finish` turns it into simulation time.
                 self.effect.limit_exceeded_at_s = Some(k as f64);
             }
@@ -246,11 +246,10 @@ impl FaultTracker {
             if k + self.second >= self.window_end {
                 peak(&mut self.effect.error_peak_last_s);
             }
-            // NaN counts as outside.
-            if error.is_nan() || error >= measure.limit {
+            if measure.beyond(error) {
                 self.effect.within_limits = false;
             }
-            if error.is_nan() || error > measure.recovery_band {
+            if measure.outside_band(error) {
                 self.last_outside = Some(k);
             }
         }
@@ -397,6 +396,26 @@ mod tests {
                 not_injected: false,
             }
         );
+    }
+
+    /// At an error equal to the limit, the fault's report says what the verdict says: within.
+    #[test]
+    fn an_error_equal_to_the_limit_is_within_it_as_for_the_verdict() {
+        let config = config(&["delay controller by 2 ticks at 5ms"]);
+        let mut trackers = FaultTracker::for_faults(&config, false);
+        let mut watch = crate::contract::limits::LimitsWatch::default();
+        for k in 0..20 {
+            let error = if k >= 5 { measure().limit } else { 0.0 };
+            trackers[0].observe(k, &loop_with(error, Some((false, 0))), &measure());
+            watch.observe(k as f64 / config.rate_hz, error, measure().limit, None);
+        }
+        let effect = trackers.pop().unwrap().finish(config.rate_hz);
+        assert!(effect.within_limits);
+        assert_eq!(effect.limit_exceeded_at_s, None);
+        assert_eq!(watch.exceeded_at_s, None);
+        let mut trackers = FaultTracker::for_faults(&config, false);
+        trackers[0].observe(6, &loop_with(f64::NAN, Some((false, 0))), &measure());
+        assert!(!trackers.pop().unwrap().finish(config.rate_hz).within_limits, "NaN is beyond");
     }
 
     #[test]
