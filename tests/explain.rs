@@ -333,11 +333,13 @@ fn a_process_that_takes_the_controllers_cpu_makes_its_misses_queued_controller_b
         panic!("this test needs two CPUs: the controller on one, the rest of the loop on the other");
     }
     let dir = fresh_dir("explain-queued");
-    // Every process of the run on CPU 0; the controller alone moves to CPU 1 below.
+    // Every process of the run on CPU 0; the controller alone moves to CPU 1 below. The loop at
+    // SCHED_FIFO 10, as a real-time loop runs: whatever else a busy machine runs at the normal
+    // policy does not make its misses, the bursts (FIFO 50) do.
     let mut launcher = Command::new("taskset")
         .args(["-c", "0"])
         .arg(env!("CARGO_BIN_EXE_looplab"))
-        .args(["run", "pendulum", "--duration", "3", "--trace-sched", "-q", "--out"])
+        .args(["run", "pendulum", "--duration", "3", "--trace-sched", "--set", "realtime.priority=10", "-q", "--out"])
         .arg(&dir)
         .stdout(Stdio::null())
         .spawn()
