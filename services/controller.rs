@@ -1,6 +1,6 @@
-//! The controller process of the loop (see `looplab_shared::runtime::relay`).
+//! The controller process of the loop (see `looplab_shared::runtime::builtin`).
 
 fn main() -> std::process::ExitCode {
     use looplab_shared::{contract::role::Role, runtime, scenarios};
-    runtime::child::process_main_with(Role::Controller, runtime::relay::controller, &scenarios::builtin())
+    runtime::child::process_main_with(Role::Controller, runtime::builtin::controller, &scenarios::builtin())
 }

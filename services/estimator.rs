@@ -1,6 +1,6 @@
-//! The estimator process of the loop (see `looplab_shared::runtime::relay`).
+//! The estimator process of the loop (see `looplab_shared::runtime::builtin`).
 
 fn main() -> std::process::ExitCode {
     use looplab_shared::{contract::role::Role, runtime, scenarios};
-    runtime::child::process_main_with(Role::Estimator, runtime::relay::estimator, &scenarios::builtin())
+    runtime::child::process_main_with(Role::Estimator, runtime::builtin::estimator, &scenarios::builtin())
 }

@@ -1,6 +1,6 @@
-//! The plant process of the loop (see `looplab_shared::runtime::plant`).
+//! The plant process of the loop (see `looplab_shared::runtime::builtin`).
 
 fn main() -> std::process::ExitCode {
     use looplab_shared::{contract::role::Role, runtime, scenarios};
-    runtime::child::process_main_with(Role::Plant, runtime::plant::run, &scenarios::builtin())
+    runtime::child::process_main_with(Role::Plant, runtime::builtin::plant, &scenarios::builtin())
 }

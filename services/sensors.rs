@@ -1,6 +1,6 @@
-//! The sensors process of the loop (see `looplab_shared::runtime::relay`).
+//! The sensors process of the loop (see `looplab_shared::runtime::builtin`).
 
 fn main() -> std::process::ExitCode {
     use looplab_shared::{contract::role::Role, runtime, scenarios};
-    runtime::child::process_main_with(Role::Sensors, runtime::relay::sensors, &scenarios::builtin())
+    runtime::child::process_main_with(Role::Sensors, runtime::builtin::sensors, &scenarios::builtin())
 }

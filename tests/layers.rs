@@ -1,6 +1,8 @@
-//! The shared crate's layers depend only downwards, and no folder's files are in an import cycle.
+//! The layers depend only downwards, and no folder's files are in an import cycle.
 //!
-//! Each folder of `shared/src` is a layer (ARCHITECTURE.md has the picture). A source file may
+//! Each folder of `shared/sdk/src` (the stage SDK: contract, config, model, runtime) and of
+//! `shared/src` (the scenarios and the rest of LoopLab, which names the SDK's layers through its
+//! re-exports) is a layer (ARCHITECTURE.md has the picture). A source file may
 //! name `crate::<layer>` only for its own layer or one below it. Read from the source text:
 //! every `crate::`, `super::` and `self::` path, written in full or in `{...}` groups, taken to
 //! the module file it names (the longest prefix of the path that is a file, so an item or an
@@ -339,19 +341,59 @@ fn cycles(graph: &BTreeMap<Module, BTreeSet<Module>>) -> Vec<Vec<Module>> {
     found
 }
 
-#[test]
-fn every_import_runs_down_or_across_and_no_module_is_in_a_cycle() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("shared/src");
+/// The files of one crate's `src`, as (path under `src/`, text).
+fn crate_files(src: &str) -> Vec<(String, String)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join(src);
     let mut paths = Vec::new();
     sources(&root, &mut paths);
     paths.sort();
-    let files: Vec<(String, String)> = paths
+    paths
         .iter()
         .map(|p| (p.strip_prefix(&root).unwrap().display().to_string(), std::fs::read_to_string(p).unwrap()))
-        .collect();
-    assert!(files.len() > 100, "read {} files from {}", files.len(), root.display());
-    let wrong = check(&files);
-    assert!(wrong.is_empty(), "imports against the layers, or in a cycle:\n{}", wrong.join("\n"));
+        .collect()
+}
+
+/// Both crates: the stage SDK (`shared/sdk`, the bottom layers) and the rest of LoopLab above it
+/// (`shared/`, which names the SDK's layers through its re-exports).
+#[test]
+fn every_import_runs_down_or_across_and_no_module_is_in_a_cycle() {
+    for (src, at_least) in [("shared/sdk/src", 50), ("shared/src", 100)] {
+        let files = crate_files(src);
+        assert!(files.len() > at_least, "read {} files from {src}", files.len());
+        let wrong = check(&files);
+        assert!(wrong.is_empty(), "{src}: imports against the layers, or in a cycle:\n{}", wrong.join("\n"));
+    }
+}
+
+/// The stage SDK is the bottom four layers and names nothing above them (cargo refuses it too:
+/// the SDK does not depend on the crate above it), so a stage of the user's own serves any
+/// catalog and links none of LoopLab's plots, recordings or scenarios.
+#[test]
+fn the_stage_sdk_is_the_bottom_four_layers_and_reaches_no_scenario() {
+    let folders = |src: &str| -> BTreeSet<String> {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join(src);
+        std::fs::read_dir(root)
+            .unwrap()
+            .flatten()
+            .filter(|e| e.path().is_dir())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect()
+    };
+    assert_eq!(folders("shared/sdk/src"), BTreeSet::from(["config", "contract", "model", "runtime"].map(String::from)));
+    for layer in ["contract", "config", "model"] {
+        assert!(!folders("shared/src").contains(layer), "shared/src/{layer}: the SDK's layer, in the crate above it");
+    }
+    for (name, text) in crate_files("shared/sdk/src") {
+        for (anchor, _, path) in paths_in(&text) {
+            // The scenarios, and every layer above the runtime.
+            let outside = path.first().is_some_and(|first| first == "scenarios" || layer(first) > layer("runtime"));
+            assert!(
+                !(matches!(anchor, Anchor::Crate) && outside),
+                "shared/sdk/src/{name}: names `crate::{}`",
+                join(&path)
+            );
+        }
+    }
 }
 
 fn names(text: &str) -> Vec<String> {

@@ -13,7 +13,7 @@ use std::path::Path;
 use common::{FaultKind, Table, fresh_dir, looplab, run};
 use figure_check::{Image, MIN_DATA_PIXELS, assert_charts, assert_figure, check, data_pixels};
 use looplab_shared::model::figure::RunColumns;
-use looplab_shared::tools::plot::figure::{Cell, Colour, Curve, FaultMark, Figure, Line, Panel, rgb};
+use looplab_shared::tools::plot::figure::{Cell, Colour, Curve, Draw as _, FaultMark, Figure, Line, Panel, rgb};
 use looplab_shared::tools::plot::misses::CauseKind;
 use looplab_shared::tools::plot::run::{
     APPLIED_LABEL, COMMAND_LABEL, MISSES_FIGURE, RunData, commands_figure, misses_figure,

@@ -1,5 +1,6 @@
-//! LoopLab's shared crate, in layers that depend only downwards:
-//! contract → config → model → scenarios → runtime → monitor → launcher → tools → cli.
+//! LoopLab's shared crate, in layers that depend only downwards: the stage SDK's
+//! (`looplab-sdk`: contract → config → model → runtime), then scenarios → runtime (LoopLab's own
+//! processes) → monitor → launcher → tools → cli.
 //! The binaries in `services/` are one call each into here. ARCHITECTURE.md has the picture.
 
 // Text for the user that never panics: a closed terminal (SIGHUP ignored, EIO) or a pipe whose
@@ -19,18 +20,14 @@ macro_rules! say_raw {
         let _ = write!(out, $($text)*).and_then(|_| out.flush());
     }};
 }
-macro_rules! tell {
-    ($($text:tt)*) => {{
-        use std::io::Write as _;
-        let _ = writeln!(std::io::stderr().lock(), $($text)*);
-    }};
-}
+// `tell!`, its line on stderr, and `frozen_fields!`, a metric's freeze and thaw, are the SDK's.
+#[macro_use]
+extern crate looplab_sdk;
+
+pub use looplab_sdk::{config, contract, model};
 
 pub mod cli;
-pub mod config;
-pub mod contract;
 pub mod launcher;
-pub mod model;
 pub mod monitor;
 pub mod runtime;
 pub mod scenarios;

@@ -1,5 +1,5 @@
 //! `liblooplab_stage.so`: a stage of your own in C, run by LoopLab's own runner
-//! (`looplab_shared::runtime::user_stage`). The C program implements a `looplab_step` and calls
+//! (`looplab_sdk::runtime::user_stage`). The C program implements a `looplab_step` and calls
 //! `looplab_run`; everything else (waiting, stamps, faults, the ready and report lines, signals)
 //! is the same relay the built-in stages run. `build.rs` writes the header `looplab_stage.h`
 //! beside the library.
@@ -12,9 +12,9 @@ use std::process::ExitCode;
 use std::sync::OnceLock;
 
 use anyhow::{Result, bail};
-use looplab_shared::contract::protocol::{ProcessArgs, stage_env};
-use looplab_shared::contract::role::Role;
-use looplab_shared::runtime::user_stage::{self, MAX_FROZEN_BYTES, Step, config_number, stage_names};
+use looplab_sdk::contract::protocol::{ProcessArgs, stage_env};
+use looplab_sdk::contract::role::Role;
+use looplab_sdk::runtime::user_stage::{self, MAX_FROZEN_BYTES, Step, config_number, stage_names};
 
 /// The most bytes a `looplab_freeze` may write (a snapshot's room for a stage's state).
 pub const LOOPLAB_MAX_FROZEN_BYTES: usize = 248;
@@ -141,7 +141,7 @@ fn load_launch() -> Option<Launch> {
         );
         return None;
     };
-    let (config, scenario) = match looplab_shared::scenarios::builtin().load_resolved(&args.launch) {
+    let config = match looplab_sdk::config::launch::load_run_config(&args.launch) {
         Ok(loaded) => loaded,
         Err(e) => {
             eprintln!("{role_name}: error: {e}");
@@ -149,7 +149,7 @@ fn load_launch() -> Option<Launch> {
         }
     };
     let (inputs, outputs) = match role_name.parse::<Role>() {
-        Ok(role) if Role::STAGES.contains(&role) => stage_names(role, &config, scenario.as_ref()),
+        Ok(role) if Role::STAGES.contains(&role) => stage_names(role, &config),
         _ => (vec![], vec![]),
     };
     let c_strings = |names: Vec<String>| names.into_iter().filter_map(|n| CString::new(n).ok()).collect();

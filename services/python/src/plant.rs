@@ -6,8 +6,8 @@
 //! ([`hold`]), so a derivative call does not take it again.
 
 use anyhow::{Result, anyhow, bail};
-use looplab_shared::model::plant_model::{PlantModel, Stepping};
-use looplab_shared::runtime::user_plant::PlantInfo;
+use looplab_sdk::model::plant_model::{PlantModel, Stepping};
+use looplab_sdk::runtime::user_plant::PlantInfo;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyModule};
 
@@ -60,7 +60,7 @@ impl Plant {
     }
 }
 
-/// Runs one plant step with the GIL held (see [`looplab_shared::runtime::user_plant::Hold`]).
+/// Runs one plant step with the GIL held (see [`looplab_sdk::runtime::user_plant::Hold`]).
 pub fn hold(step: &mut dyn FnMut() -> Result<()>) -> Result<()> {
     Python::attach(|_| step())
 }
@@ -243,18 +243,19 @@ pub fn load_class<'py>(py: Python<'py>, spec: &str) -> std::result::Result<Bound
 /// stepped `ticks` times from its initial state with a zero input, by the plant process's own
 /// [`DeclaredPlant`], the GIL taken once per step as there (`looplab bench` and the report).
 pub fn step_ns(py: Python<'_>, launch: &str, ticks: u64) -> Result<f64> {
-    use looplab_shared::model::scenario::Plant as _;
-    use looplab_shared::scenarios::declared::{plant::DeclaredPlant, system::PlantSource, system::System};
-    let (config, _) = looplab_shared::scenarios::resolve(launch, &[]).map_err(|e| anyhow!("{e}"))?;
-    let system = System::from_config(&config).map_err(|e| anyhow!("{e}"))?;
-    let PlantSource::Python { file, class } = &system.source else {
-        bail!("{launch}: its plant is not a Python class")
-    };
-    let cls = load_class(py, &format!("{}:{class}", file.display())).map_err(|e| anyhow!(e))?;
-    let info = PlantInfo { config: &config, spec: &system.spec, incarnation: 0 };
+    use looplab_sdk::config::{launch::resolve_config, python_plant};
+    use looplab_sdk::model::{declared_plant::DeclaredPlant, plant_model::ModelSpec, scenario::Plant as _};
+    // A declared system needs no catalog.
+    let config = resolve_config(launch, &[], &[]).map_err(|e| anyhow!("{e}"))?;
+    let Some(python) = &config.stages.plant else { bail!("{launch}: its plant is not a Python class") };
+    let (file, class) = python_plant::spec(python).rsplit_once(':').expect("checked when the file loaded");
+    let cls = load_class(py, &format!("{}:{class}", python.dir.join(file).display())).map_err(|e| anyhow!(e))?;
+    let plant_section = config.plant_section().map_err(|e| anyhow!("{e}"))?;
+    let spec = ModelSpec::declared(&config, &config.system().map_err(|e| anyhow!("{e}"))?, &plant_section);
+    let info = PlantInfo { config: &config, spec: &spec, incarnation: 0 };
     let model = PyPlantModel::make(py, &cls, &info)?;
-    let (inputs, dt) = (system.spec.input.len(), system.spec.dt);
-    let mut plant = DeclaredPlant::new(model, system.spec.outputs.len(), inputs, system.substeps)?;
+    let (inputs, dt) = (spec.input.len(), spec.dt);
+    let mut plant = DeclaredPlant::new(model, spec.outputs.len(), inputs, plant_section.substeps)?;
     let u = vec![0.0; inputs];
     py.detach(move || {
         let start = std::time::Instant::now();

@@ -19,7 +19,7 @@ use crate::runtime::signals::StopFlag;
 
 /// Runs the loop of `config` in this process and writes the run folder.
 pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &Path) -> Result<(Summary, Outcome)> {
-    let (_, started_at) = begin_run(run_dir, config)?;
+    let (_, started_at) = begin_run(run_dir, config, scenario)?;
     let stop = StopFlag::install()?;
     // The loop's thread only hands each message over; the recording runs beside it.
     let mut recording = RecordingThread::spawn(Recording::in_process(config, scenario, run_dir)?)?;

@@ -4,14 +4,15 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
 
-use crate::config::launch::LaunchConfig;
+use crate::config::launch::{LaunchConfig, run_vectors};
+use crate::model::scenario::Scenario;
 use crate::runtime::run_file;
 
 /// Begins a run in its folder: writes the resolved `launch.toml` (the file the processes load)
 /// and returns its path and the wall-clock start (UTC, RFC 3339) for the summary.
-pub fn begin_run(run_dir: &Path, config: &LaunchConfig) -> Result<(PathBuf, String)> {
+pub fn begin_run(run_dir: &Path, config: &LaunchConfig, scenario: &dyn Scenario) -> Result<(PathBuf, String)> {
     let launch_file = run_dir.join("launch.toml");
-    write_atomically(&launch_file, &config.to_toml())?;
+    write_atomically(&launch_file, &run_vectors::run_toml(config, &scenario.input_limits()))?;
     Ok((launch_file, chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true)))
 }
 

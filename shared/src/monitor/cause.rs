@@ -26,7 +26,7 @@ use std::fmt;
 
 use crate::config::faults::FaultKind;
 use crate::contract::msg::{Header, SchedStamp, Stamp};
-use crate::contract::report::{CauseTally, HOPS};
+use crate::contract::report::HOPS;
 use crate::contract::role::{Role, Topic};
 use crate::monitor::join::LoopParts;
 
@@ -246,17 +246,6 @@ fn skipped(
     };
     let queued = u64::from(after.sched.queued_ns).min(away);
     if 2 * queued >= away { (Cause::Queued(stage), Some(queued)) } else { (Cause::Skipped(stage), Some(away)) }
-}
-
-impl CauseTally {
-    pub fn add(&mut self, explanation: &Explanation) {
-        self.loops += 1;
-        if let Some(part) = explanation.part_ns {
-            self.min_part_ns = Some(self.min_part_ns.map_or(part, |m| m.min(part)));
-            self.max_part_ns = Some(self.max_part_ns.map_or(part, |m| m.max(part)));
-            self.total_part_ns += part;
-        }
-    }
 }
 
 #[cfg(test)]

@@ -12,13 +12,6 @@ use crate::contract::role::Topic;
 /// one copy per sample, no allocation on the receive path.
 pub use crate::contract::msg::LoopMessage as Sample;
 
-impl Sample {
-    /// The loop it belongs to, and its topic.
-    pub fn key(&self) -> (u64, Topic) {
-        (self.header().k, self.topic())
-    }
-}
-
 /// The parts of one loop that have arrived.
 #[derive(Debug, Default, Clone)]
 pub struct LoopParts {

@@ -20,6 +20,7 @@ use crate::contract::clock::now_ns;
 use crate::contract::msg::MONITOR_BUFFER;
 use crate::contract::protocol::ChildEvent;
 use crate::contract::report::MonitorReport;
+use crate::model::scenario::Scenario;
 use crate::monitor::join::Sample;
 use crate::monitor::recording::{Recording, StatusCallback};
 use crate::monitor::stall::StallWatch;
@@ -56,7 +57,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Reader<T> {
     }
 }
 
-pub fn run(context: &Context) -> Result<ChildEvent> {
+pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
     let config = &context.config;
     let states = Reader::new(context, Topic::State, Sample::State)?;
     let measurements = Reader::new(context, Topic::Measurements, Sample::Measurements)?;
@@ -74,10 +75,9 @@ pub fn run(context: &Context) -> Result<ChildEvent> {
         Box::new(|status| emit_if_room(&ChildEvent::Status(Box::new(status.clone()))).map(|_| ()));
     // Its running state goes on across restarts: the report covers the whole run. Each kill and
     // stop is judged from when the launcher says it really injected it.
-    let recording =
-        Recording::new(config, context.scenario.as_ref(), &context.run_dir, context.incarnation, Some(status))?
-            .with_snapshot(crate::monitor::resume::path(&context.run_id)?, context.scenario.as_ref())
-            .with_injections(crate::monitor::injections::path(&context.run_id)?);
+    let recording = Recording::new(config, scenario, &context.run_dir, context.incarnation, Some(status))?
+        .with_snapshot(crate::monitor::resume::path(&context.run_id)?, scenario)
+        .with_injections(crate::monitor::injections::path(&context.run_id)?);
     // The mode's one say in the monitor process. In real time the monitor must never slow the
     // loop: its writer (histograms, metrics, files: nearly all its work) runs at the lowest
     // priority, and the buffers hold a second of samples to catch up with. The receive loop

@@ -193,7 +193,7 @@ impl Recording {
     /// Goes on from the last monitor's state; on an error, leaves the recording as it was.
     fn thaw(&mut self, frozen: Thawed, scenario: &dyn Scenario) -> Result<()> {
         let mut report: MonitorReport = serde_json::from_str(&frozen.report)?;
-        report.missing.last = frozen.missing_newest;
+        report.missing.go_on_from(frozen.missing_newest);
         match &frozen.metrics {
             Some(bytes) => {
                 let mut metrics = scenario.metrics();
@@ -221,7 +221,7 @@ impl Recording {
                 // Loops still waiting for parts are not in the state: they are the next one's.
                 next_k: self.joiner.next_k(),
                 report,
-                missing_newest: self.report.missing.last,
+                missing_newest: self.report.missing.newest(),
                 last_record_sequence: self.last_record_sequence,
                 stats: &self.stats,
                 faults: &self.faults,
@@ -400,10 +400,10 @@ impl Recording {
         );
         let name = explanation.cause.to_string();
         if missed {
-            self.report.miss_causes.entry(name.clone()).or_default().add(&explanation);
+            self.report.miss_causes.entry(name.clone()).or_default().add(explanation.part_ns);
         }
         if slow {
-            self.report.slow_causes.entry(name).or_default().add(&explanation);
+            self.report.slow_causes.entry(name).or_default().add(explanation.part_ns);
         }
         Some(explanation)
     }

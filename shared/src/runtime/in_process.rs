@@ -80,12 +80,12 @@ pub fn run(
     }
     let sensors = || SensorsTask::new(config, scenario);
     let estimator = || EstimatorTask::new(config, scenario);
-    let controller = || ControllerTask::new(scenario);
+    let controller = || ControllerTask::new(config, scenario);
     let Some(playback) = Playback::load(config, scenario)? else {
         let plant = PlantCore::new(config, scenario, 0);
         return Loop { config, stop, plant }.run(sensors, estimator, controller, observe);
     };
-    let plant = PlantCore::with_plant(config, scenario, playback.plant(), 0);
+    let plant = PlantCore::with_plant(config, scenario.input_limits(), playback.plant(), 0);
     let run = Loop { config, stop, plant };
     match config.replay.as_ref().map(|r| r.role()) {
         Some(Role::Sensors) => run.run(sensors, || playback.estimator(), || playback.controller(), observe),

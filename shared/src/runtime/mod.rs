@@ -1,26 +1,17 @@
-//! Layer 4, the runtime: it owns time and policy. iceoryx2 ports, waiting, the stage runner and
-//! its tasks, the plant loop, snapshots, and the in-process twin of the five processes.
+//! Layer 4, the runtime: the stage SDK's runtime (`looplab_sdk::runtime`: ports, waiting, the
+//! stage runner, the plant loop, snapshots), with what LoopLab's own processes add to it: the
+//! built-in processes' bodies, the playback of a recording, the in-process twin of the five
+//! processes, and the bridge to a stage on another host.
+
+pub use looplab_sdk::runtime::*;
 
 pub mod bridge;
-pub mod child;
-pub mod faults;
+pub mod builtin;
 pub mod in_process;
-pub mod ipc;
-pub mod plant;
 pub mod playback;
-pub mod private_file;
-pub mod reader_state;
-pub mod realtime;
 pub mod recorded;
-pub mod relay;
-pub mod run_file;
-pub mod run_storage;
-pub mod sched;
-pub mod shared_file;
-pub mod shm_secret;
-pub mod signals;
-pub mod snapshot;
-pub mod task;
-pub mod user_plant;
-pub mod user_stage;
-pub mod wait;
+
+#[cfg(test)]
+mod plant_tests;
+#[cfg(test)]
+mod task_tests;

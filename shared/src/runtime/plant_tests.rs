@@ -1,8 +1,11 @@
 //! The plant's pure core, driven by explicit times: no clock, no process. The pendulum at
-//! 1 kHz: one period is 1 ms, its input range ±10 A, the command timeout 20 ms.
+//! 1 kHz: one period is 1 ms, its input range ±10 A, the command timeout 20 ms. Here, a layer
+//! above the stage SDK's runtime, for the pendulum.
 
-use super::*;
 use crate::config::launch::Override;
+use crate::contract::msg::*;
+use crate::contract::role::Role;
+use crate::runtime::plant::*;
 
 /// Tick 0 is due here (any time will do: the core only compares times).
 const START: u64 = 1_000_000_000;

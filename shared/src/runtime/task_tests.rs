@@ -1,9 +1,14 @@
 //! The stage runner, driven loop by loop with no clock and no process: incarnations, and each
 //! in-loop fault by loop index in both modes. The pendulum's launch file at 1 kHz, so 10 ms is
-//! loop 10.
+//! loop 10. Here, a layer above the stage SDK's runtime, for the pendulum.
 
-use super::*;
-use crate::config::launch::Override;
+use std::time::Duration;
+
+use crate::config::faults::CorruptValue;
+use crate::config::launch::{LaunchConfig, Override};
+use crate::contract::msg::{Command, Estimate, Measurements};
+use crate::contract::role::Role;
+use crate::runtime::task::*;
 
 /// Echoes its input's first value into the command, counting its calls.
 #[derive(Default)]
@@ -204,8 +209,8 @@ fn restart_controller(scenario_name: &str, at: u64, after: u64) -> (bool, bool) 
     let s = scenario.as_ref();
     let mut plant = crate::runtime::plant::PlantCore::new(&config, s, 0);
     let (mut sensors, mut estimator) = (SensorsTask::new(&config, s), EstimatorTask::new(&config, s));
-    let mut controller = ControllerTask::new(s);
-    let (mut thawed, mut fresh) = (ControllerTask::new(s), ControllerTask::new(s));
+    let mut controller = ControllerTask::new(&config, s);
+    let (mut thawed, mut fresh) = (ControllerTask::new(&config, s), ControllerTask::new(&config, s));
     let (mut thawed_same, mut fresh_same) = (true, true);
     let bits = |c: &Command| c.u.map(f64::to_bits);
     for k in 0..at + after {
@@ -249,6 +254,6 @@ fn a_static_controller_resumes_too() {
     for name in ["pendulum", "fip"] {
         assert!(restart_controller(name, 300, 100).0, "{name}");
     }
-    let (_, scenario) = crate::scenarios::resolve("pendulum", &[]).unwrap();
-    assert!(ControllerTask::new(scenario.as_ref()).freeze().unwrap().is_none(), "nothing to keep");
+    let (config, scenario) = crate::scenarios::resolve("pendulum", &[]).unwrap();
+    assert!(ControllerTask::new(&config, scenario.as_ref()).freeze().unwrap().is_none(), "nothing to keep");
 }

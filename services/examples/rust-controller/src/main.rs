@@ -4,8 +4,8 @@
 //! `cargo build --release -p looplab-example-controller` and
 //! `looplab run services/examples/rust-controller/pendulum_rust.toml`.
 
-use looplab_shared::model::scenario::Controller;
-use looplab_shared::runtime::user_stage::run_controller;
+use looplab_sdk::model::scenario::Controller;
+use looplab_sdk::runtime::user_stage::run_controller;
 
 struct StateFeedback {
     gains: [f64; 3],

@@ -151,7 +151,7 @@ impl<'a> Supervisor<'a> {
         run_dir: &Path,
         view: LiveView,
     ) -> Result<(Summary, Outcome)> {
-        let (launch_file, started_at) = begin_run(run_dir, config)?;
+        let (launch_file, started_at) = begin_run(run_dir, config, scenario)?;
         let stop = StopFlag::install()?;
         let live = Live::open(view, config, scenario)?;
         let (tx, events) = crossbeam_channel::unbounded();

@@ -3,7 +3,7 @@
 
 use anyhow::{Result, bail};
 
-use super::system::LinearSection;
+use crate::config::launch::declared::LinearSection;
 use crate::model::plant_model::{ModelSpec, PlantModel, Stepping};
 
 pub struct LinearModel {

@@ -283,7 +283,7 @@ struct DeclaredMetrics {
 }
 
 impl Metrics for DeclaredMetrics {
-    crate::model::scenario::frozen_fields!(stats, tracking, last_t);
+    frozen_fields!(stats, tracking, last_t);
 
     fn observe(&mut self, row: &Row) {
         let at = |values: &[f64], i: usize| values.get(i).copied().unwrap_or(f64::NAN);

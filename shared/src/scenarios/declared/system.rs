@@ -2,12 +2,11 @@
 //! by the configuration layer, `config::launch::declared`), the `[plant]` (which model, its
 //! sub-steps, its parameters), the built-in `[controller]`, and what its stages may read.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::config::launch::declared::SystemSection;
+use crate::config::launch::declared::{LinearSection, PlantSection, SystemSection};
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::contract::role::Role;
 use crate::model::plant_model::ModelSpec;
@@ -24,50 +23,6 @@ pub enum PlantSource {
     /// `[plant] python = "my_plant.py:Pendulum"`: the file (absolute) and the class. The plant
     /// role runs as a python3 process over it (`runtime::user_plant`); no Rust process builds it.
     Python { file: PathBuf, class: String },
-}
-
-/// `[plant.linear]`: the matrices, row by row.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct LinearSection {
-    /// n × n.
-    pub a: Vec<Vec<f64>>,
-    /// n × m (m inputs).
-    pub b: Vec<Vec<f64>>,
-    /// p × n (p outputs); leave out when no outputs are declared.
-    #[serde(default)]
-    pub c: Vec<Vec<f64>>,
-    /// p × m; left out: zero.
-    #[serde(default)]
-    pub d: Vec<Vec<f64>>,
-}
-
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PlantSection {
-    #[serde(default)]
-    linear: Option<LinearSection>,
-    #[serde(default)]
-    fmu: Option<String>,
-    /// Which of the FMU's interfaces runs it: "model-exchange" or "co-simulation" (default: Model
-    /// Exchange where the FMU offers it).
-    #[serde(default)]
-    fmu_interface: Option<String>,
-    #[serde(default)]
-    python: Option<String>,
-    /// RK4 steps per loop period (a model LoopLab integrates).
-    #[serde(default = "one")]
-    substeps: u32,
-    /// Set before the model initialises (an FMU's parameters by name).
-    #[serde(default)]
-    parameters: BTreeMap<String, f64>,
-    /// The folder `fmu` and `python` are relative to: the launch file's (written at resolve).
-    #[serde(default)]
-    folder: Option<PathBuf>,
-}
-
-fn one() -> u32 {
-    1
 }
 
 /// `[controller]`: the built-in state feedback u = −K x̂, clamped to the input's limits, for a
@@ -132,7 +87,8 @@ impl System {
                 ),
             ));
         }
-        let folder = plant.folder.clone().unwrap_or_else(|| std::env::current_dir().unwrap_or_default());
+        let spec = ModelSpec::declared(c, &vectors, &plant);
+        let folder = spec.folder.clone();
         let source = if let Some(linear) = plant.linear {
             check_matrix(c, "plant.linear.a", &linear.a, n, n)?;
             check_matrix(c, "plant.linear.b", &linear.b, n, m)?;
@@ -216,16 +172,6 @@ impl System {
                 picks.push((sensor, component));
             }
             Some(picks)
-        };
-        let spec = ModelSpec {
-            file: c.origin_file(),
-            folder: folder.clone(),
-            state: vectors.state.iter().map(|s| s.name.clone()).collect(),
-            input: vectors.input.iter().map(|s| s.name.clone()).collect(),
-            outputs: vectors.outputs.iter().map(|s| s.name.clone()).collect(),
-            initial: vectors.state.iter().map(|s| s.initial).collect(),
-            parameters: plant.parameters.into_iter().collect(),
-            dt: c.dt(),
         };
         let input_limits = vectors.input.iter().map(|u| (u.min, u.max)).collect();
         Ok(System {

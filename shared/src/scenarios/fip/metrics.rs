@@ -88,7 +88,7 @@ impl FipMetrics {
 }
 
 impl Metrics for FipMetrics {
-    crate::model::scenario::frozen_fields!(
+    frozen_fields!(
         zp,
         zp_max,
         zp_z,

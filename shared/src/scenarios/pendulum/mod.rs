@@ -349,7 +349,7 @@ struct PendulumMetrics {
 }
 
 impl Metrics for PendulumMetrics {
-    crate::model::scenario::frozen_fields!(
+    frozen_fields!(
         saturated,
         current_square_sum,
         loops,

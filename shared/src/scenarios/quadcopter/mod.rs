@@ -382,7 +382,7 @@ fn block_change(now: &[f64], initial: &[f64]) -> f64 {
 }
 
 impl Metrics for QuadcopterMetrics {
-    crate::model::scenario::frozen_fields!(
+    frozen_fields!(
         z1_steady,
         z1_max_after_5s,
         z1_last,

@@ -77,7 +77,7 @@ impl TetheredMetrics {
 }
 
 impl Metrics for TetheredMetrics {
-    crate::model::scenario::frozen_fields!(
+    frozen_fields!(
         etrack,
         etrack_phase,
         etrack_max_phase3,

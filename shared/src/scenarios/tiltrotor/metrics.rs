@@ -223,7 +223,7 @@ impl TiltrotorMetrics {
 }
 
 impl Metrics for TiltrotorMetrics {
-    crate::model::scenario::frozen_fields!(
+    frozen_fields!(
         rows,
         prior_x_errors,
         prior_x_errors_fig4,

@@ -16,7 +16,7 @@ use crate::contract::report::Stats;
 use crate::launcher::summary::Summary;
 use crate::tools::ToolError;
 use crate::tools::compare::{metric_text, ratio_label};
-use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel};
+use crate::tools::plot::figure::{Colour, Curve, Draw as _, FaultMark, Figure, Line, Panel};
 use crate::tools::run_folder::{RunFolder, Table};
 
 mod render;

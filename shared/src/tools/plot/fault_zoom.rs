@@ -9,7 +9,7 @@ use crate::launcher::summary::FaultReport;
 use crate::model::figure::{RunColumns, runs};
 use crate::model::scenario::Scenario;
 use crate::tools::ToolError;
-use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel};
+use crate::tools::plot::figure::{Colour, Curve, Draw as _, FaultMark, Figure, Line, Panel};
 use crate::tools::plot::misses::{crosses_by_cause, read_misses};
 use crate::tools::run_folder::RunFolder;
 

@@ -35,17 +35,15 @@ pub fn thin(points: Vec<(f64, f64)>, max: usize) -> Vec<(f64, f64)> {
 /// A point count that a panel's width shows without losing anything.
 const POINTS_PER_CURVE: usize = 3000;
 
-impl Panel {
-    /// The span of its curves and marks (bounds do not widen it).
-    fn y_range(&self) -> Range<f64> {
-        y_range(self.curves.iter().flat_map(|c| &c.points).chain(&self.marks).map(|p| p.1))
-    }
+/// The span of `panel`'s curves and marks (bounds do not widen it).
+fn panel_range(panel: &Panel) -> Range<f64> {
+    y_range(panel.curves.iter().flat_map(|c| &c.points).chain(&panel.marks).map(|p| p.1))
+}
 
-    /// The bounds that reach into its range, the only ones drawn.
-    fn bounds_shown(&self) -> impl Iterator<Item = &Curve> {
-        let y = self.y_range();
-        self.bounds.iter().filter(move |c| c.points.iter().any(|p| y.contains(&p.1)))
-    }
+/// The bounds that reach into `panel`'s range, the only ones drawn.
+fn bounds_shown(panel: &Panel) -> impl Iterator<Item = &Curve> {
+    let y = panel_range(panel);
+    panel.bounds.iter().filter(move |c| c.points.iter().any(|p| y.contains(&p.1)))
 }
 
 /// The truth's look in every figure: a thin dark line drawn over the thicker estimate or held
@@ -103,21 +101,28 @@ pub fn grid(panels: usize, caption: bool) -> ((u32, u32), Vec<Cell>) {
     (size, cells)
 }
 
-impl Figure {
+/// Drawing a [`Figure`] (its description is the model's, in the stage SDK, which draws nothing).
+pub trait Draw {
     /// The figure's size: panels readable at the image's natural size.
-    pub fn size(&self) -> (u32, u32) {
+    fn size(&self) -> (u32, u32);
+    /// Where each panel lies in the image.
+    fn cells(&self) -> Vec<Cell>;
+    fn draw(&self, path: &Path) -> anyhow::Result<()>;
+}
+
+impl Draw for Figure {
+    fn size(&self) -> (u32, u32) {
         grid(self.panels.len(), self.caption.is_some()).0
     }
 
-    /// Where each panel lies in the image.
-    pub fn cells(&self) -> Vec<Cell> {
+    fn cells(&self) -> Vec<Cell> {
         grid(self.panels.len(), self.caption.is_some()).1
     }
 
-    pub fn draw(&self, path: &Path) -> anyhow::Result<()> {
+    fn draw(&self, path: &Path) -> anyhow::Result<()> {
         let root = png(path, self.size())?;
         let (header, body) = root.split_vertically(HEADER);
-        self.draw_header(&header)?;
+        draw_header(self, &header)?;
         let body = match &self.caption {
             Some(caption) => {
                 let (body, bottom) = body.split_vertically(body.dim_in_pixel().1 - CAPTION);
@@ -129,145 +134,143 @@ impl Figure {
         let columns = grid_columns(self.panels.len());
         let rows = self.panels.len().div_ceil(columns).max(1);
         for (area, panel) in body.split_evenly((rows, columns)).iter().zip(&self.panels) {
-            self.draw_panel(area, panel)?;
+            draw_panel(self, area, panel)?;
         }
         root.present().map_err(plot_error)
     }
+}
 
-    /// The title and one legend for every panel (each panel has the same curves).
-    fn draw_header(&self, area: &DrawingArea<PngBackend<'_>, Shift>) -> anyhow::Result<()> {
-        // The largest size at which the title fits the figure's width.
-        let width = area.dim_in_pixel().0 as i32 - 32;
-        let mut size = 22.0;
-        let fits = |size: f64| {
-            area.estimate_text_size(&self.title, &(FONT, size).into_font().color(&BLACK))
-                .map(|(w, _)| w as i32 <= width)
-                .unwrap_or(true)
-        };
-        while size > 12.0 && !fits(size) {
-            size -= 1.0;
-        }
-        area.draw_text(&self.title, &(FONT, size).into_font().color(&BLACK), (16, 8)).map_err(plot_error)?;
-        let mut entries: Vec<(String, RGBColor, Line)> = Vec::new();
-        for panel in &self.panels {
-            for c in panel.curves.iter().chain(panel.bounds_shown()) {
-                if !entries.iter().any(|(label, ..)| *label == c.label) {
-                    entries.push((c.label.clone(), rgb(c.colour), c.line));
-                }
+/// The title and one legend for every panel (each panel has the same curves).
+fn draw_header(figure: &Figure, area: &DrawingArea<PngBackend<'_>, Shift>) -> anyhow::Result<()> {
+    // The largest size at which the title fits the figure's width.
+    let width = area.dim_in_pixel().0 as i32 - 32;
+    let mut size = 22.0;
+    let fits = |size: f64| {
+        area.estimate_text_size(&figure.title, &(FONT, size).into_font().color(&BLACK))
+            .map(|(w, _)| w as i32 <= width)
+            .unwrap_or(true)
+    };
+    while size > 12.0 && !fits(size) {
+        size -= 1.0;
+    }
+    area.draw_text(&figure.title, &(FONT, size).into_font().color(&BLACK), (16, 8)).map_err(plot_error)?;
+    let mut entries: Vec<(String, RGBColor, Line)> = Vec::new();
+    for panel in &figure.panels {
+        for c in panel.curves.iter().chain(bounds_shown(panel)) {
+            if !entries.iter().any(|(label, ..)| *label == c.label) {
+                entries.push((c.label.clone(), rgb(c.colour), c.line));
             }
         }
-        let any_marks = self.panels.iter().any(|p| !p.marks.is_empty());
-        let font = (FONT, 16).into_font().color(&BLACK);
-        let mut x = 16;
-        let y = 46;
-        let mut entry = |label: &str, draw: &dyn Fn(i32) -> anyhow::Result<()>| -> anyhow::Result<()> {
-            draw(x)?;
-            area.draw_text(label, &font, (x + 34, y - 9)).map_err(plot_error)?;
-            let (w, _) = area.estimate_text_size(label, &font).map_err(plot_error)?;
-            x += 34 + w as i32 + 18;
-            Ok(())
-        };
-        for (label, colour, line) in &entries {
-            let style = match line {
-                Line::Solid(w) => colour.stroke_width((*w).max(2)),
-                Line::Dashed | Line::Crosses => colour.stroke_width(2),
-            };
-            entry(label, &|x| {
-                if *line == Line::Crosses {
-                    area.draw(&Cross::new((x + 14, y), 5, style)).map_err(plot_error)
-                } else if *line == Line::Dashed {
-                    for s in [0, 11, 22] {
-                        area.draw(&PathElement::new(vec![(x + s, y), (x + s + 6, y)], style)).map_err(plot_error)?;
-                    }
-                    Ok(())
-                } else {
-                    area.draw(&PathElement::new(vec![(x, y), (x + 28, y)], style)).map_err(plot_error)
-                }
-            })?;
-        }
-        if any_marks {
-            entry("deadline miss", &|x| {
-                area.draw(&Cross::new((x + 14, y), 5, FAULT.stroke_width(2))).map_err(plot_error)
-            })?;
-        }
-        if self.faults.iter().any(|f| self.x.contains(&f.t)) {
-            entry(self.faults_label, &|x| {
-                area.draw(&PathElement::new(vec![(x + 14, y - 9), (x + 14, y + 9)], FAULT.stroke_width(2)))
-                    .map_err(plot_error)
-            })?;
-        }
-        Ok(())
     }
+    let any_marks = figure.panels.iter().any(|p| !p.marks.is_empty());
+    let font = (FONT, 16).into_font().color(&BLACK);
+    let mut x = 16;
+    let y = 46;
+    let mut entry = |label: &str, draw: &dyn Fn(i32) -> anyhow::Result<()>| -> anyhow::Result<()> {
+        draw(x)?;
+        area.draw_text(label, &font, (x + 34, y - 9)).map_err(plot_error)?;
+        let (w, _) = area.estimate_text_size(label, &font).map_err(plot_error)?;
+        x += 34 + w as i32 + 18;
+        Ok(())
+    };
+    for (label, colour, line) in &entries {
+        let style = match line {
+            Line::Solid(w) => colour.stroke_width((*w).max(2)),
+            Line::Dashed | Line::Crosses => colour.stroke_width(2),
+        };
+        entry(label, &|x| {
+            if *line == Line::Crosses {
+                area.draw(&Cross::new((x + 14, y), 5, style)).map_err(plot_error)
+            } else if *line == Line::Dashed {
+                for s in [0, 11, 22] {
+                    area.draw(&PathElement::new(vec![(x + s, y), (x + s + 6, y)], style)).map_err(plot_error)?;
+                }
+                Ok(())
+            } else {
+                area.draw(&PathElement::new(vec![(x, y), (x + 28, y)], style)).map_err(plot_error)
+            }
+        })?;
+    }
+    if any_marks {
+        entry("deadline miss", &|x| area.draw(&Cross::new((x + 14, y), 5, FAULT.stroke_width(2))).map_err(plot_error))?;
+    }
+    if figure.faults.iter().any(|f| figure.x.contains(&f.t)) {
+        entry(figure.faults_label, &|x| {
+            area.draw(&PathElement::new(vec![(x + 14, y - 9), (x + 14, y + 9)], FAULT.stroke_width(2)))
+                .map_err(plot_error)
+        })?;
+    }
+    Ok(())
+}
 
-    fn draw_panel(&self, area: &DrawingArea<PngBackend<'_>, Shift>, panel: &Panel) -> anyhow::Result<()> {
-        let y = panel.y_range();
-        let mut chart = ChartBuilder::on(area)
-            .caption(&panel.title, (FONT, 17))
-            .margin(10)
-            .margin_right(18)
-            .x_label_area_size(40)
-            .y_label_area_size(72)
-            .build_cartesian_2d(self.x.clone(), y.clone())
-            .map_err(plot_error)?;
+fn draw_panel(figure: &Figure, area: &DrawingArea<PngBackend<'_>, Shift>, panel: &Panel) -> anyhow::Result<()> {
+    let y = panel_range(panel);
+    let mut chart = ChartBuilder::on(area)
+        .caption(&panel.title, (FONT, 17))
+        .margin(10)
+        .margin_right(18)
+        .x_label_area_size(40)
+        .y_label_area_size(72)
+        .build_cartesian_2d(figure.x.clone(), y.clone())
+        .map_err(plot_error)?;
+    chart
+        .configure_mesh()
+        .x_desc(figure.x_desc)
+        .y_desc(&panel.y_desc)
+        .x_labels(6)
+        .y_labels(5)
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 14))
+        .light_line_style(WHITE.mix(0.0))
+        .y_label_formatter(&|v| tick_label(&snap_to_zero(*v, &y)))
+        .x_label_formatter(&tick_label)
+        .draw()
+        .map_err(plot_error)?;
+    let area = &chart.plotting_area().clone();
+    // Bounds first: a command at its limit stays visible over the limit's line.
+    for curve in bounds_shown(panel).chain(&panel.curves) {
+        let points: Vec<(f64, f64)> =
+            curve.points.iter().copied().filter(|p| p.0 >= figure.x.start && p.0 <= figure.x.end).collect();
+        match curve.line {
+            Line::Solid(width) => thick_line(area, &thin(points, POINTS_PER_CURVE), rgb(curve.colour), width)?,
+            Line::Dashed => {
+                let points = thin(points, POINTS_PER_CURVE);
+                chart
+                    .draw_series(DashedLineSeries::new(points, 8, 6, rgb(curve.colour).stroke_width(2)))
+                    .map_err(plot_error)?;
+            }
+            // Events, not a signal: every one is drawn, where thinning would drop some.
+            Line::Crosses => {
+                let style = rgb(curve.colour).stroke_width(2);
+                chart.draw_series(points.iter().map(|p| Cross::new(*p, 5, style))).map_err(plot_error)?;
+            }
+        }
+    }
+    chart.draw_series(panel.marks.iter().map(|p| Cross::new(*p, 5, FAULT.stroke_width(2)))).map_err(plot_error)?;
+    let label_font = (FONT, 13).into_font().color(&FAULT);
+    // Each label goes on the first line down where it overlaps no other label.
+    let mut taken: Vec<Vec<Range<i32>>> = Vec::new();
+    for fault in figure.faults.iter().filter(|f| figure.x.contains(&f.t)) {
         chart
-            .configure_mesh()
-            .x_desc(self.x_desc)
-            .y_desc(&panel.y_desc)
-            .x_labels(6)
-            .y_labels(5)
-            .label_style((FONT, 13))
-            .axis_desc_style((FONT, 14))
-            .light_line_style(WHITE.mix(0.0))
-            .y_label_formatter(&|v| tick_label(&snap_to_zero(*v, &y)))
-            .x_label_formatter(&tick_label)
-            .draw()
+            .draw_series(DashedLineSeries::new([(fault.t, y.start), (fault.t, y.end)], 6, 4, FAULT.stroke_width(2)))
             .map_err(plot_error)?;
-        let area = &chart.plotting_area().clone();
-        // Bounds first: a command at its limit stays visible over the limit's line.
-        for curve in panel.bounds_shown().chain(&panel.curves) {
-            let points: Vec<(f64, f64)> =
-                curve.points.iter().copied().filter(|p| p.0 >= self.x.start && p.0 <= self.x.end).collect();
-            match curve.line {
-                Line::Solid(width) => thick_line(area, &thin(points, POINTS_PER_CURVE), rgb(curve.colour), width)?,
-                Line::Dashed => {
-                    let points = thin(points, POINTS_PER_CURVE);
-                    chart
-                        .draw_series(DashedLineSeries::new(points, 8, 6, rgb(curve.colour).stroke_width(2)))
-                        .map_err(plot_error)?;
-                }
-                // Events, not a signal: every one is drawn, where thinning would drop some.
-                Line::Crosses => {
-                    let style = rgb(curve.colour).stroke_width(2);
-                    chart.draw_series(points.iter().map(|p| Cross::new(*p, 5, style))).map_err(plot_error)?;
-                }
-            }
-        }
-        chart.draw_series(panel.marks.iter().map(|p| Cross::new(*p, 5, FAULT.stroke_width(2)))).map_err(plot_error)?;
-        let label_font = (FONT, 13).into_font().color(&FAULT);
-        // Each label goes on the first line down where it overlaps no other label.
-        let mut taken: Vec<Vec<Range<i32>>> = Vec::new();
-        for fault in self.faults.iter().filter(|f| self.x.contains(&f.t)) {
-            chart
-                .draw_series(DashedLineSeries::new([(fault.t, y.start), (fault.t, y.end)], 6, 4, FAULT.stroke_width(2)))
-                .map_err(plot_error)?;
-            let (w, h) = area.estimate_text_size(&fault.label, &label_font).map_err(plot_error)?;
-            let x = area.map_coordinate(&(fault.t, y.end)).0;
-            let span = x..x + w as i32 + 8;
-            let row = taken.iter().position(|r| r.iter().all(|o| o.end <= span.start || span.end <= o.start));
-            let row = row.unwrap_or_else(|| {
-                taken.push(Vec::new());
-                taken.len() - 1
-            });
-            taken[row].push(span);
-            let at = EmptyElement::at((fault.t, y.end));
-            let offset = (4, 3 + (h as i32 + 4) * row as i32);
-            let background =
-                Rectangle::new([offset, (offset.0 + w as i32 + 2, offset.1 + h as i32 + 2)], WHITE.mix(0.85).filled());
-            area.draw(&(at + background + Text::new(fault.label.clone(), offset, label_font.clone())))
-                .map_err(plot_error)?;
-        }
-        Ok(())
+        let (w, h) = area.estimate_text_size(&fault.label, &label_font).map_err(plot_error)?;
+        let x = area.map_coordinate(&(fault.t, y.end)).0;
+        let span = x..x + w as i32 + 8;
+        let row = taken.iter().position(|r| r.iter().all(|o| o.end <= span.start || span.end <= o.start));
+        let row = row.unwrap_or_else(|| {
+            taken.push(Vec::new());
+            taken.len() - 1
+        });
+        taken[row].push(span);
+        let at = EmptyElement::at((fault.t, y.end));
+        let offset = (4, 3 + (h as i32 + 4) * row as i32);
+        let background =
+            Rectangle::new([offset, (offset.0 + w as i32 + 2, offset.1 + h as i32 + 2)], WHITE.mix(0.85).filled());
+        area.draw(&(at + background + Text::new(fault.label.clone(), offset, label_font.clone())))
+            .map_err(plot_error)?;
     }
+    Ok(())
 }
 
 /// A solid line `width` pixels wide, drawn as that many one-pixel lines side by side: plotters

@@ -14,6 +14,7 @@ use crate::launcher::in_process::run_in_process;
 use crate::model::catalog::Catalog;
 use crate::model::figure::{PaperCase, PaperTarget, RunColumns};
 use crate::tools::ToolError;
+use crate::tools::plot::figure::Draw as _;
 use crate::tools::plot::run::RunData;
 
 /// Runs `case` in this process into `out/<name>` and reads the run folder back.

@@ -16,7 +16,7 @@ use crate::model::figure::RunColumns;
 use crate::model::figure::runs;
 use crate::model::layout::Layout;
 use crate::model::scenario::Scenario;
-use crate::tools::plot::figure::{Colour, Curve, FaultMark, Figure, Line, Panel, series, steps, tick_label};
+use crate::tools::plot::figure::{Colour, Curve, Draw as _, FaultMark, Figure, Line, Panel, series, steps, tick_label};
 use crate::tools::plot::latency;
 use crate::tools::plot::misses::{Miss, crosses_by_cause, read_misses};
 use crate::tools::run_folder::RunFolder;

@@ -1,0 +1,403 @@
+//! Loading: a scenario name or a launch file, with overrides, resolved into a checked
+//! [`LaunchConfig`]; and the resolved file each loop process reads back.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::error::{COMMON_KEYS, LaunchError};
+use crate::config::faults::{FaultSpec, Supervision};
+use crate::config::hosts::Hosts;
+use crate::config::launch::checks::{
+    check_common, check_fault, check_finite, check_realtime, check_sensors, check_supervision, check_wait,
+};
+use crate::config::launch::overrides::{Override, merge, set_dotted};
+use crate::config::launch::types::{LaunchConfig, Mode, Origins, SensorSpec, deserialize_at};
+use crate::config::launch::{declared, run_vectors};
+use crate::config::python_plant;
+use crate::config::realtime::RealtimeSettings;
+use crate::config::replay::ReplaySpec;
+use crate::config::schema::ScenarioSchema;
+use crate::config::stages::Stages;
+use crate::config::wait::WaitSettings;
+
+/// The keys every scenario shares, as the document has them.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CommonKeys {
+    /// Empty: a declared system.
+    #[serde(default)]
+    scenario: String,
+    mode: Mode,
+    rate_hz: f64,
+    /// None: one loop period.
+    #[serde(default)]
+    deadline_us: Option<f64>,
+    /// None: only the deadline misses are explained.
+    #[serde(default)]
+    explain_over_us: Option<f64>,
+    /// false: no probe beside the loop.
+    #[serde(default)]
+    probe: bool,
+    /// false: no scheduler trace.
+    #[serde(default)]
+    trace_sched: bool,
+    duration_s: f64,
+    seed: u64,
+    #[serde(default)]
+    sensors: BTreeMap<String, SensorSpec>,
+    #[serde(default)]
+    faults: Vec<FaultSpec>,
+    #[serde(default)]
+    supervision: Supervision,
+    #[serde(default)]
+    wait: WaitSettings,
+    #[serde(default)]
+    realtime: RealtimeSettings,
+    /// Read by `Hosts::parse`, for errors that name the key.
+    #[serde(default)]
+    hosts: toml::Table,
+    /// Read by `Stages::parse`, likewise.
+    #[serde(default)]
+    stages: toml::Table,
+    #[serde(default)]
+    replay: Option<ReplaySpec>,
+}
+
+/// The names of the scenarios of `catalog`, for error messages.
+fn names(catalog: &[ScenarioSchema]) -> String {
+    catalog.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+}
+
+fn find<'a>(catalog: &'a [ScenarioSchema], name: &str) -> Option<&'a ScenarioSchema> {
+    catalog.iter().find(|s| s.name == name)
+}
+
+/// Resolves what the user asked to run, a scenario name or a launch-file path, with overrides,
+/// into a checked configuration for one of the scenarios of `catalog` (the scenarios layer
+/// passes its registry, and builds the scenario the configuration describes).
+pub fn resolve_config(
+    target: &str,
+    overrides: &[Override],
+    catalog: &[ScenarioSchema],
+) -> Result<LaunchConfig, LaunchError> {
+    let scenario_names = || names(catalog);
+    // A scenario's name wins over a file of that name; anything else that looks like a path is one.
+    let looks_like_path = find(catalog, target).is_none()
+        && !Path::new(target).is_dir()
+        && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
+    let (origin, document, launch_folder) = if looks_like_path {
+        let text = std::fs::read_to_string(target)
+            .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;
+        let user: toml::Table = toml::from_str(&text).map_err(|e| toml_error(target, &text, &e))?;
+        if declared::is_declared(&user) {
+            let mut document: toml::Table = toml::from_str(declared::DECLARED_DEFAULTS).expect("the defaults parse");
+            merge(&mut document, user);
+            let folder = Path::new(target).parent().map(Path::to_path_buf);
+            if !overrides.is_empty() {
+                from_document(document.clone(), target, &[], catalog, folder.as_deref(), false)?;
+            }
+            let config = from_document(document, target, overrides, catalog, folder.as_deref(), false)?;
+            return check_stages(config);
+        }
+        let name = match user.get("scenario") {
+            Some(toml::Value::String(name)) => name.clone(),
+            Some(_) => {
+                return Err(LaunchError::new(
+                    target,
+                    Some("scenario"),
+                    format!("must be a string; allowed: {}", scenario_names()),
+                ));
+            }
+            None => {
+                return Err(LaunchError::new(
+                    target,
+                    Some("scenario"),
+                    format!(
+                        "missing; allowed: {} (or no scenario and a [system] table: a system of your own)",
+                        scenario_names()
+                    ),
+                ));
+            }
+        };
+        let schema = find(catalog, &name).ok_or_else(|| {
+            LaunchError::new(
+                target,
+                Some("scenario"),
+                format!("unknown scenario \"{name}\"; allowed: {}", scenario_names()),
+            )
+        })?;
+        let mut document = schema.defaults();
+        merge(&mut document, user);
+        (target.to_owned(), document, Path::new(target).parent().map(Path::to_path_buf))
+    } else if Path::new(target).is_dir() {
+        return Err(LaunchError::new(
+            target,
+            None,
+            format!("is a folder; give a launch file (.toml) or a scenario name: {}", scenario_names()),
+        ));
+    } else {
+        let schema = find(catalog, target).ok_or_else(|| {
+            LaunchError::new(
+                "command line",
+                None,
+                format!(
+                    "unknown scenario \"{target}\"; allowed: {} (or a path to a .toml launch file)",
+                    scenario_names()
+                ),
+            )
+        })?;
+        (schema.file.to_owned(), schema.defaults(), None)
+    };
+    // The file is checked as written too: a bad value in it is reported even where a `--set`
+    // replaces it (`mode = 3.7` in the file with `--mode realtime`).
+    if looks_like_path && !overrides.is_empty() {
+        from_document(document.clone(), &origin, &[], catalog, launch_folder.as_deref(), false)?;
+    }
+    let config = from_document(document, &origin, overrides, catalog, launch_folder.as_deref(), false)?;
+    check_stages(config)
+}
+
+/// A user's stage that cannot start is bad input, found before anything starts.
+fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
+    for (role, stage) in &config.stages.commands {
+        stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
+    }
+    Ok(config)
+}
+
+/// A Python plant that cannot start is bad input, found before anything starts. Checked once the
+/// scenario is built, so that what is wrong with the rest of `[plant]` is said first.
+pub fn check_python_plant(config: &LaunchConfig) -> Result<(), LaunchError> {
+    match &config.stages.plant {
+        Some(plant) => python_plant::check(plant).map_err(|message| config.error(python_plant::KEY, message)),
+        None => Ok(()),
+    }
+}
+
+/// Reads a resolved launch file written by the launcher (what each loop process does).
+pub fn load_resolved_config(path: &Path, catalog: &[ScenarioSchema]) -> Result<LaunchConfig, LaunchError> {
+    let (document, origin) = read_resolved(path)?;
+    from_document(document, &origin, &[], catalog, None, false)
+}
+
+/// Reads a run's `launch.toml` as a stage of the user's own does: with no catalog, the vectors
+/// the launcher resolved (`[vectors]`) in place of the scenario's entry, and the input's limits.
+pub fn load_run_config(path: &Path) -> Result<LaunchConfig, LaunchError> {
+    let (document, origin) = read_resolved(path)?;
+    from_document(document, &origin, &[], &[], None, true)
+}
+
+fn read_resolved(path: &Path) -> Result<(toml::Table, String), LaunchError> {
+    let origin = path.display().to_string();
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| LaunchError::new(&origin, None, format!("cannot read the launch file: {e}")))?;
+    let document = toml::from_str(&text).map_err(|e| toml_error(&origin, &text, &e))?;
+    Ok((document, origin))
+}
+
+/// `launch_folder`: the launch file's folder, where a stage's command given in it starts (one
+/// given on the command line starts in the current folder). `from_run`: a run's `launch.toml`
+/// read without a catalog ([`load_run_config`]).
+fn from_document(
+    mut document: toml::Table,
+    origin: &str,
+    overrides: &[Override],
+    catalog: &[ScenarioSchema],
+    launch_folder: Option<&Path>,
+    from_run: bool,
+) -> Result<LaunchConfig, LaunchError> {
+    let mut origins = Origins { file: origin.to_owned(), set_keys: BTreeMap::new() };
+    for o in overrides {
+        let key =
+            set_dotted(&mut document, o).map_err(|message| LaunchError::new(o.origin(), Some(&o.key), message))?;
+        origins.set_keys.insert(key, o.origin());
+    }
+    // TOML allows nan and inf; no key of a launch file means either, and the checks below
+    // (and the physics) can then assume finite numbers.
+    document.iter().try_for_each(|(key, value)| check_finite(&origins, key, value))?;
+    // The launcher's own table: taken out of every file, read only from a run's.
+    let run_vectors = run_vectors::take(&mut document, &origins)?.filter(|_| from_run);
+    if from_run && run_vectors.is_none() {
+        return Err(origins.error(
+            run_vectors::KEY,
+            "missing: a stage of your own reads the run's vectors from the launch.toml `looplab run` writes; start \
+             it with the looplab of the same version",
+        ));
+    }
+
+    let declared_schema;
+    let schema = if declared::is_declared(&document) {
+        declared_schema = declared::declared_schema(&document, &origins)?;
+        &declared_schema
+    } else {
+        let scenario_name = match document.get("scenario") {
+            Some(toml::Value::String(s)) => s.clone(),
+            _ => {
+                return Err(origins.error("scenario", format!("missing or not a string; allowed: {}", names(catalog))));
+            }
+        };
+        match (&run_vectors, find(catalog, &scenario_name)) {
+            (Some(run), _) => &run.schema,
+            (None, Some(schema)) => schema,
+            (None, None) => {
+                return Err(origins
+                    .error("scenario", format!("unknown scenario \"{scenario_name}\"; allowed: {}", names(catalog))));
+            }
+        }
+    };
+    schema.check_fits()?;
+
+    // Top-level keys: the shared ones, then the scenario's sections; anything else is a typo. A
+    // run's file was checked so when the launcher resolved it, and its vectors name no sections.
+    let sections = schema.sections();
+    let allowed: BTreeSet<&str> = COMMON_KEYS.iter().copied().chain(sections.iter().map(String::as_str)).collect();
+    for key in document.keys() {
+        if run_vectors.is_none() && !allowed.contains(key.as_str()) {
+            return Err(origins.error(
+                key,
+                format!(
+                    "unknown key; allowed at the top level: {}",
+                    allowed.iter().copied().collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+    }
+    let mut common_table = toml::Table::new();
+    for key in COMMON_KEYS {
+        if let Some(v) = document.get(key) {
+            common_table.insert(key.to_owned(), v.clone());
+        }
+    }
+    let common: CommonKeys = deserialize_at(&origins, "", toml::Value::Table(common_table))?;
+    let hosts = Hosts::parse(&common.hosts, |key, message| origins.error(key, message))?;
+    let current = std::env::current_dir().unwrap_or_default();
+    let launch_folder = launch_folder.map(|f| current.join(f));
+    let mut stages = Stages::parse(
+        &common.stages,
+        |key| match &launch_folder {
+            Some(folder) if origins.of(key) == origins.file => folder.clone(),
+            _ => current.clone(),
+        },
+        |key, message| origins.error(key, message),
+    )?;
+    if let Some(toml::Value::Table(table)) = document.get_mut("stages") {
+        stages.write_dirs(table);
+    }
+    // A declared plant's model path is relative to the launch file's folder; the loop processes
+    // read the resolved file from the run folder, so the folder is written into it (as a
+    // stage's `dir`).
+    if schema.name == declared::DECLARED
+        && let Some(toml::Value::Table(plant)) = document.get_mut("plant")
+        && !plant.contains_key("folder")
+    {
+        let folder = launch_folder.clone().unwrap_or_else(|| current.clone());
+        plant.insert("folder".into(), toml::Value::String(folder.display().to_string()));
+    }
+    // A built-in scenario's [plant] is its own; only a declared system's may name a Python class,
+    // found in the plant's folder, and the launcher starts it there.
+    if schema.name == declared::DECLARED {
+        let folder = document.get("plant").and_then(|p| p.get("folder")).and_then(|f| f.as_str()).map(PathBuf::from);
+        stages.plant = python_plant::parse(&document, folder.unwrap_or_else(|| current.clone()))
+            .map_err(|message| origins.error(python_plant::KEY, message))?;
+    }
+
+    // In an open-loop replay the processes that play the recording back are LoopLab's own,
+    // whatever the file runs in their place.
+    if let Some(replay) = &common.replay {
+        stages.commands.retain(|role, _| !replay.plays_back(*role));
+        if replay.plays_back(crate::contract::role::Role::Plant) {
+            stages.plant = None;
+        }
+    }
+
+    let mut sensors: BTreeMap<String, SensorSpec> = common.sensors.into_iter().filter(|(_, s)| s.enabled).collect();
+    for (name, sensor) in &mut sensors {
+        if schema.name == declared::DECLARED {
+            sensor.signal = name.clone();
+        } else if !sensor.reads.is_empty() {
+            return Err(origins.error(
+                &format!("sensors.{name}.reads"),
+                "is for a declared system (no scenario, a [system] table); a scenario's sensor names its signal",
+            ));
+        }
+    }
+    let config = LaunchConfig {
+        scenario: if schema.name == declared::DECLARED { declared::DECLARED.to_owned() } else { common.scenario },
+        mode: common.mode,
+        rate_hz: common.rate_hz,
+        deadline_us: common.deadline_us,
+        explain_over_us: common.explain_over_us,
+        probe: common.probe,
+        trace_sched: common.trace_sched,
+        duration_s: common.duration_s,
+        seed: common.seed,
+        sensors,
+        faults: common.faults,
+        supervision: common.supervision,
+        wait: common.wait,
+        realtime: common.realtime,
+        hosts,
+        stages,
+        replay: common.replay,
+        document,
+        schema: schema.clone(),
+        input_limits: run_vectors.map(|run| run.input_limits),
+        origins,
+    };
+    check_common(&config)?;
+    check_sensors(&config)?;
+    check_supervision(&config.supervision, &config)?;
+    check_wait(&config.wait, &config)?;
+    check_realtime(&config)?;
+    if let Some(replay) = &config.replay {
+        replay.check().map_err(|(key, message)| config.error(&key, message))?;
+    }
+    for (i, fault) in config.faults.iter().enumerate() {
+        check_fault(fault, &config, &format!("faults.{i}"))?;
+    }
+    Ok(config)
+}
+
+/// A TOML syntax error on one line: where, and what.
+fn toml_error(origin: &str, text: &str, e: &toml::de::Error) -> LaunchError {
+    let message = e.message().lines().collect::<Vec<_>>().join(", ");
+    let place = e.span().map(|span| {
+        let before = &text[..span.start.min(text.len())];
+        let line = before.matches('\n').count() + 1;
+        let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+        format!("line {line}, column {column}: ")
+    });
+    LaunchError::new(origin, None, format!("not valid TOML: {}{message}", place.unwrap_or_default()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scenario whose estimate is larger than a message carries cannot be resolved: the error
+    /// names the scenario and the vector (and no child process ever starts).
+    #[test]
+    fn a_scenario_whose_vectors_do_not_fit_the_messages_is_an_error_at_resolution() {
+        use crate::config::schema::Component;
+        const E60: &[Component] = &[Component::new("e", "1"); 60];
+        let schema = ScenarioSchema {
+            name: "made-up",
+            file: "launch/made-up.toml",
+            text: "scenario = \"made-up\"\nmode = \"lockstep\"\nrate_hz = 100.0\nduration_s = 1.0\nseed = 1\n",
+            state: &[],
+            input: &[],
+            estimate: E60,
+            signals: vec![],
+        };
+        let e = resolve_config("made-up", &[], std::slice::from_ref(&schema)).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "scenario made-up: the estimate has 60 components, more than the 48 a message carries"
+        );
+        let fits = ScenarioSchema { estimate: &E60[..48], ..schema };
+        let c = resolve_config("made-up", &[], &[fits]).unwrap();
+        assert_eq!((c.scenario.as_str(), c.loops()), ("made-up", 100));
+    }
+}

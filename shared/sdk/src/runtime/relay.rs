@@ -1,0 +1,135 @@
+//! The process runner of a stage: wake on input, let the [`StageRunner`] handle it, stamp the
+//! loop trace and publish. The sensors, estimator and controller processes are this loop around
+//! their task.
+
+use anyhow::Result;
+
+use crate::config::launch::Mode;
+use crate::contract::clock::now_ns;
+use crate::contract::msg::{Message, Stamp};
+use crate::contract::protocol::ChildEvent;
+use crate::contract::role::Role;
+use crate::model::scenario::Calibration;
+use crate::runtime::child::emit;
+use crate::runtime::child::{Context, WAIT_SLICE};
+use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
+use crate::runtime::sched::RunQueue;
+use crate::runtime::snapshot::Snapshot;
+use crate::runtime::task::{StageRunner, Task};
+use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
+
+/// Runs `task` as the process of `role` until a stop is requested (or the task fails).
+pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {
+    let (input, output) = (role.input().expect("a stage has an input"), role.output().expect("and an output"));
+    let (wait_settings, realtime) = (&context.config.wait, context.config.mode == Mode::Realtime);
+    let subscriber: TopicSubscriber<T::In> =
+        context.ipc.stage_subscriber(input, reader_blocks(wait_settings, input, realtime))?;
+    let publisher: TopicPublisher<T::Out> = context.ipc.publisher(output, writer_wakes(&context.config, output))?;
+    // The frozen state of the task survives a restart in the run's snapshot folder.
+    let mut kept: Option<Snapshot<Calibration>> =
+        if T::FREEZES { Some(Snapshot::open(&context.run_id, role.name())?) } else { None };
+    let mut runner = StageRunner::new(task, role, &context.config, context.incarnation);
+    if context.incarnation > 0
+        && let Some(frozen) = kept.as_mut().and_then(|k| k.read())
+    {
+        runner.task.thaw(&frozen)?;
+    }
+    // Lockstep: the input being handled, kept until its output is out. The loop waits for this
+    // stage's output, so a predecessor that died in the middle of a loop (its step failed) left
+    // an input nobody will send again: its successor handles it first.
+    let mut in_flight: Option<Snapshot<InFlight<T::In>>> =
+        if realtime { None } else { Some(Snapshot::open(&context.run_id, &format!("{}-input", role.name()))?) };
+    let mut replay = in_flight
+        .as_ref()
+        .and_then(|j| j.read())
+        .filter(|j| j.pending != 0 && context.incarnation > 0)
+        .map(|j| j.input);
+    subscriber.connect(&context.stop)?;
+    emit(&ChildEvent::Ready)?;
+
+    let mut last_k: Option<u64> = None;
+    let period_ns = (context.config.dt() * 1e9).round() as u64;
+    let mut waiter = Waiter::new(wait_settings, role, realtime, period_ns);
+    let mut arrivals = ArrivalModel::new(period_ns);
+    let mut run_queue = RunQueue::open();
+    while !context.stop.requested() {
+        let due = last_k.and_then(|k| arrivals.due(k + 1));
+        let slice_end = now_ns() + WAIT_SLICE.as_nanos() as u64;
+        if replay.is_none() {
+            waiter.wait(
+                due,
+                slice_end,
+                || subscriber.has_samples(),
+                |until| subscriber.doze_until(until),
+                || subscriber.doze_until(slice_end),
+            )?;
+        }
+        let mut cleared = false;
+        loop {
+            let replayed = replay.take();
+            let sample = if replayed.is_none() { subscriber.next(&mut cleared)? } else { None };
+            let input: &T::In = match (&replayed, &sample) {
+                (Some(input), _) => input,
+                (None, Some(sample)) => sample,
+                (None, None) => break,
+            };
+            let received = now_ns();
+            let waited = run_queue.since_last();
+            let header = *input.header();
+            arrivals.observe(header.k, header.trace.get(Stamp::PlantPublish), received);
+            if let Some(journal) = in_flight.as_mut() {
+                journal.write(&InFlight { input: *input, pending: 1 });
+            }
+            let handled = runner.handle(input)?;
+            // Lockstep: the state is kept before the output goes out, so that a kill injected
+            // at a later loop (with the plant holding the loop) always finds this loop's state;
+            // real time: after the send, off the hop's path.
+            if !realtime {
+                keep(&mut kept, &runner.task)?;
+            }
+            if let Some(hold) = handled.hold {
+                std::thread::sleep(hold);
+            }
+            if let Some(mut out) = handled.output {
+                // A long computation's own read, before the publish stamp: it is part of the stage.
+                let sched = run_queue.stamp(waited, received, now_ns());
+                let out_header = out.header_mut();
+                out_header.trace.stamp(role, received, now_ns());
+                out_header.sched = sched;
+                publisher.send(&out)?;
+                last_k = Some(header.k);
+            }
+            if let Some(journal) = in_flight.as_mut() {
+                journal.write(&InFlight { input: *input, pending: 0 });
+            }
+            // After the send, off the hop's path: the input's chunk goes back.
+            drop(sample);
+            if realtime {
+                keep(&mut kept, &runner.task)?;
+            }
+        }
+    }
+    let mut report = runner.report;
+    (report.waited, report.dropped) = publisher.backpressure();
+    report.wait = waiter.counts;
+    Ok(ChildEvent::StageReport(report))
+}
+
+/// A lockstep stage's input while it is handled.
+#[derive(Clone, Copy)]
+#[repr(C)]
+struct InFlight<I> {
+    input: I,
+    /// 1 from its arrival until its output is sent.
+    pending: u32,
+}
+
+/// Writes the task's frozen state to its snapshot, if it has one.
+fn keep<T: Task>(kept: &mut Option<Snapshot<Calibration>>, task: &T) -> Result<()> {
+    if let Some(kept) = kept.as_mut()
+        && let Some(frozen) = task.freeze()?
+    {
+        kept.write(&frozen);
+    }
+    Ok(())
+}
