@@ -72,11 +72,6 @@ pub fn loop_at(injected_ns: u64, start_ns: u64, period_ns: u64) -> u64 {
     injected_ns.saturating_sub(start_ns).div_ceil(period_ns.max(1))
 }
 
-/// The plant's tick period at `rate_hz`, in whole ns, rounded as the plant rounds it.
-pub fn period_ns(rate_hz: f64) -> u64 {
-    (1.0 / rate_hz * 1e9).round() as u64
-}
-
 /// Lockstep: the faults the launcher injects at loop `k`, not injected yet.
 pub fn due_at_loop(faults: &[FaultSpec], seen: &[FaultSeen], rate_hz: f64, k: u64) -> Vec<usize> {
     (0..faults.len())
@@ -111,6 +106,7 @@ pub fn injection(spec: &FaultSpec, now_ns: u64) -> Option<(i32, Option<u64>)> {
 mod tests {
     use super::*;
     use crate::config::launch::Override;
+    use crate::contract::clock::period_ns;
     use crate::scenarios::resolve;
 
     fn faults(texts: &[&str]) -> Vec<FaultSpec> {

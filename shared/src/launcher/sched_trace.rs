@@ -257,7 +257,7 @@ pub fn name_who_ran(
     .map(column);
     let (cause, missed, e2e, due, published, received, part) =
         (cause?, missed?, e2e?, due?, published?, received?, part?);
-    let period_ns = (1e9 / summary.rate_hz).round() as u64;
+    let period_ns = crate::contract::clock::period_ns(summary.rate_hz);
     let slow_ns = summary.slow_loops.as_ref().map(|slow| (slow.over_us * 1e3).round() as u64);
     let mut report = SchedTraceReport { file: TRACE_FILE.into(), lost_events: trace.lost_events, ..Default::default() };
     for row in reader.records() {

@@ -85,7 +85,7 @@ pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
     // microseconds per poll, and a starved one would see a stall too late (or lose samples).
     // The plant ticks on a clock there, so silence is a stall.
     let (plant_period_ns, background) = match config.mode {
-        Mode::Realtime => (Some((config.dt() * 1e9) as u64), true),
+        Mode::Realtime => (Some(config.period_ns()), true),
         Mode::Lockstep => (None, false),
     };
     emit(&ChildEvent::Ready)?;

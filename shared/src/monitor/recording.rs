@@ -118,7 +118,8 @@ impl Recording {
         Ok(Self {
             rate_hz: config.rate_hz,
             joiner: Joiner::new(JOIN_WINDOW),
-            stats: LoopStats::new(layout.sensors.len(), config.dt(), wall_clock).with_crossing(Crossing::new(config)),
+            stats: LoopStats::new(layout.sensors.len(), config.period_ns(), wall_clock)
+                .with_crossing(Crossing::new(config)),
             layout,
             metrics: scenario.metrics(),
             measure: scenario.error_measure(),

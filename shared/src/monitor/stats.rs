@@ -31,7 +31,7 @@ pub struct LoopStats {
 }
 
 impl LoopStats {
-    pub fn new(sensors: usize, dt: f64, wall_clock: bool) -> Self {
+    pub fn new(sensors: usize, period_ns: u64, wall_clock: bool) -> Self {
         Self {
             end_to_end: Distribution::default(),
             hops: Default::default(),
@@ -39,7 +39,7 @@ impl LoopStats {
             plant_wake_latency: Distribution::default(),
             skipped_ticks: 0,
             data_age: (0..sensors).map(|_| Distribution::default()).collect(),
-            period_ns: (dt * 1e9).round() as i64,
+            period_ns: period_ns as i64,
             wall_clock,
             crossing: None,
         }
@@ -132,8 +132,8 @@ mod tests {
     #[test]
     fn data_age_adds_the_actuation_time_only_in_wall_clock_time() {
         let timing = TickTiming { scheduled_ns: 5_000_000, wake_ns: 5_020_000, period_ns: 1_003_000 };
-        let mut realtime = LoopStats::new(1, 0.001, true);
-        let mut lockstep = LoopStats::new(1, 0.001, false);
+        let mut realtime = LoopStats::new(1, 1_000_000, true);
+        let mut lockstep = LoopStats::new(1, 1_000_000, false);
         // Loop 5 (t = 5 ms) used a sample taken at 3 ms.
         realtime.observe(0.005, &loop_at(5, 0.003, timing));
         lockstep.observe(0.005, &loop_at(5, 0.003, TickTiming::default()));
@@ -148,7 +148,7 @@ mod tests {
 
     #[test]
     fn a_tick_after_skipped_ticks_woke_late_from_the_first_ones_due_time() {
-        let mut stats = LoopStats::new(1, 0.001, true);
+        let mut stats = LoopStats::new(1, 1_000_000, true);
         let mut tick = |k: u64, wake_late_ns: u64, skipped_ticks: u64| {
             let timing =
                 TickTiming { scheduled_ns: k * 1_000_000, wake_ns: k * 1_000_000 + wake_late_ns, period_ns: 1 };

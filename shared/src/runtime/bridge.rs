@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::hosts::{Crossing, Hosts};
 use crate::config::launch::{LaunchConfig, Mode};
-use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState};
+use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState, layout_fingerprint, layout_mismatch};
 use crate::contract::protocol::CrossingCounts;
 use crate::contract::role::{Role, Topic};
 use iceoryx2::prelude::ipc;
@@ -40,6 +40,9 @@ pub fn alive_key(run_id: &str, role: Role) -> String {
 /// would be read as something else. Checked when the bridges meet.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Layout {
+    /// The messages' layout fingerprint (`contract::msg::layout_fingerprint`), the one every
+    /// port on either host checks.
+    pub fingerprint: String,
     /// The commit and version the bridge was built from.
     pub build: String,
     pub topics: Vec<TopicLayout>,
@@ -65,6 +68,7 @@ impl Layout {
             }
         }
         Layout {
+            fingerprint: layout_fingerprint().to_owned(),
             build: format!("{} {}", env!("CARGO_PKG_VERSION"), env!("LOOPLAB_GIT_COMMIT")),
             topics: vec![
                 of::<PlantState>(Topic::State),
@@ -77,6 +81,9 @@ impl Layout {
 
     /// Why `theirs` cannot talk to us, if it cannot.
     pub fn mismatch(&self, theirs: &Layout) -> Option<String> {
+        if self.fingerprint != theirs.fingerprint {
+            return Some(layout_mismatch("the other host's messages have", &theirs.fingerprint, &self.fingerprint));
+        }
         if self.build != theirs.build {
             return Some(format!("the other host runs build {}, this one {}", theirs.build, self.build));
         }
@@ -319,5 +326,12 @@ mod tests {
         assert!(ours.mismatch(&theirs).unwrap().starts_with("command differs"));
         theirs.build = "0.0.0 other".into();
         assert!(ours.mismatch(&theirs).unwrap().contains("the other host runs build 0.0.0 other"));
+        theirs.fingerprint = "0123456789abcdef".into();
+        let why = ours.mismatch(&theirs).unwrap();
+        let expected = format!(
+            "the other host's messages have layout fingerprint 0123456789abcdef, this process was built with {}",
+            ours.fingerprint
+        );
+        assert!(why.starts_with(&expected), "{why}");
     }
 }

@@ -108,7 +108,7 @@ mod tests {
     #[test]
     fn the_sections_derive_from_the_defaults() {
         let catalog = builtin();
-        let sections = |name| catalog.find(name).unwrap().schema().sections();
+        let sections = |name| crate::config::launch::sections(&catalog.find(name).unwrap().schema());
         assert_eq!(sections("pendulum"), ["controller", "estimator", "limits", "model", "plant"]);
         assert_eq!(
             sections("quadcopter"),

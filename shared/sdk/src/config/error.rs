@@ -3,27 +3,6 @@
 
 use std::fmt;
 
-/// The top-level keys every launch file shares; the rest belong to the scenario.
-pub const COMMON_KEYS: [&str; 17] = [
-    "scenario",
-    "mode",
-    "rate_hz",
-    "deadline_us",
-    "explain_over_us",
-    "probe",
-    "trace_sched",
-    "duration_s",
-    "seed",
-    "sensors",
-    "faults",
-    "supervision",
-    "wait",
-    "realtime",
-    "hosts",
-    "stages",
-    "replay",
-];
-
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LaunchError {
     /// The file (or `--set KEY=VALUE`) the bad value came from.

@@ -5,7 +5,7 @@
 
 use std::fmt;
 
-use crate::config::error::{COMMON_KEYS, LaunchError};
+use crate::config::error::LaunchError;
 use crate::contract::msg::{MAX_ESTIMATE, MAX_INPUT, MAX_SENSOR_DIM, MAX_STATE};
 
 /// One component of a vector: its name and its unit (together a column of `trajectory.csv`).
@@ -67,13 +67,6 @@ impl ScenarioSchema {
     /// The default launch file, parsed.
     pub fn defaults(&self) -> toml::Table {
         toml::from_str(self.text).unwrap_or_else(|e| panic!("built-in {} does not parse: {e}", self.file))
-    }
-
-    /// The scenario's own top-level sections: those of its defaults that every launch file does
-    /// not share.
-    pub fn sections(&self) -> Vec<String> {
-        let common = COMMON_KEYS;
-        self.defaults().keys().filter(|k| !common.contains(&k.as_str())).cloned().collect()
     }
 
     pub fn signal(&self, name: &str) -> Option<&SignalLayout> {

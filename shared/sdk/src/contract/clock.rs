@@ -5,6 +5,13 @@ use std::io;
 use iceoryx2::prelude::{FileDescriptor, FileDescriptorBased, SynchronousMultiplexing};
 
 /// CLOCK_MONOTONIC in nanoseconds: the one clock every process of a run stamps with.
+/// The loop period in whole ns at `rate_hz`: the plant's schedule keeps its ticks this far apart,
+/// and everything that turns the rate into ticks (the monitor, the injector, the figures, the
+/// traces) takes it from here, so all say the same period.
+pub fn period_ns(rate_hz: f64) -> u64 {
+    (1.0 / rate_hz * 1e9).round() as u64
+}
+
 pub fn now_ns() -> u64 {
     let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC always exists on Linux.

@@ -45,6 +45,8 @@ pub struct PlantCore {
     plant: Box<dyn crate::model::scenario::Plant>,
     limits: Vec<(f64, f64)>,
     dt: f64,
+    /// The loop period, ns (`LaunchConfig::period_ns`): the real-time schedule's.
+    period_ns: u64,
     incarnation: u32,
     /// Real-time mode: when tick 0 was and the period (ns); tick j is due at start + j·period.
     /// None in lockstep mode, where every command is in time by construction.
@@ -101,6 +103,7 @@ impl PlantCore {
             plant,
             limits,
             dt: config.dt(),
+            period_ns: config.period_ns(),
             incarnation,
             schedule: None,
             deadline_ns: config.deadline_ns(),
@@ -117,7 +120,7 @@ impl PlantCore {
             counters: PlantCounters::default(),
             report: PlantReport::default(),
             k: 0,
-            arrivals: ArrivalModel::new((config.dt() * 1e9).round() as u64),
+            arrivals: ArrivalModel::new(config.period_ns()),
             open_loop: false,
         }
     }
@@ -225,8 +228,7 @@ impl PlantCore {
     /// Real time: starts the schedule with tick 0 at `now_ns`, unless a restored snapshot holds
     /// one already; returns when tick 0 was.
     pub fn start_schedule(&mut self, now_ns: u64) -> u64 {
-        let period_ns = (self.dt * 1e9).round() as u64;
-        self.schedule.get_or_insert((now_ns, period_ns)).0
+        self.schedule.get_or_insert((now_ns, self.period_ns)).0
     }
 
     /// A restarted plant catches up with the ticks that passed while it was down, to tick
@@ -494,7 +496,7 @@ pub fn run_with(
             }
         }
         Mode::Realtime => {
-            let period_ns = (p.dt * 1e9).round() as u64;
+            let period_ns = p.period_ns;
             let start_ns = p.core.start_schedule(now_ns());
             emit(&ChildEvent::Started { start_ns, period_ns, k: p.k })?;
             // A restarted plant catches up with the ticks that passed while it was down.

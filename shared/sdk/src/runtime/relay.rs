@@ -48,7 +48,7 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
     emit(&ChildEvent::Ready)?;
 
     let mut last_k: Option<u64> = None;
-    let period_ns = (context.config.dt() * 1e9).round() as u64;
+    let period_ns = context.config.period_ns();
     let mut waiter = Waiter::new(wait_settings, role, realtime, period_ns);
     let mut arrivals = ArrivalModel::new(period_ns);
     let mut run_queue = RunQueue::open();

@@ -75,9 +75,7 @@ impl Supervisor<'_> {
         let at_ms = self.log.since_start_ms(ns);
         let at_loop = match self.config.mode {
             Mode::Lockstep => self.last_pause.filter(|_| self.paused),
-            Mode::Realtime => {
-                self.log.plant_start_ns.map(|start| inject::loop_at(ns, start, inject::period_ns(self.config.rate_hz)))
-            }
+            Mode::Realtime => self.log.plant_start_ns.map(|start| inject::loop_at(ns, start, self.config.period_ns())),
         };
         let why = format!("{why}; see logs/{role}.log");
         self.log.lost.push(LostStage { process: role, at_ms, at_loop, why });

@@ -166,7 +166,7 @@ impl Supervisor<'_> {
         }
         self.note(ns, format!("inject: {}", fault.describe()));
         if let Some(start) = self.log.plant_start_ns {
-            let k = inject::loop_at(ns, start, inject::period_ns(self.config.rate_hz));
+            let k = inject::loop_at(ns, start, self.config.period_ns());
             self.tell_monitor(i, Injection::AtLoop(k));
         }
     }

@@ -349,15 +349,7 @@ struct PendulumMetrics {
 }
 
 impl Metrics for PendulumMetrics {
-    frozen_fields!(
-        saturated,
-        current_square_sum,
-        loops,
-        last,
-        theta_max_abs,
-        bias_last_outside,
-        recent
-    );
+    frozen_fields!(saturated, current_square_sum, loops, last, theta_max_abs, bias_last_outside, recent);
 
     fn observe(&mut self, row: &Row) {
         let (theta, wheel_speed, bias_estimate) = (row.state[0], row.state[2], row.estimate[3]);

@@ -133,7 +133,7 @@ pub fn run(exe: &Path, dir: &Path, rate_hz: f64, loops: u64) -> Result<LoopResul
         std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.take().expect("piped")), &mut line)?;
         children.push(child);
     }
-    let period = (1e9 / rate_hz).round() as u64;
+    let period = crate::contract::clock::period_ns(rate_hz);
     let start = now_ns() + 20_000_000;
     let receiver = plant_socket.try_clone()?;
     let collect = std::thread::spawn(move || -> Result<(Vec<[u64; 8]>, u64, f64)> {

@@ -347,7 +347,7 @@ struct Builder {
 
 impl Builder {
     fn new(summary: &Summary) -> Self {
-        let period_ns = if summary.rate_hz > 0.0 { (1e9 / summary.rate_hz).round() as u64 } else { 0 };
+        let period_ns = if summary.rate_hz > 0.0 { crate::contract::clock::period_ns(summary.rate_hz) } else { 0 };
         let mut builder = Builder {
             tracks: vec![],
             events: vec![],

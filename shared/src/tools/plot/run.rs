@@ -360,7 +360,7 @@ pub fn tick_period_figure(data: &RunData) -> Option<Figure> {
     if data.config.mode == Mode::Lockstep {
         return None;
     }
-    let nominal_ns = 1e9 / data.config.rate_hz;
+    let nominal_ns = data.config.period_ns() as f64;
     let (t, period) = (&data.ticks.t, &data.ticks.period_ns);
     // The first tick has no previous wake-up: its period is 0.
     let error: Vec<(f64, f64)> = t

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::error::{COMMON_KEYS, LaunchError};
+use crate::config::error::LaunchError;
 use crate::config::faults::{FaultSpec, Supervision};
 use crate::config::hosts::Hosts;
 use crate::config::launch::checks::{
@@ -21,6 +21,49 @@ use crate::config::replay::ReplaySpec;
 use crate::config::schema::ScenarioSchema;
 use crate::config::stages::Stages;
 use crate::config::wait::WaitSettings;
+
+/// The top-level keys every launch file shares, in [`CommonKeys`]'s order; the rest belong to
+/// the scenario. Read from the struct itself (serde names its fields to the deserialiser it
+/// reads from), so the list and the struct cannot disagree.
+pub fn common_keys() -> &'static [&'static str] {
+    use serde::de::{Error as _, Visitor, value::Error};
+
+    /// A deserialiser that only keeps the field names a struct asks it for.
+    struct FieldNames(Option<&'static [&'static str]>);
+
+    impl<'de> serde::Deserializer<'de> for &mut FieldNames {
+        type Error = Error;
+        fn deserialize_struct<V: Visitor<'de>>(
+            self,
+            _name: &'static str,
+            fields: &'static [&'static str],
+            _visitor: V,
+        ) -> Result<V::Value, Error> {
+            self.0 = Some(fields);
+            Err(Error::custom("only the field names were wanted"))
+        }
+        fn deserialize_any<V: Visitor<'de>>(self, _visitor: V) -> Result<V::Value, Error> {
+            Err(Error::custom("not a struct"))
+        }
+        serde::forward_to_deserialize_any! {
+            bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes byte_buf option
+            unit unit_struct newtype_struct seq tuple tuple_struct map enum identifier ignored_any
+        }
+    }
+
+    static KEYS: std::sync::OnceLock<&'static [&'static str]> = std::sync::OnceLock::new();
+    KEYS.get_or_init(|| {
+        let mut names = FieldNames(None);
+        let _ = CommonKeys::deserialize(&mut names);
+        names.0.expect("CommonKeys is a struct")
+    })
+}
+
+/// `schema`'s own top-level sections: those of its defaults that every launch file does not
+/// share.
+pub fn sections(schema: &ScenarioSchema) -> Vec<String> {
+    schema.defaults().keys().filter(|k| !common_keys().contains(&k.as_str())).cloned().collect()
+}
 
 /// The keys every scenario shares, as the document has them.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -251,8 +294,8 @@ fn from_document(
 
     // Top-level keys: the shared ones, then the scenario's sections; anything else is a typo. A
     // run's file was checked so when the launcher resolved it, and its vectors name no sections.
-    let sections = schema.sections();
-    let allowed: BTreeSet<&str> = COMMON_KEYS.iter().copied().chain(sections.iter().map(String::as_str)).collect();
+    let sections = sections(schema);
+    let allowed: BTreeSet<&str> = common_keys().iter().copied().chain(sections.iter().map(String::as_str)).collect();
     for key in document.keys() {
         if run_vectors.is_none() && !allowed.contains(key.as_str()) {
             return Err(origins.error(
@@ -265,7 +308,7 @@ fn from_document(
         }
     }
     let mut common_table = toml::Table::new();
-    for key in COMMON_KEYS {
+    for &key in common_keys() {
         if let Some(v) = document.get(key) {
             common_table.insert(key.to_owned(), v.clone());
         }
@@ -378,6 +421,30 @@ mod tests {
 
     /// A scenario whose estimate is larger than a message carries cannot be resolved: the error
     /// names the scenario and the vector (and no child process ever starts).
+    #[test]
+    fn the_common_keys_are_the_common_tables_fields_as_serde_names_them() {
+        let keys = [
+            "scenario",
+            "mode",
+            "rate_hz",
+            "deadline_us",
+            "explain_over_us",
+            "probe",
+            "trace_sched",
+            "duration_s",
+            "seed",
+            "sensors",
+            "faults",
+            "supervision",
+            "wait",
+            "realtime",
+            "hosts",
+            "stages",
+            "replay",
+        ];
+        assert_eq!(common_keys(), keys);
+    }
+
     #[test]
     fn a_scenario_whose_vectors_do_not_fit_the_messages_is_an_error_at_resolution() {
         use crate::config::schema::Component;

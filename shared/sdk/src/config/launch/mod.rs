@@ -16,8 +16,8 @@ mod overrides;
 pub mod run_vectors;
 mod types;
 
-pub use crate::config::error::{COMMON_KEYS, LaunchError};
-pub use load::{check_python_plant, load_resolved_config, load_run_config, resolve_config};
+pub use crate::config::error::LaunchError;
+pub use load::{check_python_plant, common_keys, load_resolved_config, load_run_config, resolve_config, sections};
 pub use overrides::{Override, merge};
 pub use types::{LaunchConfig, MAX_DURATION_S, MAX_LOOPS, MAX_RATE_HZ, Mode, PerComponent, SensorSpec};
 

@@ -195,7 +195,7 @@ impl LaunchConfig {
 
     /// The loop period in ns, as the plant's schedule has it.
     pub fn period_ns(&self) -> u64 {
-        (self.dt() * 1e9).round() as u64
+        crate::contract::clock::period_ns(self.rate_hz)
     }
 
     /// Number of loops the run has: duration × rate, rounded to the nearest tick.

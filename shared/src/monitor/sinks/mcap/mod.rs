@@ -191,7 +191,7 @@ impl McapRecording {
             detail,
             wall_clock,
             rate_hz: config.rate_hz,
-            dt_ns: (1e9 / config.rate_hz).round() as i64,
+            dt_ns: config.period_ns() as i64,
             faults: config.faults.clone(),
             fault_times: from_ticks.into_iter().map(|tick| (tick, None)).collect(),
             last_log_time: 0,
