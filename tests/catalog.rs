@@ -1,35 +1,18 @@
 //! The catalog as a value, from outside the crate (as a crate with its own scenarios uses it):
 //! the built-in catalog with one entry added, resolved by name, run in lockstep in this process.
-//! The added entry is the pendulum's code under another name with other default gains.
+//! The added entry is the pendulum's code under another name with other default gains
+//! (`common::stiff_pendulum`).
 
 use crate::common;
 
 use std::path::{Path, PathBuf};
 
-use common::{Table, fresh_dir};
+use common::{Table, fresh_dir, stiff_pendulum};
 use looplab_shared::config::launch::Override;
 use looplab_shared::launcher::{self, Outcome};
 use looplab_shared::model::catalog::Catalog;
-use looplab_shared::model::scenario::ScenarioEntry;
-use looplab_shared::scenarios::{self, pendulum};
+use looplab_shared::scenarios;
 use sha2::{Digest, Sha256};
-
-const BUILTIN_GAINS: &str = "gains = [-378.0, -55.0, -1.0]";
-const STIFF_GAINS: &str = "gains = [-420.0, -60.0, -1.0]";
-
-/// The pendulum's entry as `pendulum-stiff`, its controller's default gains raised.
-fn stiff_pendulum() -> ScenarioEntry {
-    let text = pendulum::ENTRY.text.replace(r#"scenario = "pendulum""#, r#"scenario = "pendulum-stiff""#);
-    assert!(text.contains(BUILTIN_GAINS), "the pendulum's defaults no longer hold {BUILTIN_GAINS}");
-    let text = text.replace(BUILTIN_GAINS, STIFF_GAINS);
-    ScenarioEntry {
-        name: "pendulum-stiff",
-        description: "the pendulum with stiffer default gains",
-        file: "tests/catalog.rs",
-        text: text.leak(),
-        ..pendulum::ENTRY
-    }
-}
 
 fn extended() -> Catalog {
     scenarios::builtin().with(stiff_pendulum())

@@ -14,27 +14,11 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
-use common::{fresh_dir, python_launcher};
+use common::{STIFF_GAINS, fresh_dir, python_launcher, stiff_pendulum};
 use looplab_shared::contract::role::Role;
 use looplab_shared::model::catalog::Catalog;
-use looplab_shared::model::scenario::ScenarioEntry;
 use looplab_shared::runtime::{builtin, child::process_main_with};
-use looplab_shared::scenarios::{self, pendulum};
-
-const BUILTIN_GAINS: &str = "gains = [-378.0, -55.0, -1.0]";
-const STIFF_GAINS: &str = "gains = [-420.0, -60.0, -1.0]";
-
-fn stiff_pendulum() -> ScenarioEntry {
-    let text = pendulum::ENTRY.text.replace(r#"scenario = "pendulum""#, r#"scenario = "pendulum-stiff""#);
-    assert!(text.contains(BUILTIN_GAINS), "the pendulum's defaults no longer hold {BUILTIN_GAINS}");
-    ScenarioEntry {
-        name: "pendulum-stiff",
-        description: "the pendulum with stiffer default gains",
-        file: "tests/outside_crate.rs",
-        text: text.replace(BUILTIN_GAINS, STIFF_GAINS).leak(),
-        ..pendulum::ENTRY
-    }
-}
+use looplab_shared::scenarios;
 
 fn catalog() -> Catalog {
     scenarios::builtin().with(stiff_pendulum())

@@ -60,6 +60,26 @@ pub fn assert_nothing_left(s: &Summary) {
 }
 
 /// A fresh, not yet existing folder under the system's temp folder.
+/// The built-in pendulum's controller gains, as its defaults give them, and the stiffer ones of
+/// [`stiff_pendulum`].
+pub const BUILTIN_GAINS: &str = "gains = [-378.0, -55.0, -1.0]";
+pub const STIFF_GAINS: &str = "gains = [-420.0, -60.0, -1.0]";
+
+/// A scenario a crate of its own adds (`Catalog::with`): the pendulum's entry as
+/// `pendulum-stiff`, its controller's default gains raised.
+pub fn stiff_pendulum() -> looplab_shared::model::scenario::ScenarioEntry {
+    use looplab_shared::scenarios::pendulum;
+    let text = pendulum::ENTRY.text.replace(r#"scenario = "pendulum""#, r#"scenario = "pendulum-stiff""#);
+    assert!(text.contains(BUILTIN_GAINS), "the pendulum's defaults no longer hold {BUILTIN_GAINS}");
+    looplab_shared::model::scenario::ScenarioEntry {
+        name: "pendulum-stiff",
+        description: "the pendulum with stiffer default gains",
+        file: "tests/common/mod.rs",
+        text: text.replace(BUILTIN_GAINS, STIFF_GAINS).leak(),
+        ..pendulum::ENTRY
+    }
+}
+
 pub fn fresh_dir(name: &str) -> PathBuf {
     static COUNTER: AtomicU32 = AtomicU32::new(0);
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
