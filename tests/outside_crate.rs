@@ -14,7 +14,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
-use common::{STIFF_GAINS, fresh_dir, python_launcher, stiff_pendulum};
+use common::{STIFF_GAINS, fresh_dir, python_module_dir, stiff_pendulum};
 use looplab_shared::contract::role::Role;
 use looplab_shared::model::catalog::Catalog;
 use looplab_shared::runtime::{builtin, child::process_main_with};
@@ -69,13 +69,10 @@ fn link_binaries(dir: &Path) -> PathBuf {
 
 /// Runs `target` in lockstep for 2 s with this crate's launcher; returns the run folder.
 fn run(launcher: &Path, target: &str, out: &Path) -> PathBuf {
-    // The Python module, as the suite's Python tests import it.
-    let python = python_launcher();
-    let pythonpath = python.get_envs().find(|(k, _)| *k == "PYTHONPATH").and_then(|(_, v)| v).unwrap().to_owned();
     let output = Command::new(launcher)
         .args(["run", target, "--mode", "lockstep", "--duration", "2", "-q", "--out"])
         .arg(out)
-        .env("PYTHONPATH", pythonpath)
+        .env("PYTHONPATH", python_module_dir())
         .env_remove("CARGO")
         .env_remove("CARGO_MANIFEST_DIR")
         .output()

@@ -29,11 +29,18 @@ pub fn looplab() -> Command {
 }
 
 /// The launcher, with the `looplab` Python module that cargo builds importable by the stages and
-/// plants it starts: the workspace's `liblooplab.so` linked as `looplab.so` into
-/// `target/<profile>/python-module`.
+/// plants it starts ([`python_module_dir`] on its PYTHONPATH).
 pub fn python_launcher() -> Command {
+    let mut command = looplab();
+    command.env("PYTHONPATH", python_module_dir());
+    command
+}
+
+/// A folder from which python3 imports the `looplab` module cargo builds: the workspace's
+/// `liblooplab.so` linked as `looplab.so` into `target/<profile>/python-module`.
+pub fn python_module_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
-    let dir = DIR.get_or_init(|| {
+    DIR.get_or_init(|| {
         let target = built();
         let dir = target.join("python-module");
         std::fs::create_dir_all(&dir).unwrap();
@@ -41,10 +48,7 @@ pub fn python_launcher() -> Command {
         let _ = std::fs::remove_file(&module);
         std::os::unix::fs::symlink(target.join("liblooplab.so"), &module).unwrap();
         dir
-    });
-    let mut command = looplab();
-    command.env("PYTHONPATH", dir);
-    command
+    })
 }
 
 /// Nothing of the run is left: the launcher found its shared memory clean, no file of it is in

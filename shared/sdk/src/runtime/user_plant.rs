@@ -17,7 +17,7 @@ use crate::contract::role::Role;
 use crate::model::declared_plant::DeclaredPlant;
 use crate::model::plant_model::{ModelSpec, PlantModel};
 use crate::model::scenario::Plant;
-use crate::runtime::user_stage::run_stage;
+use crate::runtime::user_stage::{input_limits, run_stage};
 
 /// What a user's plant model is told when it starts.
 pub struct PlantInfo<'a> {
@@ -72,8 +72,7 @@ pub fn run_plant_holding(make: impl FnOnce(&PlantInfo) -> Result<Box<dyn PlantMo
         let plant = hold_result(hold, &mut || {
             DeclaredPlant::new(model.take().expect("built once"), outputs, inputs, plant_section.substeps)
         })?;
-        let limits = config.input_limits.clone().expect("a run's launch.toml has its vectors");
-        crate::runtime::plant::run_with(context, Box::new(Held { plant, hold }), limits)
+        crate::runtime::plant::run_with(context, Box::new(Held { plant, hold }), input_limits(config))
     })
 }
 

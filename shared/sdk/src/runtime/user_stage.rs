@@ -145,7 +145,7 @@ pub(crate) fn run_stage(
 
 /// The input's limits the launcher resolved (a run's launch.toml read by `load_run_config` has
 /// them).
-fn input_limits(config: &LaunchConfig) -> Vec<(f64, f64)> {
+pub(crate) fn input_limits(config: &LaunchConfig) -> Vec<(f64, f64)> {
     config.input_limits.clone().expect("a run's launch.toml has its vectors")
 }
 
