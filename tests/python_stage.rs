@@ -116,6 +116,98 @@ fn an_integrating_python_controller_killed_in_lockstep_resumes_its_integrator() 
     assert_nothing_left(s);
 }
 
+/// A controller whose integral runs over a window of the last 8190 loops: its whole state (the
+/// window, where it writes next and the last step's time: 64 KiB, `looplab.MAX_FROZEN_BYTES`)
+/// decides every command, so a run killed in lockstep is the run without the kill only if all of
+/// it came back.
+const WINDOWED_CONTROLLER: &str = r#"import math
+import struct
+import sys
+from array import array
+
+import looplab
+
+WINDOW = (looplab.MAX_FROZEN_BYTES - 16) // 8  # theta·dt of the last WINDOW loops
+
+
+class WindowedController:
+    def __init__(self, stage):
+        self.k1, self.k2, self.k3 = stage.config["controller"]["gains"]
+        self.limit = stage.config["model"]["current_limit_a"]
+        self.window = array("d", bytes(8 * WINDOW))
+        self.next = 0
+        self.t_last = None
+
+    def step(self, t, x, u):
+        if self.t_last is not None:
+            self.window[self.next] = x[0] * (t - self.t_last)
+            self.next = (self.next + 1) % WINDOW
+        self.t_last = t
+        integral = math.fsum(self.window)
+        current = -(self.k1 * x[0] + self.k2 * x[1] + self.k3 * x[2] - 20.0 * integral)
+        u[0] = min(max(current, -self.limit), self.limit)
+
+    def freeze(self):
+        if self.t_last is None:
+            return None
+        return struct.pack("<qd", self.next, self.t_last) + self.window.tobytes()
+
+    def thaw(self, data):
+        self.next, self.t_last = struct.unpack_from("<qd", data)
+        self.window = array("d")
+        self.window.frombytes(data[16:])
+        print(f"thawed {len(data)} bytes", file=sys.stderr)
+
+
+looplab.run(WindowedController)
+"#;
+
+#[test]
+fn a_python_stage_keeps_64_kib_across_a_kill_and_more_ends_it_with_one_line() {
+    let dir = fresh_dir("frozen-64k");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("windowed_controller.py");
+    std::fs::write(&script, WINDOWED_CONTROLLER).unwrap();
+    let stage = python_stage("controller", script.to_str().unwrap());
+    let common = ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", &stage];
+    let nominal = run_from(launcher(), "windowed-nominal", &common);
+    let killed =
+        run_from(launcher(), "windowed-killed", &[&common[..], &["--fault", "kill controller at 2s"]].concat());
+    let s = killed.summary();
+    assert_eq!(s.restarts[&Role::Controller], 1, "{:?}", s.restarts);
+    assert!(log(&killed, "controller").contains("thawed 65536 bytes"), "{}", log(&killed, "controller"));
+    assert!(trajectory_bytes(&killed) == trajectory_bytes(&nominal), "the restarted controller lost its window");
+    assert_nothing_left(s);
+
+    // One byte more than a snapshot holds ends the incarnation with the reason.
+    let script = dir.join("too_much.py");
+    std::fs::write(
+        &script,
+        "import looplab\n\n\nclass TooMuch:\n    def __init__(self, stage):\n        pass\n\n    \
+         def step(self, t, x, u):\n        pass\n\n    def freeze(self):\n        \
+         return bytes(looplab.MAX_FROZEN_BYTES + 1)\n\n\nlooplab.run(TooMuch)\n",
+    )
+    .unwrap();
+    let out = dir.join("run");
+    let stage = python_stage("controller", script.to_str().unwrap());
+    let output = launcher()
+        .args(["run", "pendulum", "--mode", "lockstep", "--duration", "1", "-q", "--set", &stage])
+        .args(["--set", "supervision.controller.restart=never", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
+    let s = load_summary(&out);
+    let why = match &s.stopped_because {
+        Some(StopReason::Failed(why)) => why.clone(),
+        other => panic!("not a failure: {other:?}"),
+    };
+    let line = "controller: error: freeze returned 65537 bytes; a snapshot keeps at most 65536";
+    assert!(why.contains(line), "{why}");
+    assert_nothing_left(&s);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// The thawed integrator's (integral, t) from the controller's log.
 fn thawed(log: &str) -> Option<(f64, f64)> {
     let line = log.lines().find_map(|l| l.strip_prefix("thawed: integral "))?;

@@ -1,12 +1,12 @@
-//! A real run's `run.mcap` read back by `runtime::recorded::load` (what `looplab replay` plays
+//! A real run's `run.mcap` read back by `runtime::recording_reader::load` (what `looplab replay` plays
 //! back): trajectory.csv's numbers exactly, and the flags the monitor saw. The reader's
 //! round trip of awkward floats and its errors are unit tests (`monitor/sinks/recorded_tests.rs`).
 
 use crate::common;
 
 use common::{Run, run, run_in_process};
-use looplab_shared::model::layout::Layout;
-use looplab_shared::runtime::recorded::{RecordedLoop, load};
+use looplab_shared::model::layout::VectorLayout;
+use looplab_shared::runtime::recording_reader::{RecordedLoop, load};
 
 /// Equal bits, or both NaN.
 fn same(a: f64, b: f64) -> bool {
@@ -14,9 +14,9 @@ fn same(a: f64, b: f64) -> bool {
 }
 
 /// The run's loops as the reader gives them back, and its layout.
-fn read_back(r: &Run) -> (Vec<RecordedLoop>, Layout) {
+fn read_back(r: &Run) -> (Vec<RecordedLoop>, VectorLayout) {
     let (config, scenario) = looplab_shared::scenarios::load_resolved(&r.dir.join("launch.toml")).unwrap();
-    let layout = Layout::new(&config, scenario.as_ref());
+    let layout = VectorLayout::new(&config, scenario.as_ref());
     let recorded = load(&r.dir, &layout, config.loops()).unwrap();
     assert_eq!(recorded.len() as u64, r.summary["loops"].as_u64().unwrap());
     (recorded, layout)
@@ -24,7 +24,7 @@ fn read_back(r: &Run) -> (Vec<RecordedLoop>, Layout) {
 
 /// Every cell of trajectory.csv equals the value the reader gives back, bit for bit: the state,
 /// each sensor's reading, the estimate, the command and the input applied; k and t too.
-fn assert_matches_trajectory(r: &Run, recorded: &[RecordedLoop], layout: &Layout) {
+fn assert_matches_trajectory(r: &Run, recorded: &[RecordedLoop], layout: &VectorLayout) {
     let text = std::fs::read_to_string(r.dir.join("trajectory.csv")).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next().unwrap().split(',').collect::<Vec<_>>(), layout.trajectory_columns());

@@ -23,7 +23,7 @@ use looplab_shared::config::launch::{LaunchConfig, Mode};
 use looplab_shared::contract::clock::now_ns;
 use looplab_shared::contract::protocol::{BridgeReport, ChildEvent, CrossingCounts, LinkCounts, Outage, ProcessArgs};
 use looplab_shared::contract::role::{Role, Topic};
-use looplab_shared::runtime::bridge::{self, Inbound, Layout, Outbound, Plan};
+use looplab_shared::runtime::bridge::{self, Inbound, Outbound, Plan, WireLayout};
 use looplab_shared::runtime::child::{WAIT_SLICE, emit, wait, waitset};
 use looplab_shared::runtime::ipc::{self, Ipc};
 use looplab_shared::runtime::signals::StopFlag;
@@ -64,7 +64,7 @@ fn zenoh_error(what: &str) -> impl FnOnce(zenoh::Error) -> anyhow::Error + '_ {
 /// our subscriber by now (then nothing it sends from the start is lost).
 #[derive(Serialize, Deserialize)]
 struct Hello {
-    layout: Layout,
+    layout: WireLayout,
     matched: bool,
 }
 
@@ -197,7 +197,8 @@ fn run(args: &Args) -> Result<BridgeReport> {
                 .declare_queryable(&key)
                 .callback(move |query| {
                     let matched = publishers.values().all(|p| p.matching_status().wait().is_ok_and(|m| m.matching()));
-                    let hello = serde_json::to_vec(&Hello { layout: Layout::ours(), matched }).expect("serialisable");
+                    let hello =
+                        serde_json::to_vec(&Hello { layout: WireLayout::ours(), matched }).expect("serialisable");
                     let _ = query.reply(query.key_expr().clone(), hello).wait();
                 })
                 .wait()
@@ -280,7 +281,7 @@ fn meet(
             let Ok(sample) = reply.result() else { continue };
             let hello: Hello = serde_json::from_slice(&sample.payload().to_bytes())
                 .context("the other host's bridge answered something else than a layout")?;
-            if let Some(why) = Layout::ours().mismatch(&hello.layout) {
+            if let Some(why) = WireLayout::ours().mismatch(&hello.layout) {
                 bail!("the hosts cannot share messages: {why}");
             }
             answered = true;

@@ -16,8 +16,8 @@ use looplab_sdk::contract::protocol::{ProcessArgs, stage_env};
 use looplab_sdk::contract::role::Role;
 use looplab_sdk::runtime::user_stage::{self, MAX_FROZEN_BYTES, Step, config_number, stage_names};
 
-/// The most bytes a `looplab_freeze` may write (a snapshot's room for a stage's state).
-pub const LOOPLAB_MAX_FROZEN_BYTES: usize = 248;
+/// The most bytes a `looplab_freeze` may write (a snapshot's room for a stage's state: 64 KiB).
+pub const LOOPLAB_MAX_FROZEN_BYTES: usize = 65536;
 const _: () = assert!(LOOPLAB_MAX_FROZEN_BYTES == MAX_FROZEN_BYTES);
 
 /// Computes this loop's output from its input at simulation time `t` (seconds). `in` holds
@@ -97,13 +97,14 @@ impl Step for CStep {
 
     fn freeze(&self) -> Result<Option<Vec<u8>>> {
         let Some(freeze) = self.freeze else { return Ok(None) };
-        let mut buf = [0u8; LOOPLAB_MAX_FROZEN_BYTES];
+        let mut buf = vec![0u8; LOOPLAB_MAX_FROZEN_BYTES];
         // SAFETY: buf has room for the cap it is given.
         let len = unsafe { freeze(self.user, buf.as_mut_ptr(), buf.len()) };
         if len > buf.len() {
             bail!("freeze says it wrote {len} bytes; it has room for {}", buf.len());
         }
-        Ok((len > 0).then(|| buf[..len].to_vec()))
+        buf.truncate(len);
+        Ok((len > 0).then_some(buf))
     }
 
     fn thaw(&mut self, frozen: &[u8]) -> Result<()> {

@@ -13,6 +13,7 @@ use crossbeam_channel::Sender;
 use crate::config::stages::StageCommand;
 use crate::contract::protocol::{ChildEvent, ProcessArgs};
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 use crate::launcher::outcome::Exit;
 
 /// The loop's binaries by role.
@@ -229,7 +230,7 @@ pub fn spawn<E: Send + 'static>(
     lines: Sender<E>,
     into: fn(ChildLine) -> E,
 ) -> Result<Spawned> {
-    let log_path = args.run_dir.join("logs").join(format!("{role}.log"));
+    let log_path = args.run_dir.join(files::LOGS).join(format!("{role}.log"));
     // A restarted process appends to its log.
     let log = crate::runtime::run_file::open(&log_path, crate::runtime::run_file::Existing::Append)?;
     let process_args = ProcessArgs {

@@ -13,7 +13,7 @@ use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::summary::{self, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
 use crate::monitor::Recording;
-use crate::monitor::recorder::RecordingThread;
+use crate::monitor::recording_thread::{RecorderOptions, RecordingThread};
 use crate::runtime::in_process;
 use crate::runtime::signals::StopFlag;
 
@@ -22,7 +22,8 @@ pub fn run_in_process(config: &LaunchConfig, scenario: &dyn Scenario, run_dir: &
     let (_, started_at) = begin_run(run_dir, config, scenario)?;
     let stop = StopFlag::install()?;
     // The loop's thread only hands each message over; the recording runs beside it.
-    let mut recording = RecordingThread::spawn(Recording::in_process(config, scenario, run_dir)?)?;
+    let mut recording =
+        RecordingThread::spawn(Recording::in_process(config, scenario, run_dir)?, RecorderOptions::IN_PROCESS)?;
     let ran = in_process::run(config, scenario, &stop, |message| recording.take(message));
     // The recording's own error first (a full disk): the loop only saw it stop.
     let monitor = recording.finish()?;

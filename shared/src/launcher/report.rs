@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 // The scenarios' old path to this type, until issue 11 moves it below them.
 use crate::config::launch::Mode;
 use crate::contract::report::{CauseTally, HOPS, MissingLoops, Stats};
+use crate::contract::run_format::files;
 use crate::launcher::outcome::{EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Outcome};
 pub use crate::launcher::summary::ErrorMeasureInfo;
 use crate::launcher::summary::Summary;
@@ -114,7 +115,7 @@ fn scheduling_line(s: &Summary) -> Option<String> {
 /// A finished run's summary.json, read back for `looplab report`.
 pub fn read_summary(run_dir: &std::path::Path) -> anyhow::Result<Summary> {
     use anyhow::Context as _;
-    let path = run_dir.join("summary.json");
+    let path = run_dir.join(files::SUMMARY);
     if !run_dir.is_dir() {
         anyhow::bail!("{}: no such run folder", run_dir.display());
     }

@@ -5,13 +5,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result, bail};
 
 use crate::config::launch::{LaunchConfig, run_vectors};
+use crate::contract::run_format::files;
 use crate::model::scenario::Scenario;
 use crate::runtime::run_file;
 
 /// Begins a run in its folder: writes the resolved `launch.toml` (the file the processes load)
 /// and returns its path and the wall-clock start (UTC, RFC 3339) for the summary.
 pub fn begin_run(run_dir: &Path, config: &LaunchConfig, scenario: &dyn Scenario) -> Result<(PathBuf, String)> {
-    let launch_file = run_dir.join("launch.toml");
+    let launch_file = run_dir.join(files::LAUNCH);
     write_atomically(&launch_file, &run_vectors::run_toml(config, &scenario.input_limits()))?;
     Ok((launch_file, chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true)))
 }
@@ -50,7 +51,7 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
             }
         }
     };
-    std::fs::create_dir_all(dir.join("logs"))
+    std::fs::create_dir_all(dir.join(files::LOGS))
         .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
     Ok(dir)
 }

@@ -12,6 +12,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 use crate::launcher::summary::{SchedTraceReport, Summary};
 use anyhow::{Context as _, Result};
 
@@ -240,7 +241,7 @@ pub fn name_who_ran(
     run_dir: &Path,
     pids: &BTreeMap<Role, Vec<u32>>,
 ) -> Result<()> {
-    let path = run_dir.join("loops.csv");
+    let path = run_dir.join(files::LOOPS);
     let mut reader = csv::Reader::from_path(&path).with_context(|| format!("read {}", path.display()))?;
     let headers = reader.headers()?.clone();
     let column =

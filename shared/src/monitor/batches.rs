@@ -1,13 +1,12 @@
-//! A bounded channel of batches between two threads: the sender fills a batch and hands it over
-//! when it is full, the receiver empties it and hands it back to be filled again. A thread that
-//! produces a few hundred thousand items a second pays for one channel operation (and at most
-//! one wake-up of the other thread) per batch instead of per item, and nothing is allocated once
-//! the batches are made.
+//! A channel of batches between two threads: the sender fills a batch and hands it over when it
+//! is full (or when asked), the receiver empties it and hands it back to be filled again. A
+//! thread that produces a few hundred thousand items a second pays for one channel operation
+//! (and at most one wake-up of the other thread) per batch instead of per item, and nothing is
+//! allocated once the batches are made.
 
-use crossbeam_channel::{Receiver, Sender, bounded};
+use std::time::Duration;
 
-/// Batches in flight at most: the sender waits while this many are full and unread.
-const IN_FLIGHT: usize = 4;
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, bounded, unbounded};
 
 /// The other end hung up (its thread ended, with an error or a panic).
 #[derive(Debug)]
@@ -27,11 +26,14 @@ pub struct BatchReceiver<T> {
     empty: Sender<Vec<T>>,
 }
 
-/// A channel of batches of `size` items.
-pub fn batches<T>(size: usize) -> (BatchSender<T>, BatchReceiver<T>) {
-    let (full_tx, full_rx) = bounded(IN_FLIGHT);
-    // Every batch is full, being filled or being emptied, so the empty ones always fit.
-    let (empty_tx, empty_rx) = bounded(IN_FLIGHT + 2);
+/// A channel of batches of `size` items. `in_flight`: the full batches the sender may hand over
+/// before it waits for the receiver; None: it never waits, and the batches queue up instead.
+pub fn batches<T>(size: usize, in_flight: Option<usize>) -> (BatchSender<T>, BatchReceiver<T>) {
+    let ((full_tx, full_rx), (empty_tx, empty_rx)) = match in_flight {
+        // Every batch is full, being filled or being emptied, so the empty ones always fit.
+        Some(n) => (bounded(n), bounded(n + 2)),
+        None => (unbounded(), unbounded()),
+    };
     let sender = BatchSender { batch: Vec::with_capacity(size), size, full: full_tx, empty: empty_rx };
     (sender, BatchReceiver { full: full_rx, empty: empty_tx })
 }
@@ -60,6 +62,15 @@ impl<T> BatchReceiver<T> {
         self.full.recv().ok()
     }
 
+    /// As [`BatchReceiver::recv`], waiting at most `timeout`: Ok(None) when none came by then.
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<Vec<T>>, HungUp> {
+        match self.full.recv_timeout(timeout) {
+            Ok(batch) => Ok(Some(batch)),
+            Err(RecvTimeoutError::Timeout) => Ok(None),
+            Err(RecvTimeoutError::Disconnected) => Err(HungUp),
+        }
+    }
+
     /// Hands an emptied batch back to be filled again.
     pub fn give_back(&self, mut batch: Vec<T>) {
         batch.clear();
@@ -74,7 +85,7 @@ mod tests {
 
     #[test]
     fn items_arrive_in_order_in_batches_that_are_reused() {
-        let (mut tx, rx) = batches::<u32>(3);
+        let (mut tx, rx) = batches::<u32>(3, Some(4));
         let reader = std::thread::spawn(move || {
             let mut seen: Vec<u32> = vec![];
             let mut sizes = vec![];
@@ -99,7 +110,7 @@ mod tests {
 
     #[test]
     fn a_receiver_that_hung_up_is_reported() {
-        let (mut tx, rx) = batches::<u32>(1);
+        let (mut tx, rx) = batches::<u32>(1, None);
         drop(rx);
         assert!(tx.push(1).is_err());
     }

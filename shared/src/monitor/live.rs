@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use crate::config::schema::Component;
 use crate::contract::protocol::{LiveLatency, LiveStatus, SignalPoint};
 use crate::contract::report::HOPS;
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::monitor::join::LoopParts;
 use crate::monitor::stats::{Distribution, LoopStats};
 
@@ -36,7 +36,7 @@ pub struct KeySignal {
 /// The scenario's key signals, from its layout alone: the first two state components the
 /// estimator estimates (by name; the first state components when fewer are), and the first
 /// command.
-pub fn key_signals(layout: &Layout) -> Vec<KeySignal> {
+pub fn key_signals(layout: &VectorLayout) -> Vec<KeySignal> {
     let estimate_of = |c: &Component| layout.estimate.iter().position(|e| e.name == c.name);
     let estimated = layout.state.iter().enumerate().filter(|(_, c)| estimate_of(c).is_some());
     let others = layout.state.iter().enumerate().filter(|(_, c)| estimate_of(c).is_none());
@@ -104,7 +104,7 @@ pub struct Live {
 }
 
 impl Live {
-    pub fn new(layout: &Layout, rate_hz: f64) -> Self {
+    pub fn new(layout: &VectorLayout, rate_hz: f64) -> Self {
         // A second of loops, within what a status may sort cheaply.
         let window = || Window::new((rate_hz.round() as usize).clamp(1, MAX_WINDOW));
         Self {
@@ -166,7 +166,7 @@ mod tests {
     #[test]
     fn key_signals_prefer_estimated_states_then_the_first_command() {
         let c = Component::new;
-        let layout = Layout {
+        let layout = VectorLayout {
             state: vec![c("p_x", "m"), c("p_y", "m"), c("mass", "kg")],
             estimate: vec![c("xi", "1"), c("mass", "kg")],
             input: vec![c("thrust", "N"), c("tau_x", "N·m")],
@@ -181,7 +181,7 @@ mod tests {
                 signal("thrust", "N", Truth::Command(0), None)
             ]
         );
-        let example = key_signals(&Layout::example());
+        let example = key_signals(&VectorLayout::example());
         assert_eq!(
             example.iter().map(|s| (s.name, s.estimate)).collect::<Vec<_>>(),
             [("theta", Some(0)), ("omega", None), ("u", None)]

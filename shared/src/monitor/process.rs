@@ -3,25 +3,24 @@
 //! Its readers have no listeners, so publishing never wakes it; it polls every few milliseconds
 //! with deep buffers (real-time mode: safe overflow, so a slow monitor loses samples, counted,
 //! and never blocks a stage). The receive loop only copies samples out of shared memory, feeds
-//! the stall watch and passes each drain's samples as one batch over a channel to a writer
-//! thread, which runs the [`Recording`] and sends the live status to the launcher. One batch per
-//! drain wakes the writer once per poll, not once per sample: on two CPUs each of its wake-ups
-//! can take a CPU from a stage of the loop.
+//! the stall watch and hands each drain's samples over to the [`RecordingThread`], which runs
+//! the [`Recording`] and sends the live status to the launcher. One hand-over per drain wakes the
+//! recorder once per poll, not once per sample: on two CPUs each of its wake-ups can take a CPU
+//! from a stage of the loop.
 
 use std::fmt::Debug;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use anyhow::{Result, anyhow};
-use crossbeam_channel::{Receiver, RecvTimeoutError};
+use anyhow::Result;
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::msg::MONITOR_BUFFER;
 use crate::contract::protocol::ChildEvent;
-use crate::contract::report::MonitorReport;
 use crate::model::scenario::Scenario;
 use crate::monitor::join::Sample;
+use crate::monitor::recording_thread::{RecorderOptions, RecordingThread};
 use crate::monitor::recording::{Recording, StatusCallback};
 use crate::monitor::stall::StallWatch;
 use crate::runtime::child::Context;
@@ -34,7 +33,7 @@ const POLL_PERIOD: Duration = Duration::from_millis(5);
 /// files are flushed as often, so that a killed monitor loses little.
 const STATUS_PERIOD: Duration = Duration::from_millis(100);
 
-/// One topic's reader and how its samples go to the writer.
+/// One topic's reader and how its samples go to the recorder.
 struct Reader<T: Debug + ZeroCopySend + 'static> {
     subscriber: TopicSubscriber<T>,
     wrap: fn(T) -> Sample,
@@ -45,15 +44,17 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Reader<T> {
         Ok(Self { subscriber: context.ipc.passive_subscriber(topic)?, wrap })
     }
 
-    /// Adds every sample queued to `batch`.
-    fn drain(&self, watch: &mut StallWatch, batch: &mut Vec<Sample>) -> Result<()> {
+    /// Passes every sample queued to `recording`; returns how many there were.
+    fn drain(&self, watch: &mut StallWatch, recording: &mut RecordingThread) -> Result<usize> {
+        let mut n = 0;
         while let Some(message) = self.subscriber.receive()? {
             let sample = (self.wrap)(message);
             let (k, topic) = sample.key();
             watch.saw(topic, k, sample.published_ns());
-            batch.push(sample);
+            recording.take(sample)?;
+            n += 1;
         }
-        Ok(())
+        Ok(n)
     }
 }
 
@@ -79,7 +80,7 @@ pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
         .with_snapshot(crate::monitor::resume::path(&context.run_id)?, scenario)
         .with_injections(crate::monitor::injections::path(&context.run_id)?);
     // The mode's one say in the monitor process. In real time the monitor must never slow the
-    // loop: its writer (histograms, metrics, files: nearly all its work) runs at the lowest
+    // loop: its recorder (histograms, metrics, files: nearly all its work) runs at the lowest
     // priority, and the buffers hold a second of samples to catch up with. The receive loop
     // below stays at normal priority: it only copies samples out and watches for stalls, a few
     // microseconds per poll, and a starved one would see a stall too late (or lose samples).
@@ -90,31 +91,24 @@ pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
     };
     emit(&ChildEvent::Ready)?;
 
-    let (tx, rx) = crossbeam_channel::unbounded();
-    let writer = std::thread::Builder::new().name("monitor-writer".into()).spawn(move || {
-        if background {
-            crate::runtime::wait::run_in_background();
-        }
-        write(recording, rx)
-    })?;
+    // The receive loop never waits for the recorder: a late recorder queues samples up rather
+    // than leave them in shared memory to be lost.
+    let options = RecorderOptions { in_flight: None, checkpoint_every: Some(STATUS_PERIOD), background };
+    let mut recording = RecordingThread::spawn(recording, options)?;
 
     let timeout_ns = (config.supervision.stall_timeout_s * 1e9) as u64;
     let mut watch = StallWatch::new(timeout_ns, config.loops(), plant_period_ns, Box::new(now_ns));
     let mut drain = || -> Result<usize> {
-        let mut batch = Vec::new();
         // In the order data flows, so a loop's parts tend to arrive together.
-        states.drain(&mut watch, &mut batch)?;
-        measurements.drain(&mut watch, &mut batch)?;
-        estimates.drain(&mut watch, &mut batch)?;
-        commands.drain(&mut watch, &mut batch)?;
-        records.drain(&mut watch, &mut batch)?;
+        let n = states.drain(&mut watch, &mut recording)?
+            + measurements.drain(&mut watch, &mut recording)?
+            + estimates.drain(&mut watch, &mut recording)?
+            + commands.drain(&mut watch, &mut recording)?
+            + records.drain(&mut watch, &mut recording)?;
         for event in watch.check() {
             emit(&event)?;
         }
-        let n = batch.len();
-        if n > 0 {
-            tx.send(batch).map_err(|_| anyhow!("the monitor's writer stopped"))?;
-        }
+        recording.hand_over()?;
         Ok(n)
     };
     let drained = (|| -> Result<()> {
@@ -127,31 +121,8 @@ pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
         while drain()? > 0 {}
         Ok(())
     })();
-    drop(tx);
-    // The writer's own error first (a full disk): the receive loop only saw it stop.
-    let report = writer.join().map_err(|_| anyhow!("the monitor's writer panicked"))??;
+    // The recorder's own error first (a full disk): the receive loop only saw it stop.
+    let report = recording.finish()?;
     drained?;
     Ok(ChildEvent::MonitorReport(Box::new(report)))
-}
-
-/// The writer thread: records every sample, with a checkpoint (status and flush) every
-/// [`STATUS_PERIOD`], until the receive loop hangs up.
-fn write(mut recording: Recording, rx: Receiver<Vec<Sample>>) -> Result<MonitorReport> {
-    let mut last_status = Instant::now();
-    loop {
-        match rx.recv_timeout(STATUS_PERIOD) {
-            Ok(batch) => {
-                for sample in batch {
-                    recording.take(sample)?;
-                }
-            }
-            Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => break,
-        }
-        if last_status.elapsed() >= STATUS_PERIOD {
-            last_status = Instant::now();
-            recording.checkpoint()?;
-        }
-    }
-    recording.finish()
 }

@@ -12,7 +12,7 @@ use crate::contract::msg::{Command, Estimate, Header, MONITOR_BUFFER, Measuremen
 use crate::contract::protocol::MonitorStatus;
 use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::role::{Role, Topic};
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::model::scenario::{ErrorMeasure, Metrics, Row, Scenario};
 use crate::monitor::cause::{self, Explanation};
 use crate::monitor::crossing::Crossing;
@@ -34,7 +34,7 @@ pub type StatusCallback = Box<dyn FnMut(&MonitorStatus) -> Result<()> + Send>;
 pub struct Recording {
     rate_hz: f64,
     joiner: Joiner,
-    layout: Layout,
+    layout: VectorLayout,
     stats: LoopStats,
     metrics: Box<dyn Metrics>,
     measure: ErrorMeasure,
@@ -108,7 +108,7 @@ impl Recording {
         status: Option<StatusCallback>,
         spare_core: bool,
     ) -> Result<Self> {
-        let layout = Layout::new(config, scenario);
+        let layout = VectorLayout::new(config, scenario);
         let restarted = incarnation > 0;
         let sinks = sinks::open(&SinkSetup { run_dir, restarted, config, layout: &layout, spare_core })?;
         let live = status.is_some().then(|| Live::new(&layout, config.rate_hz));

@@ -63,7 +63,7 @@ pub fn read(path: &Path) -> Result<Option<Thawed>> {
 mod tests {
     use crate::config::launch::Override;
     use crate::contract::msg::SensorReading;
-    use crate::model::layout::Layout;
+    use crate::model::layout::VectorLayout;
     use crate::model::scenario::{Metrics, Row};
     use crate::scenarios::{builtin, resolve};
 
@@ -72,7 +72,7 @@ mod tests {
         (0..n).map(|i| ((k as f64) * 0.01 * (i + salt + 1) as f64).sin() * (1.0 + i as f64)).collect()
     }
 
-    fn feed(metrics: &mut dyn Metrics, layout: &Layout, rate_hz: f64, loops: std::ops::Range<u64>) {
+    fn feed(metrics: &mut dyn Metrics, layout: &VectorLayout, rate_hz: f64, loops: std::ops::Range<u64>) {
         for k in loops {
             let t = k as f64 / rate_hz;
             let readings: Vec<SensorReading> = (0..layout.sensors.len())
@@ -105,7 +105,7 @@ mod tests {
         for entry in builtin().entries() {
             let overrides = [Override::parse("duration_s=3").unwrap()];
             let (config, scenario) = resolve(entry.name, &overrides).unwrap();
-            let layout = Layout::new(&config, scenario.as_ref());
+            let layout = VectorLayout::new(&config, scenario.as_ref());
             let loops = config.loops();
             let mut whole = scenario.metrics();
             feed(whole.as_mut(), &layout, config.rate_hz, 0..loops);

@@ -26,7 +26,7 @@ pub fn link_key(run_id: &str, topic: Topic) -> String {
     format!("looplab/{run_id}/{}", topic.name())
 }
 
-/// The key under which the remote bridge answers with its [`Layout`].
+/// The key under which the remote bridge answers with its [`WireLayout`].
 pub fn layout_key(run_id: &str) -> String {
     format!("looplab/{run_id}/layout")
 }
@@ -39,7 +39,7 @@ pub fn alive_key(run_id: &str, role: Role) -> String {
 /// What a frame of each crossing topic is: both hosts must run the same build, or the bytes
 /// would be read as something else. Checked when the bridges meet.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Layout {
+pub struct WireLayout {
     /// The messages' layout fingerprint (`contract::msg::layout_fingerprint`), the one every
     /// port on either host checks.
     pub fingerprint: String,
@@ -56,7 +56,7 @@ pub struct TopicLayout {
     pub align: usize,
 }
 
-impl Layout {
+impl WireLayout {
     /// This build's layout of every topic that can cross.
     pub fn ours() -> Self {
         fn of<T>(topic: Topic) -> TopicLayout {
@@ -67,7 +67,7 @@ impl Layout {
                 align: std::mem::align_of::<T>(),
             }
         }
-        Layout {
+        WireLayout {
             fingerprint: layout_fingerprint().to_owned(),
             build: format!("{} {}", env!("CARGO_PKG_VERSION"), env!("LOOPLAB_GIT_COMMIT")),
             topics: vec![
@@ -80,7 +80,7 @@ impl Layout {
     }
 
     /// Why `theirs` cannot talk to us, if it cannot.
-    pub fn mismatch(&self, theirs: &Layout) -> Option<String> {
+    pub fn mismatch(&self, theirs: &WireLayout) -> Option<String> {
         if self.fingerprint != theirs.fingerprint {
             return Some(layout_mismatch("the other host's messages have", &theirs.fingerprint, &self.fingerprint));
         }
@@ -319,7 +319,7 @@ mod tests {
 
     #[test]
     fn layouts_of_one_build_match_and_another_build_is_named() {
-        let ours = Layout::ours();
+        let ours = WireLayout::ours();
         assert_eq!(ours.mismatch(&ours.clone()), None);
         let mut theirs = ours.clone();
         theirs.topics[3].size += 8;

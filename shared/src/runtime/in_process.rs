@@ -172,7 +172,7 @@ impl<'a, T: Task, M: Fn() -> T> Stage<'a, T, M> {
         if self.kills.contains(&k) {
             // The process keeps its frozen state before each output goes out (lockstep), and its
             // successor thaws it before its first input.
-            let frozen = self.runner.task.freeze()?;
+            let frozen = crate::runtime::snapshot::stage_frozen(self.runner.task.freeze()?)?;
             let incarnation = self.earlier.len() as u32 + 1;
             let next = StageRunner::new((self.make)(), self.role, self.config, incarnation);
             let last = std::mem::replace(&mut self.runner, next);

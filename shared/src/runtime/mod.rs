@@ -9,7 +9,7 @@ pub mod bridge;
 pub mod builtin;
 pub mod in_process;
 pub mod playback;
-pub mod recorded;
+pub mod recording_reader;
 
 #[cfg(test)]
 mod plant_tests;

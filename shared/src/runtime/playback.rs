@@ -15,9 +15,9 @@ use crate::config::launch::LaunchConfig;
 use crate::config::replay::ReplaySpec;
 use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState};
 use crate::contract::role::Role;
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::model::scenario::{Plant, Scenario};
-use crate::runtime::recorded::{self, RecordedLoop};
+use crate::runtime::recording_reader::{self, RecordedLoop};
 use crate::runtime::task::Task;
 
 /// A recording, loaded for the processes that play it back.
@@ -32,8 +32,8 @@ impl Playback {
     /// The recording of `config`'s open-loop replay; None when `config` is not one.
     pub fn load(config: &LaunchConfig, scenario: &dyn Scenario) -> Result<Option<Self>> {
         let Some(replay) = config.replay.clone().filter(|r| !r.closed_loop) else { return Ok(None) };
-        let layout = Layout::new(config, scenario);
-        let loops = recorded::load(&replay.recording, &layout, config.loops())?;
+        let layout = VectorLayout::new(config, scenario);
+        let loops = recording_reader::load(&replay.recording, &layout, config.loops())?;
         if loops.iter().all(|l| l.state.is_none()) {
             bail!("{}: the recording holds no state of any loop", replay.recording.display());
         }

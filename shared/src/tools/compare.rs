@@ -15,13 +15,14 @@ use anyhow::Context as _;
 use crate::config::wait::WaitSettings;
 use crate::contract::report::Stats;
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 use crate::launcher::summary::Summary;
 use crate::tools::ToolError;
 use crate::tools::plot::latency::{self, END_TO_END, Panel, Series, missed_count, stats_of};
 use crate::tools::run_folder::RunFolder;
 
 /// The files of a run folder compare reads.
-const INPUTS: [&str; 3] = ["summary.json", "loops.csv", "launch.toml"];
+const INPUTS: [&str; 3] = [files::SUMMARY, files::LOOPS, files::LAUNCH];
 
 /// A field of the report's statistics.
 type StatsField = fn(&Stats) -> Option<u64>;
@@ -62,9 +63,9 @@ pub fn compare(dirs: &[PathBuf], out: Option<&Path>) -> Result<(String, PathBuf)
 fn read_run(dir: &Path) -> Result<Run, ToolError> {
     let folder = RunFolder::open(dir, &INPUTS)?;
     let summary = folder.summary()?;
-    let wait = read_wait(&folder.text("launch.toml")?)
+    let wait = read_wait(&folder.text(files::LAUNCH)?)
         .map_err(|e| ToolError::BadInput(format!("{}: launch.toml: {e:#}", dir.display())))?;
-    let latencies = latency::latencies_from_loops(&folder.table("loops.csv")?)?;
+    let latencies = latency::latencies_from_loops(&folder.table(files::LOOPS)?)?;
     let canonical = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
     let name = canonical.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
     Ok(Run { name, summary, wait, latencies })

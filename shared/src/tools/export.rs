@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 
 use crate::contract::msg::{Command, Estimate, LoopRecord, LoopTrace, Measurements, PlantState, TickTiming};
 use crate::contract::report::FaultEffect;
+use crate::contract::run_format::files;
 use crate::model::catalog::Catalog;
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::monitor::join::LoopParts;
 use crate::monitor::sinks::mcap::{Detail, FILE, McapRecording};
 use crate::monitor::sinks::{JoinedLoop, RunSink};
@@ -28,9 +29,9 @@ pub fn write_mcap(run_dir: &Path, catalog: &Catalog, force: bool) -> Result<Path
         )));
     }
     let (config, scenario) = folder.launch(catalog)?;
-    let layout = Layout::new(&config, scenario.as_ref());
+    let layout = VectorLayout::new(&config, scenario.as_ref());
     let summary: serde_json::Value =
-        serde_json::from_str(&folder.text("summary.json")?).map_err(|e| bad(format!("summary.json: {e}")))?;
+        serde_json::from_str(&folder.text(files::SUMMARY)?).map_err(|e| bad(format!("{}: {e}", files::SUMMARY)))?;
     // One effect per fault of the launch file, None where the monitor had no record of it.
     let effects: Vec<Option<FaultEffect>> = summary["faults"]
         .as_array()
@@ -38,8 +39,8 @@ pub fn write_mcap(run_dir: &Path, catalog: &Catalog, force: bool) -> Result<Path
         .unwrap_or_default();
 
     // Everything is read and checked before the recording's file is created.
-    let trajectory = Trajectory::read(folder.table("trajectory.csv")?, &layout)?;
-    let loops = Loops::read(folder.table("loops.csv")?)?;
+    let trajectory = Trajectory::read(folder.table(files::TRAJECTORY)?, &layout)?;
+    let loops = Loops::read(folder.table(files::LOOPS)?)?;
     if trajectory.k.len() != loops.k.len() {
         return Err(bad("trajectory.csv and loops.csv have different numbers of rows".into()));
     }
@@ -115,7 +116,7 @@ struct Trajectory {
 }
 
 impl Trajectory {
-    fn read(table: Table, layout: &Layout) -> Result<Self, ToolError> {
+    fn read(table: Table, layout: &VectorLayout) -> Result<Self, ToolError> {
         let mut names = layout.trajectory_columns().into_iter();
         let k = table.column(&names.next().expect("k"))?;
         let t = table.column(&names.next().expect("t"))?;

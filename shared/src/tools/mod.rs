@@ -2,6 +2,8 @@
 //! (run.mcap; run.perfetto-trace: `perfetto`),
 //! `looplab compare`, and the figures (`plot`).
 
+use crate::contract::run_format::files;
+
 pub mod bench;
 pub mod compare;
 pub mod diff;
@@ -39,4 +41,4 @@ impl std::fmt::Display for ToolError {
 impl std::error::Error for ToolError {}
 
 /// The files of a finished run folder that export and plot read.
-pub const RUN_FILES: [&str; 4] = ["launch.toml", "trajectory.csv", "loops.csv", "summary.json"];
+pub const RUN_FILES: [&str; 4] = [files::LAUNCH, files::TRAJECTORY, files::LOOPS, files::SUMMARY];

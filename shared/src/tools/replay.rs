@@ -25,11 +25,12 @@ use crate::config::launch::{LaunchConfig, Mode, Override};
 use crate::config::replay::{KEY, ReplaySpec};
 use crate::contract::msg::Message;
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 use crate::launcher::outcome::Outcome;
 use crate::model::catalog::Catalog;
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::runtime::faults::{AddedDelay, StageFaults};
-use crate::runtime::recorded::{self, RecordedLoop};
+use crate::runtime::recording_reader::{self, RecordedLoop};
 use crate::tools::ToolError;
 
 /// `looplab replay`'s options.
@@ -119,15 +120,15 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         .recording
         .canonicalize()
         .map_err(|e| bad(format!("{}: cannot open the recording: {e}", args.recording.display())))?;
-    let launch_file = recording.join("launch.toml");
+    let launch_file = recording.join(files::LAUNCH);
     if !launch_file.is_file() {
         return Err(bad(format!("{}: not a run folder (it has no launch.toml)", recording.display())));
     }
     let (role, program) = parse_stage(&args.stage).map_err(|e| bad(format!("--stage {}: {e}", args.stage)))?;
     let target = launch_file.display().to_string();
     let (recorded_config, recorded_scenario) = catalog.resolve(&target, &[]).map_err(|e| bad(e.to_string()))?;
-    let layout = Layout::new(&recorded_config, recorded_scenario.as_ref());
-    let loops = recorded::load(&recording, &layout, recorded_config.loops()).map_err(|e| bad(format!("{e:#}")))?;
+    let layout = VectorLayout::new(&recorded_config, recorded_scenario.as_ref());
+    let loops = recording_reader::load(&recording, &layout, recorded_config.loops()).map_err(|e| bad(format!("{e:#}")))?;
     let seen = RecordedStage::new(&recorded_config, role, &loops);
 
     let mut overrides = vec![set("mode", "lockstep".into())];
@@ -160,7 +161,7 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         catalog.resolve(&target, &overrides).map_err(|e| bad(e.to_string()))
     };
     let (config, scenario) = resolve(&spec)?;
-    if Layout::new(&config, scenario.as_ref()) != layout {
+    if VectorLayout::new(&config, scenario.as_ref()) != layout {
         return Err(bad(format!(
             "--set: the replay's vectors or sensors differ from the recording's ({}); a replay feeds the stage \
              the recorded messages, so they must be the same",
@@ -191,7 +192,7 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
             None => crate::launcher::in_process::run_in_process(&config, scenario.as_ref(), dir)?,
         };
         let seconds = started.elapsed().as_secs_f64();
-        let replayed = recorded::load(dir, &layout, config.loops())?;
+        let replayed = recording_reader::load(dir, &layout, config.loops())?;
         let outputs = compare(output_columns(role, &layout), |l| output_values(role, &layout, l), &loops, &replayed);
         Ok(Attempt {
             skipped: RecordedStage::new(&config, role, &replayed).skipped,
@@ -261,13 +262,13 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         },
     };
     let json = serde_json::to_string_pretty(&report).expect("a report is JSON");
-    std::fs::write(run_dir.join("replay.json"), json + "\n")
-        .with_context(|| format!("write {}", run_dir.join("replay.json").display()))?;
+    std::fs::write(run_dir.join(files::REPLAY), json + "\n")
+        .with_context(|| format!("write {}", run_dir.join(files::REPLAY).display()))?;
     if !matches!(outcome, Outcome::Completed) {
         return Err(ToolError::Failed(anyhow::anyhow!(
             "the replay did not complete ({}); see {}",
             report.outcome,
-            run_dir.join("logs").display()
+            run_dir.join(files::LOGS).display()
         )));
     }
     Ok(report)
@@ -402,7 +403,7 @@ fn input_header(role: Role, l: &RecordedLoop) -> Option<crate::contract::msg::He
 
 /// The stage's output values of one loop, in trajectory.csv's column order; None if it sent
 /// none or sent it marked lost.
-fn output_values(role: Role, layout: &Layout, l: &RecordedLoop) -> Option<Vec<f64>> {
+fn output_values(role: Role, layout: &VectorLayout, l: &RecordedLoop) -> Option<Vec<f64>> {
     match role {
         Role::Sensors => l
             .measurements
@@ -414,7 +415,7 @@ fn output_values(role: Role, layout: &Layout, l: &RecordedLoop) -> Option<Vec<f6
 }
 
 /// The columns of trajectory.csv that hold the stage's outputs.
-fn output_columns(role: Role, layout: &Layout) -> Vec<String> {
+fn output_columns(role: Role, layout: &VectorLayout) -> Vec<String> {
     let prefix = match role {
         Role::Sensors => "meas.",
         Role::Estimator => "est.",

@@ -10,6 +10,7 @@ use anyhow::Context as _;
 
 use crate::config::launch::LaunchConfig;
 use crate::contract::msg::LoopTrace;
+use crate::contract::run_format::files;
 use crate::launcher::report::read_summary;
 use crate::launcher::summary::Summary;
 use crate::model::catalog::Catalog;
@@ -46,7 +47,7 @@ impl RunFolder {
 
     /// The run's launch.toml (resolved at the run's start) and its scenario, built from `catalog`.
     pub fn launch(&self, catalog: &Catalog) -> Result<(LaunchConfig, Box<dyn Scenario>), ToolError> {
-        catalog.load_resolved(&self.dir.join("launch.toml")).map_err(|e| self.bad(e))
+        catalog.load_resolved(&self.dir.join(files::LAUNCH)).map_err(|e| self.bad(e))
     }
 
     /// The run's summary.json.

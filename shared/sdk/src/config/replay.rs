@@ -20,6 +20,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 
 /// The top-level key.
 pub const KEY: &str = "replay";
@@ -66,7 +67,7 @@ impl ReplaySpec {
         if !self.stage.parse::<Role>().is_ok_and(|r| Role::STAGES.contains(&r)) {
             return Err((format!("{KEY}.stage"), format!("unknown stage \"{}\"; allowed: {allowed}", self.stage)));
         }
-        if !self.recording.join("launch.toml").is_file() {
+        if !self.recording.join(files::LAUNCH).is_file() {
             return Err((
                 format!("{KEY}.recording"),
                 format!("{} is not a run folder (it has no launch.toml)", self.recording.display()),

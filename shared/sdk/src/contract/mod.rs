@@ -8,3 +8,4 @@ pub mod msg;
 pub mod protocol;
 pub mod report;
 pub mod role;
+pub mod run_format;

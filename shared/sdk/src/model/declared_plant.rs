@@ -109,17 +109,18 @@ impl Plant for DeclaredPlant {
         }
     }
 
-    fn save_model(&mut self) -> Result<Option<Vec<u8>>> {
-        self.model.save()
+    fn freeze(&mut self) -> Result<Option<Vec<u8>>> {
+        self.model.freeze()
     }
 
-    /// The model's own saved state: what a co-simulation FMU, which cannot be set from the state
-    /// vector, goes on from.
-    fn restore_model(&mut self, bytes: &[u8]) {
-        self.failed = match self.model.load(bytes) {
+    /// The model's own frozen state: what a co-simulation FMU, which cannot be set from the
+    /// state vector, goes on from. A model that cannot fails its first step with the reason.
+    fn thaw(&mut self, frozen: &[u8]) -> Result<()> {
+        self.failed = match self.model.thaw(frozen) {
             Ok(()) => None,
             Err(e) => Some(e.context("the restarted plant cannot go on from its model's saved state")),
         };
+        Ok(())
     }
 }
 

@@ -7,7 +7,7 @@ use crate::config::schema::Component;
 use crate::model::scenario::Scenario;
 
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Layout {
+pub struct VectorLayout {
     pub state: Vec<Component>,
     /// Per sensor, in the launch file's order (the order of readings in `Measurements`): its
     /// name and its components.
@@ -16,13 +16,13 @@ pub struct Layout {
     pub input: Vec<Component>,
 }
 
-impl Layout {
+impl VectorLayout {
     /// A small made-up layout for the sinks' unit tests: two state components, two sensors
     /// (one scalar, one of two components), one estimate, one input.
     #[doc(hidden)]
     pub fn example() -> Self {
         let c = Component::new;
-        Layout {
+        VectorLayout {
             state: vec![c("theta", "rad"), c("omega", "rad/s")],
             sensors: vec![
                 ("encoder".into(), vec![c("angle", "rad")]),
@@ -117,7 +117,7 @@ mod tests {
     #[test]
     fn the_example_layout_has_these_columns() {
         assert_eq!(
-            Layout::example().trajectory_columns(),
+            VectorLayout::example().trajectory_columns(),
             [
                 "k",
                 "t_s",

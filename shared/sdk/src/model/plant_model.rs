@@ -72,11 +72,11 @@ pub trait PlantModel: Send {
     fn outputs(&mut self, t: f64, x: &[f64], u: &[f64], y: &mut [f64]) -> anyhow::Result<()>;
     /// Its whole internal state as bytes, where it can serialise it (an FMU with
     /// `canSerializeFMUstate`); None: it cannot, and a restart goes on from the state vector.
-    fn save(&mut self) -> anyhow::Result<Option<Vec<u8>>> {
+    fn freeze(&mut self) -> anyhow::Result<Option<Vec<u8>>> {
         Ok(None)
     }
-    /// Goes on from what [`PlantModel::save`] returned.
-    fn load(&mut self, _bytes: &[u8]) -> anyhow::Result<()> {
+    /// Goes on from what [`PlantModel::freeze`] returned.
+    fn thaw(&mut self, _frozen: &[u8]) -> anyhow::Result<()> {
         Err(anyhow::anyhow!("this model cannot restore a saved state"))
     }
     /// Goes on from state vector `x` (a restart without saved bytes). Err: it cannot (a

@@ -293,13 +293,15 @@ pub trait Plant {
     fn step(&mut self, t: f64, u: &[f64], dt: f64) -> anyhow::Result<()>;
     /// Sets the state, for a restarted plant going on from its snapshot.
     fn restore(&mut self, state: &[f64]);
-    /// The model's own whole state as bytes (an FMU's serialisation), kept beside the snapshot
-    /// after every tick; None: the state vector is all there is to keep.
-    fn save_model(&mut self) -> anyhow::Result<Option<Vec<u8>>> {
+    /// The model's own whole state beyond the state vector (an FMU's serialisation), frozen
+    /// beside the snapshot after every tick; None: the state vector is all there is to keep.
+    fn freeze(&mut self) -> anyhow::Result<Option<Vec<u8>>> {
         Ok(None)
     }
-    /// After [`Plant::restore`]: goes on from what [`Plant::save_model`] returned.
-    fn restore_model(&mut self, _bytes: &[u8]) {}
+    /// After [`Plant::restore`]: goes on from what [`Plant::freeze`] returned.
+    fn thaw(&mut self, _frozen: &[u8]) -> anyhow::Result<()> {
+        Ok(())
+    }
     /// What the actuator applied over the last step, where it differs from the command (a
     /// command link that samples the commands): the estimator predicts with it.
     fn applied_input(&self) -> Option<&[f64]> {
@@ -321,28 +323,31 @@ pub trait Estimator {
     /// Takes every sensor's held reading at simulation time `t` and the input the actuator
     /// applied over the last interval; writes the estimate.
     fn update(&mut self, t: f64, readings: &[SensorReading], u_applied: &[f64], estimate: &mut [f64]);
-    /// Slow states worth keeping across a restart, such as a calibrated sensor bias; the fast
-    /// ones start again from the current measurements. None: nothing to keep (yet).
-    fn calibration(&self) -> Option<Calibration> {
+    /// States worth keeping across a restart, such as a calibrated sensor bias (the fast ones
+    /// may start again from the current measurements), frozen after each update with
+    /// [`freeze_value`]. None: nothing to keep (yet).
+    fn freeze(&self) -> Option<Vec<u8>> {
         None
     }
-    /// A restarted estimator gets its predecessor's calibration before its first update.
-    fn resume(&mut self, _calibration: &Calibration) {}
+    /// A restarted estimator gets its predecessor's frozen state before its first update
+    /// ([`thaw_value`] decodes it).
+    fn thaw(&mut self, _frozen: &[u8]) -> anyhow::Result<()> {
+        Ok(())
+    }
 }
-
-/// Up to 32 numbers an estimator or a controller keeps across restarts.
-pub type Calibration = [f64; 32];
 
 pub trait Controller {
     fn update(&mut self, t: f64, estimate: &[f64], command: &mut [f64]);
     /// Its state between updates (integrators, filters, the previous time), frozen after each
-    /// update so that a restarted controller goes on where this one stopped. None: a static
-    /// law, nothing to keep.
-    fn freeze(&self) -> Option<Calibration> {
+    /// update with [`freeze_value`] so that a restarted controller goes on where this one
+    /// stopped. None: a static law, nothing to keep.
+    fn freeze(&self) -> Option<Vec<u8>> {
         None
     }
     /// A restarted controller gets its predecessor's frozen state before its first update.
-    fn thaw(&mut self, _frozen: &Calibration) {}
+    fn thaw(&mut self, _frozen: &[u8]) -> anyhow::Result<()> {
+        Ok(())
+    }
 }
 
 /// One loop as the monitor joined it, for the scenario's metrics.
@@ -398,12 +403,13 @@ macro_rules! frozen_fields {
     };
 }
 
-/// One value as bytes, for [`frozen_fields`].
+/// One value as bytes: the one encoding of frozen state (an estimator's, a controller's, the
+/// metrics'), exact for every f64, NaN included.
 pub fn freeze_value<T: serde::Serialize>(value: &T) -> Vec<u8> {
     crate::contract::codec::to_bytes(value).expect("plain data encodes")
 }
 
-/// A value from [`freeze_value`]'s bytes.
+/// A value from [`freeze_value`]'s bytes; an error where they are not one.
 pub fn thaw_value<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> anyhow::Result<T> {
     crate::contract::codec::decode(bytes)
 }

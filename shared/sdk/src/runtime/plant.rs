@@ -32,7 +32,7 @@ use crate::runtime::child::{Context, WAIT_SLICE, emit, line_written, wait_for_li
 use crate::runtime::ipc::Wake;
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::sched::{RunQueue, clamp};
-use crate::runtime::snapshot::{ModelSnapshot, Snapshot};
+use crate::runtime::snapshot::{FrozenSnapshot, MAX_MODEL_BYTES, Snapshot};
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
@@ -316,7 +316,7 @@ struct PlantProcess {
     loop_out: TopicPublisher<LoopRecord>,
     snapshot: Snapshot<SnapshotData>,
     /// The plant model's own bytes for the same tick, where it serialises itself (an FMU).
-    model_snapshot: Option<ModelSnapshot>,
+    model_snapshot: Option<FrozenSnapshot>,
     run_queue: RunQueue,
     /// Its run-queue wait before the last wake-up, stamped on what that wake-up sends.
     woke: SchedStamp,
@@ -340,7 +340,7 @@ impl PlantProcess {
         let mut msg = self.core.state_message(timing, now_ns());
         msg.header.sched = self.woke;
         self.state_out.send(&msg)?;
-        self.save();
+        self.keep();
         Ok(())
     }
 
@@ -352,7 +352,7 @@ impl PlantProcess {
 
     fn advance(&mut self) -> Result<()> {
         self.core.advance()?;
-        self.save();
+        self.keep();
         Ok(())
     }
 
@@ -366,11 +366,11 @@ impl PlantProcess {
         Ok(())
     }
 
-    /// The model's bytes first, then the snapshot of the same tick (see [`ModelSnapshot`]).
-    fn save(&mut self) {
+    /// The model's bytes first, then the snapshot of the same tick (see [`FrozenSnapshot`]).
+    fn keep(&mut self) {
         let s = self.core.snapshot();
         if let Some(model) = &mut self.model_snapshot {
-            let kept = match self.core.plant.save_model() {
+            let kept = match self.core.plant.freeze() {
                 Ok(Some(bytes)) => model.write(s.k, &bytes),
                 Ok(None) => false,
                 Err(e) => {
@@ -388,12 +388,12 @@ impl PlantProcess {
     /// Opens the model's snapshot where the model serialises itself; a restarted plant goes on
     /// from the bytes of its snapshot's tick.
     fn open_model_snapshot(&mut self, run_id: &str, restored: Option<u64>) -> Result<()> {
-        if !matches!(self.core.plant.save_model(), Ok(Some(_))) {
+        if !matches!(self.core.plant.freeze(), Ok(Some(_))) {
             return Ok(());
         }
-        let model = ModelSnapshot::open(run_id, Role::Plant.name())?;
+        let model = FrozenSnapshot::open(run_id, "plant.model", MAX_MODEL_BYTES)?;
         if let Some(bytes) = restored.and_then(|k| model.read(k)) {
-            self.core.plant.restore_model(&bytes);
+            self.core.plant.thaw(&bytes)?;
         }
         self.model_snapshot = Some(model);
         Ok(())
@@ -452,7 +452,7 @@ pub fn run_with(
             // Positive, finite and at most an hour (checked at load), so this cannot panic.
             let stall_limit = Duration::from_secs_f64(supervision.lockstep_stall_s);
             emit(&ChildEvent::Started { start_ns: now_ns(), period_ns: 0, k: p.k })?;
-            p.save();
+            p.keep();
             let mut waiter = Waiter::new(&context.config.wait, Role::Plant, false, 0);
             'ticks: while p.k < loops && !context.stop.requested() {
                 if pauses.contains(&p.k) {
@@ -504,7 +504,7 @@ pub fn run_with(
             let current = ((woke - start_ns) / period_ns).min(loops.saturating_sub(1));
             if current > p.k {
                 p.core.catch_up(current)?;
-                p.save();
+                p.keep();
             }
             let timer = TickTimer::new(start_ns + (p.k + 1) * period_ns, period_ns)?;
             let mut previous_wake = woke;
@@ -535,7 +535,7 @@ pub fn run_with(
                     continue;
                 }
                 // Saved at once: after the run's last tick no state goes out to save it.
-                p.save();
+                p.keep();
                 if p.k < loops {
                     let timing = TickTiming {
                         scheduled_ns: start_ns + p.k * period_ns,

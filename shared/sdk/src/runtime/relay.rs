@@ -9,12 +9,11 @@ use crate::contract::clock::now_ns;
 use crate::contract::msg::{Message, Stamp};
 use crate::contract::protocol::ChildEvent;
 use crate::contract::role::Role;
-use crate::model::scenario::Calibration;
 use crate::runtime::child::emit;
 use crate::runtime::child::{Context, WAIT_SLICE};
 use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::sched::RunQueue;
-use crate::runtime::snapshot::Snapshot;
+use crate::runtime::snapshot::{FrozenSnapshot, MAX_FROZEN_BYTES, Snapshot, stage_frozen};
 use crate::runtime::task::{StageRunner, Task};
 use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
@@ -26,11 +25,11 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
         context.ipc.stage_subscriber(input, reader_blocks(wait_settings, input, realtime))?;
     let publisher: TopicPublisher<T::Out> = context.ipc.publisher(output, writer_wakes(&context.config, output))?;
     // The frozen state of the task survives a restart in the run's snapshot folder.
-    let mut kept: Option<Snapshot<Calibration>> =
-        if T::FREEZES { Some(Snapshot::open(&context.run_id, role.name())?) } else { None };
+    let mut kept: Option<FrozenSnapshot> =
+        if T::FREEZES { Some(FrozenSnapshot::open(&context.run_id, role.name(), MAX_FROZEN_BYTES)?) } else { None };
     let mut runner = StageRunner::new(task, role, &context.config, context.incarnation);
     if context.incarnation > 0
-        && let Some(frozen) = kept.as_mut().and_then(|k| k.read())
+        && let Some(frozen) = kept.as_ref().and_then(FrozenSnapshot::newest)
     {
         runner.task.thaw(&frozen)?;
     }
@@ -85,7 +84,7 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
             // at a later loop (with the plant holding the loop) always finds this loop's state;
             // real time: after the send, off the hop's path.
             if !realtime {
-                keep(&mut kept, &runner.task)?;
+                keep(&mut kept, &runner.task, header.k)?;
             }
             if let Some(hold) = handled.hold {
                 std::thread::sleep(hold);
@@ -105,7 +104,7 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
             // After the send, off the hop's path: the input's chunk goes back.
             drop(sample);
             if realtime {
-                keep(&mut kept, &runner.task)?;
+                keep(&mut kept, &runner.task, header.k)?;
             }
         }
     }
@@ -124,12 +123,12 @@ struct InFlight<I> {
     pending: u32,
 }
 
-/// Writes the task's frozen state to its snapshot, if it has one.
-fn keep<T: Task>(kept: &mut Option<Snapshot<Calibration>>, task: &T) -> Result<()> {
+/// Writes the task's frozen state of loop k to its snapshot, if it has one.
+fn keep<T: Task>(kept: &mut Option<FrozenSnapshot>, task: &T, k: u64) -> Result<()> {
     if let Some(kept) = kept.as_mut()
-        && let Some(frozen) = task.freeze()?
+        && let Some(frozen) = stage_frozen(task.freeze()?)?
     {
-        kept.write(&frozen);
+        kept.write(k, &frozen);
     }
     Ok(())
 }

@@ -77,58 +77,94 @@ impl<T> Drop for Snapshot<T> {
     }
 }
 
-/// The most bytes of a plant model's own state (an FMU's serialised state) a [`ModelSnapshot`]
-/// keeps; a larger state is not kept, and a restart goes on from the state vector.
+/// The most bytes a stage's frozen state may take ([`FrozenSnapshot`] of a stage): room for a
+/// real filter's state (a 9-state Kalman filter's mean and covariance take 720).
+pub const MAX_FROZEN_BYTES: usize = 64 * 1024;
+
+/// A stage's frozen state if it fits in its snapshot; more than [`MAX_FROZEN_BYTES`] is an
+/// error that ends the stage's incarnation.
+pub fn stage_frozen(frozen: Option<Vec<u8>>) -> Result<Option<Vec<u8>>> {
+    match frozen {
+        Some(bytes) if bytes.len() > MAX_FROZEN_BYTES => {
+            anyhow::bail!("freeze returned {} bytes; a snapshot keeps at most {MAX_FROZEN_BYTES}", bytes.len())
+        }
+        frozen => Ok(frozen),
+    }
+}
+
+/// The most bytes of a plant model's own state (an FMU's serialised state) the plant's
+/// [`FrozenSnapshot`] keeps; a larger state is not kept, and a restart goes on from the state
+/// vector.
 pub const MAX_MODEL_BYTES: usize = 1 << 20;
 
-/// The plant model's own state as bytes (an FMU's serialisation), beside the plant's
-/// [`Snapshot`]: two slots of [`MAX_MODEL_BYTES`] written in turn, each tagged with the tick it
-/// belongs to. The plant writes it before its snapshot of the same tick, so whichever process
-/// death cuts in between, one slot matches the snapshot's tick. On tmpfs, pages never written
-/// take no memory.
-pub struct ModelSnapshot {
+/// What a part froze (`freeze`, whatever the part: an estimator, a controller, a stage of the
+/// user's own, a plant model) as bytes, kept across a restart: two slots of `capacity` bytes
+/// written in turn, each tagged with the loop it belongs to and between two copies of its
+/// sequence number, so a kill in the middle of a write leaves the other slot whole. The plant
+/// writes its model's before its [`Snapshot`] of the same tick, so whichever process death cuts
+/// in between, one slot matches the snapshot's tick. On tmpfs, pages never written take no
+/// memory.
+pub struct FrozenSnapshot {
     base: *mut u8,
+    capacity: usize,
     sequence: u64,
 }
 
 /// A slot's header: sequence, tick, length; the bytes follow, then the sequence again.
 const HEADER: usize = 24;
-const SLOT: usize = HEADER + MAX_MODEL_BYTES + 8;
 
-impl ModelSnapshot {
-    pub fn open(run_id: &str, process: &str) -> Result<Self> {
-        let ptr = shared_file::map(&path(run_id, &format!("{process}.model"))?, 2 * SLOT, Open::OrCreate)?;
-        let mut snapshot = Self { base: ptr.cast(), sequence: 0 };
+impl FrozenSnapshot {
+    /// Opens (or creates) the frozen state of `process` (a stage's role, `plant.model`) in run
+    /// `run_id`, its slots `capacity` bytes each.
+    pub fn open(run_id: &str, process: &str, capacity: usize) -> Result<Self> {
+        let capacity = capacity.next_multiple_of(8);
+        let ptr = shared_file::map(&path(run_id, process)?, 2 * Self::slot(capacity), Open::OrCreate)?;
+        let mut snapshot = Self { base: ptr.cast(), capacity, sequence: 0 };
         snapshot.sequence = (0..2).map(|i| snapshot.header(i).0).max().unwrap_or(0);
         Ok(snapshot)
     }
 
+    fn slot(capacity: usize) -> usize {
+        HEADER + capacity + 8
+    }
+
     /// Slot i's (sequence, tick, length, closing sequence).
     fn header(&self, i: usize) -> (u64, u64, usize, u64) {
+        let slot_size = Self::slot(self.capacity);
         // SAFETY: inside the mapping; volatile because another process wrote it.
         unsafe {
-            let slot = self.base.add(i * SLOT).cast::<u64>();
+            let slot = self.base.add(i * slot_size).cast::<u64>();
             let len = std::ptr::read_volatile(slot.add(2)) as usize;
-            let end = std::ptr::read_volatile(self.base.add(i * SLOT + HEADER + MAX_MODEL_BYTES).cast::<u64>());
+            let end = std::ptr::read_volatile(self.base.add(i * slot_size + HEADER + self.capacity).cast::<u64>());
             (std::ptr::read_volatile(slot), std::ptr::read_volatile(slot.add(1)), len, end)
         }
     }
 
-    /// The bytes written whole for tick `k`, if any.
-    pub fn read(&self, k: u64) -> Option<Vec<u8>> {
-        (0..2).find_map(|i| {
-            let (begin, tick, len, end) = self.header(i);
-            (begin > 0 && begin == end && tick == k && len <= MAX_MODEL_BYTES).then(|| {
-                // SAFETY: `len` bytes inside the slot.
-                unsafe { std::slice::from_raw_parts(self.base.add(i * SLOT + HEADER), len) }.to_vec()
-            })
+    /// Slot i's bytes, if it was written whole: (sequence, tick, bytes).
+    fn whole(&self, i: usize) -> Option<(u64, u64, Vec<u8>)> {
+        let (begin, tick, len, end) = self.header(i);
+        (begin > 0 && begin == end && len <= self.capacity).then(|| {
+            // SAFETY: `len` bytes inside the slot.
+            let bytes =
+                unsafe { std::slice::from_raw_parts(self.base.add(i * Self::slot(self.capacity) + HEADER), len) };
+            (begin, tick, bytes.to_vec())
         })
     }
 
-    /// Keeps `bytes` as tick `k`'s; false (nothing written) where they exceed [`MAX_MODEL_BYTES`].
+    /// The bytes written whole for tick `k`, if any.
+    pub fn read(&self, k: u64) -> Option<Vec<u8>> {
+        (0..2).filter_map(|i| self.whole(i)).find(|(_, tick, _)| *tick == k).map(|(_, _, bytes)| bytes)
+    }
+
+    /// The newest bytes written whole, if any were.
+    pub fn newest(&self) -> Option<Vec<u8>> {
+        (0..2).filter_map(|i| self.whole(i)).max_by_key(|(seq, _, _)| *seq).map(|(_, _, bytes)| bytes)
+    }
+
+    /// Keeps `bytes` as tick `k`'s; false (nothing written) where they exceed the capacity.
     pub fn write(&mut self, k: u64, bytes: &[u8]) -> bool {
         use std::sync::atomic::{Ordering, compiler_fence};
-        if bytes.len() > MAX_MODEL_BYTES {
+        if bytes.len() > self.capacity {
             return false;
         }
         self.sequence += 1;
@@ -136,23 +172,23 @@ impl ModelSnapshot {
         // SAFETY: the slot is inside our mapping; the fences order begin, the data and end, as
         // in `Snapshot::write`.
         unsafe {
-            let slot = self.base.add((seq % 2) as usize * SLOT);
+            let slot = self.base.add((seq % 2) as usize * Self::slot(self.capacity));
             std::ptr::write_volatile(slot.cast::<u64>(), seq);
             compiler_fence(Ordering::SeqCst);
             std::ptr::write_volatile(slot.cast::<u64>().add(1), k);
             std::ptr::write_volatile(slot.cast::<u64>().add(2), bytes.len() as u64);
             std::ptr::copy_nonoverlapping(bytes.as_ptr(), slot.add(HEADER), bytes.len());
             compiler_fence(Ordering::SeqCst);
-            std::ptr::write_volatile(slot.add(HEADER + MAX_MODEL_BYTES).cast::<u64>(), seq);
+            std::ptr::write_volatile(slot.add(HEADER + self.capacity).cast::<u64>(), seq);
         }
         true
     }
 }
 
-impl Drop for ModelSnapshot {
+impl Drop for FrozenSnapshot {
     fn drop(&mut self) {
         // SAFETY: unmaps what `open` mapped.
-        unsafe { shared_file::unmap(self.base.cast(), 2 * SLOT) };
+        unsafe { shared_file::unmap(self.base.cast(), 2 * Self::slot(self.capacity)) };
     }
 }
 
@@ -203,6 +239,34 @@ mod tests {
         drop(node);
         let cleanup = clean_up_run(&id).unwrap();
         assert!(cleanup.leftover.is_empty(), "{:?}", cleanup.leftover);
+        drop(lock);
+    }
+
+    #[test]
+    fn frozen_state_of_64_kib_comes_back_whole_and_a_torn_write_leaves_the_last_one() {
+        let id = unique_id("frozen");
+        let lock = create_run_storage(&id).unwrap();
+        let bytes = |k: u64| (0..MAX_FROZEN_BYTES).map(|i| (i as u64 * 31 + k) as u8).collect::<Vec<_>>();
+        {
+            let mut frozen = FrozenSnapshot::open(&id, "controller", MAX_FROZEN_BYTES).unwrap();
+            assert_eq!(frozen.newest(), None, "nothing written yet");
+            for k in 1..=3 {
+                assert!(frozen.write(k, &bytes(k)));
+            }
+            assert!(!frozen.write(4, &vec![0; MAX_FROZEN_BYTES + 1]), "more than the capacity is not kept");
+            // A kill in the middle of the fourth write, into slot 0 (tick 2's): its opening
+            // number is written, its closing one never comes.
+            // SAFETY: slot 0's first header word, inside the mapping.
+            unsafe { std::ptr::write_volatile(frozen.base.cast::<u64>(), 4) };
+        }
+        let reopened = FrozenSnapshot::open(&id, "controller", MAX_FROZEN_BYTES).unwrap();
+        assert!(reopened.newest() == Some(bytes(3)), "the newest whole slot, all 64 KiB of it");
+        assert!(reopened.read(3) == Some(bytes(3)) && reopened.read(2).is_none(), "the torn slot held tick 2");
+        drop(reopened);
+        let e = stage_frozen(Some(vec![0; MAX_FROZEN_BYTES + 1])).unwrap_err().to_string();
+        assert_eq!(e, "freeze returned 65537 bytes; a snapshot keeps at most 65536");
+        assert_eq!(stage_frozen(Some(vec![1; MAX_FROZEN_BYTES])).unwrap().map(|b| b.len()), Some(MAX_FROZEN_BYTES));
+        assert!(clean_up_run(&id).unwrap().leftover.is_empty());
         drop(lock);
     }
 

@@ -15,7 +15,7 @@ use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState};
 use crate::contract::protocol::StageReport;
 use crate::contract::role::Role;
-use crate::model::scenario::{Calibration, Controller, Estimator, Scenario};
+use crate::model::scenario::{Controller, Estimator, Scenario};
 use crate::model::sensors::SensorEmulator;
 use crate::runtime::faults::{AddedDelay, StageFaults};
 
@@ -31,13 +31,14 @@ pub trait Task {
     /// Computes this loop's output from its input (the header is the runner's business). An
     /// error (a user's stage that raised) ends the process's incarnation.
     fn process(&mut self, input: &Self::In, output: &mut Self::Out) -> Result<()>;
-    /// State worth keeping across a restart: an estimator's calibrated bias, a controller's
-    /// integrators.
-    fn freeze(&self) -> Result<Option<Calibration>> {
+    /// State worth keeping across a restart (an estimator's calibrated bias, a controller's
+    /// integrators), frozen after every loop: at most
+    /// [`MAX_FROZEN_BYTES`](crate::runtime::snapshot::MAX_FROZEN_BYTES).
+    fn freeze(&self) -> Result<Option<Vec<u8>>> {
         Ok(None)
     }
     /// A restarted task gets its predecessor's frozen state before its first input.
-    fn thaw(&mut self, _frozen: &Calibration) -> Result<()> {
+    fn thaw(&mut self, _frozen: &[u8]) -> Result<()> {
         Ok(())
     }
     /// Replaces the output by a corrupt value (`corrupt` faults, which target the command).
@@ -113,12 +114,11 @@ impl Task for EstimatorTask {
         self.estimator.update(meas.header.t, readings, &meas.u_applied[..self.inputs], &mut out.x[..self.estimates]);
         Ok(())
     }
-    fn freeze(&self) -> Result<Option<Calibration>> {
-        Ok(self.estimator.calibration())
+    fn freeze(&self) -> Result<Option<Vec<u8>>> {
+        Ok(self.estimator.freeze())
     }
-    fn thaw(&mut self, frozen: &Calibration) -> Result<()> {
-        self.estimator.resume(frozen);
-        Ok(())
+    fn thaw(&mut self, frozen: &[u8]) -> Result<()> {
+        self.estimator.thaw(frozen)
     }
 }
 
@@ -150,12 +150,11 @@ impl Task for ControllerTask {
         self.controller.update(est.header.t, &est.x[..self.estimates], &mut out.u[..m]);
         Ok(())
     }
-    fn freeze(&self) -> Result<Option<Calibration>> {
+    fn freeze(&self) -> Result<Option<Vec<u8>>> {
         Ok(self.controller.freeze())
     }
-    fn thaw(&mut self, frozen: &Calibration) -> Result<()> {
-        self.controller.thaw(frozen);
-        Ok(())
+    fn thaw(&mut self, frozen: &[u8]) -> Result<()> {
+        self.controller.thaw(frozen)
     }
     fn corrupt(&self, out: &mut Command, value: CorruptValue) {
         corrupt_command(out, &self.limits, value);

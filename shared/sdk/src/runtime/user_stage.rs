@@ -17,7 +17,7 @@
 use std::path::Path;
 use std::process::ExitCode;
 
-use anyhow::{Context as _, Result, anyhow, bail};
+use anyhow::{Context as _, Result, anyhow};
 
 use crate::config::faults::CorruptValue;
 use crate::config::launch::{LaunchConfig, load_run_config};
@@ -25,14 +25,12 @@ use crate::config::schema::Component;
 use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState, layout_fingerprint, layout_mismatch};
 use crate::contract::protocol::{ChildEvent, ProcessArgs, stage_env};
 use crate::contract::role::Role;
-use crate::model::scenario::{Calibration, Controller, Estimator};
+use crate::model::scenario::{Controller, Estimator};
 use crate::runtime::child::{Context, keep_stdout_for_events, run_process_as};
 use crate::runtime::relay::relay;
 use crate::runtime::task::{ControllerTask, EstimatorTask, Task, corrupt_command};
 
-/// The most bytes a stage's `freeze` may keep: what a snapshot holds ([`Calibration`]), less
-/// the length.
-pub const MAX_FROZEN_BYTES: usize = (std::mem::size_of::<Calibration>()) - 8;
+pub use crate::runtime::snapshot::MAX_FROZEN_BYTES;
 
 /// What a user's stage is told when it starts.
 pub struct StageInfo<'a> {
@@ -73,7 +71,7 @@ pub fn run_step(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Step>>) -> ExitC
 #[doc(hidden)]
 pub fn run_step_as_build(layout: &str, make: impl FnOnce(&StageInfo) -> Result<Box<dyn Step>>) -> ExitCode {
     run_stage(&Role::STAGES, layout, |context, role| {
-        let layout = Layout::new(&context.config);
+        let layout = StageNumbers::new(&context.config);
         let info = layout.info(role, context);
         let step = make(&info).context("the stage's constructor failed")?;
         match role {
@@ -88,7 +86,7 @@ pub fn run_step_as_build(layout: &str, make: impl FnOnce(&StageInfo) -> Result<B
 /// scenario's own [`Controller`] trait.
 pub fn run_controller(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Controller>>) -> ExitCode {
     run_stage(&[Role::Controller], layout_fingerprint(), |context, role| {
-        let info = Layout::new(&context.config).info(role, context);
+        let info = StageNumbers::new(&context.config).info(role, context);
         let controller = make(&info).context("the controller's constructor failed")?;
         relay(context, role, ControllerTask::with(controller, &context.config, input_limits(&context.config)))
     })
@@ -97,7 +95,7 @@ pub fn run_controller(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Controller
 /// Runs `make`'s estimator as the estimator stage, as [`run_controller`] does a controller.
 pub fn run_estimator(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Estimator>>) -> ExitCode {
     run_stage(&[Role::Estimator], layout_fingerprint(), |context, role| {
-        let info = Layout::new(&context.config).info(role, context);
+        let info = StageNumbers::new(&context.config).info(role, context);
         let estimator = make(&info).context("the estimator's constructor failed")?;
         relay(context, role, EstimatorTask::with(estimator, &context.config))
     })
@@ -197,7 +195,7 @@ impl StageInfo<'_> {
 }
 
 /// Where each stage's numbers are in its messages.
-struct Layout {
+struct StageNumbers {
     state: usize,
     inputs: usize,
     estimates: usize,
@@ -210,7 +208,7 @@ struct Layout {
 /// A sensor's numbers after its components: valid, fresh, sample_time.
 const READING_EXTRAS: usize = 3;
 
-impl Layout {
+impl StageNumbers {
     fn new(config: &LaunchConfig) -> Self {
         let schema = &config.schema;
         let sensor_dims: Vec<usize> = config.sensors.values().map(|s| config.signal_of(s).components.len()).collect();
@@ -250,17 +248,17 @@ impl Layout {
 /// into one (a few numbers; the user's code sees the same two buffers every loop).
 struct UserTask<I, O> {
     step: Box<dyn Step>,
-    layout: Layout,
+    layout: StageNumbers,
     input: Vec<f64>,
     output: Vec<f64>,
-    read: fn(&Layout, &I, &mut [f64]),
-    start: fn(&Layout, f64, &mut [f64]),
-    write: fn(&mut Layout, &I, &[f64], &mut O),
+    read: fn(&StageNumbers, &I, &mut [f64]),
+    start: fn(&StageNumbers, f64, &mut [f64]),
+    write: fn(&mut StageNumbers, &I, &[f64], &mut O),
     limits: Vec<(f64, f64)>,
     corrupt: fn(&[(f64, f64)], &mut O, CorruptValue),
 }
 
-fn zeros(_: &Layout, _t: f64, output: &mut [f64]) {
+fn zeros(_: &StageNumbers, _t: f64, output: &mut [f64]) {
     output.fill(0.0);
 }
 
@@ -269,11 +267,11 @@ fn no_corruption<O>(_: &[(f64, f64)], _: &mut O, _: CorruptValue) {}
 impl<I, O> UserTask<I, O> {
     fn new(
         step: Box<dyn Step>,
-        layout: Layout,
+        layout: StageNumbers,
         (inputs, outputs): (usize, usize),
-        read: fn(&Layout, &I, &mut [f64]),
-        start: fn(&Layout, f64, &mut [f64]),
-        write: fn(&mut Layout, &I, &[f64], &mut O),
+        read: fn(&StageNumbers, &I, &mut [f64]),
+        start: fn(&StageNumbers, f64, &mut [f64]),
+        write: fn(&mut StageNumbers, &I, &[f64], &mut O),
     ) -> Self {
         Self {
             step,
@@ -290,13 +288,13 @@ impl<I, O> UserTask<I, O> {
 }
 
 impl UserTask<PlantState, Measurements> {
-    fn sensors(step: Box<dyn Step>, layout: Layout) -> Self {
+    fn sensors(step: Box<dyn Step>, layout: StageNumbers) -> Self {
         let sizes = (layout.state + layout.inputs, layout.readings_len());
-        let read = |l: &Layout, s: &PlantState, into: &mut [f64]| {
+        let read = |l: &StageNumbers, s: &PlantState, into: &mut [f64]| {
             into[..l.state].copy_from_slice(&s.x[..l.state]);
             into[l.state..].copy_from_slice(&s.u_applied[..l.inputs]);
         };
-        let start = |l: &Layout, t: f64, out: &mut [f64]| {
+        let start = |l: &StageNumbers, t: f64, out: &mut [f64]| {
             out.fill(0.0);
             let mut i = 0;
             for &dim in &l.sensor_dims {
@@ -304,7 +302,7 @@ impl UserTask<PlantState, Measurements> {
                 i += dim + READING_EXTRAS;
             }
         };
-        let write = |l: &mut Layout, s: &PlantState, from: &[f64], out: &mut Measurements| {
+        let write = |l: &mut StageNumbers, s: &PlantState, from: &[f64], out: &mut Measurements| {
             let mut i = 0;
             for ((reading, &dim), seq) in out.readings.iter_mut().zip(&l.sensor_dims).zip(&mut l.sensor_seq) {
                 reading.value[..dim].copy_from_slice(&from[i..i + dim]);
@@ -325,13 +323,13 @@ impl UserTask<PlantState, Measurements> {
 }
 
 impl UserTask<Measurements, Estimate> {
-    fn estimator(step: Box<dyn Step>, layout: Layout) -> Self {
+    fn estimator(step: Box<dyn Step>, layout: StageNumbers) -> Self {
         let sizes = (layout.readings_len() + layout.inputs, layout.estimates);
-        let read = |l: &Layout, m: &Measurements, into: &mut [f64]| {
+        let read = |l: &StageNumbers, m: &Measurements, into: &mut [f64]| {
             let i = l.read_readings(m, into);
             into[i..].copy_from_slice(&m.u_applied[..l.inputs]);
         };
-        let write = |l: &mut Layout, _: &Measurements, from: &[f64], out: &mut Estimate| {
+        let write = |l: &mut StageNumbers, _: &Measurements, from: &[f64], out: &mut Estimate| {
             out.x[..l.estimates].copy_from_slice(from);
         };
         Self::new(step, layout, sizes, read, zeros, write)
@@ -339,10 +337,10 @@ impl UserTask<Measurements, Estimate> {
 }
 
 impl UserTask<Estimate, Command> {
-    fn controller(step: Box<dyn Step>, layout: Layout, limits: Vec<(f64, f64)>) -> Self {
+    fn controller(step: Box<dyn Step>, layout: StageNumbers, limits: Vec<(f64, f64)>) -> Self {
         let sizes = (layout.estimates, layout.inputs);
-        let read = |l: &Layout, e: &Estimate, into: &mut [f64]| into.copy_from_slice(&e.x[..l.estimates]);
-        let write = |l: &mut Layout, _: &Estimate, from: &[f64], out: &mut Command| {
+        let read = |l: &StageNumbers, e: &Estimate, into: &mut [f64]| into.copy_from_slice(&e.x[..l.estimates]);
+        let write = |l: &mut StageNumbers, _: &Estimate, from: &[f64], out: &mut Command| {
             out.u[..l.inputs].copy_from_slice(from);
         };
         let mut task = Self::new(step, layout, sizes, read, zeros, write);
@@ -366,42 +364,17 @@ impl<I: Message, O: Message> Task for UserTask<I, O> {
         Ok(())
     }
 
-    fn freeze(&self) -> Result<Option<Calibration>> {
-        let Some(bytes) = self.step.freeze().context("freeze failed")? else { return Ok(None) };
-        Ok(Some(pack(&bytes)?))
+    fn freeze(&self) -> Result<Option<Vec<u8>>> {
+        self.step.freeze().context("freeze failed")
     }
 
-    fn thaw(&mut self, frozen: &Calibration) -> Result<()> {
-        self.step.thaw(&unpack(frozen)?).context("thaw failed")
+    fn thaw(&mut self, frozen: &[u8]) -> Result<()> {
+        self.step.thaw(frozen).context("thaw failed")
     }
 
     fn corrupt(&self, output: &mut O, value: CorruptValue) {
         (self.corrupt)(&self.limits, output, value);
     }
-}
-
-/// A stage's frozen bytes in a snapshot: the length, then the bytes.
-fn pack(bytes: &[u8]) -> Result<Calibration> {
-    if bytes.len() > MAX_FROZEN_BYTES {
-        bail!("freeze returned {} bytes; a snapshot keeps at most {MAX_FROZEN_BYTES}", bytes.len());
-    }
-    let mut frozen: Calibration = [0.0; 32];
-    frozen[0] = bytes.len() as f64;
-    let mut raw = [0u8; MAX_FROZEN_BYTES];
-    raw[..bytes.len()].copy_from_slice(bytes);
-    for (slot, chunk) in frozen[1..].iter_mut().zip(raw.chunks_exact(8)) {
-        *slot = f64::from_bits(u64::from_le_bytes(chunk.try_into().expect("8 bytes")));
-    }
-    Ok(frozen)
-}
-
-fn unpack(frozen: &Calibration) -> Result<Vec<u8>> {
-    let len = frozen[0] as usize;
-    if !(0.0..=MAX_FROZEN_BYTES as f64).contains(&frozen[0]) || frozen[0] != len as f64 {
-        return Err(anyhow!("the snapshot is not a stage's frozen bytes"));
-    }
-    let raw: Vec<u8> = frozen[1..].iter().flat_map(|v| v.to_bits().to_le_bytes()).collect();
-    Ok(raw[..len].to_vec())
 }
 
 #[cfg(test)]
@@ -417,13 +390,5 @@ mod tests {
         for missing in ["controller.gains.3", "controller.gains", "controller.kind", "controller.x", "model", ""] {
             assert_eq!(number(missing), None, "{missing}");
         }
-    }
-
-    #[test]
-    fn frozen_bytes_survive_a_snapshot_and_too_many_are_refused() {
-        for bytes in [vec![], vec![7u8], (0..=247u8).collect::<Vec<_>>()] {
-            assert_eq!(unpack(&pack(&bytes).unwrap()).unwrap(), bytes);
-        }
-        assert_eq!(pack(&[0; 249]).unwrap_err().to_string(), "freeze returned 249 bytes; a snapshot keeps at most 248");
     }
 }

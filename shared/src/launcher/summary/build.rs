@@ -10,6 +10,7 @@ use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::protocol::{BridgeReport, PlantReport, StageReport, WaitCounts};
 use crate::contract::report::MonitorReport;
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 use crate::launcher::child::Start;
 use crate::launcher::inject::{FaultSeen, target};
 use crate::launcher::outcome::{Outcome, StopReason};
@@ -169,7 +170,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
 
 /// Writes `summary.json` into the run folder, whole or not at all.
 pub fn write(summary: &Summary, run_dir: &Path) -> Result<()> {
-    write_atomically(&run_dir.join("summary.json"), &(serde_json::to_string_pretty(summary)? + "\n"))
+    write_atomically(&run_dir.join(files::SUMMARY), &(serde_json::to_string_pretty(summary)? + "\n"))
 }
 
 /// One entry per start, in start order; a stage's with that incarnation's own counts: from its

@@ -11,7 +11,7 @@ use crate::config::launch::LaunchConfig;
 use crate::contract::protocol::MonitorStatus;
 use crate::launcher::dashboard::{self, Dashboard, ProcessRow, Update};
 use crate::launcher::summary::TimelineEntry;
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::model::scenario::Scenario;
 use crate::monitor::live::{Truth, key_signals};
 
@@ -107,7 +107,7 @@ impl Live {
 
 /// The dashboard's fixed lines: the run, and the key signals with their units.
 fn dashboard_header(config: &LaunchConfig, scenario: &dyn Scenario) -> dashboard::Header {
-    let signals = key_signals(&Layout::new(config, scenario))
+    let signals = key_signals(&VectorLayout::new(config, scenario))
         .into_iter()
         .map(|s| dashboard::SignalPlot {
             title: format!("{} [{}]", s.name, s.unit),

@@ -25,6 +25,7 @@ use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::clock::now_ns;
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 use crate::launcher::child::{self, Binaries, ChildArgs, ChildLine, Program, Start};
 use crate::launcher::outcome::Exit;
 use crate::launcher::outcome::Outcome;
@@ -345,7 +346,7 @@ impl<'a> Supervisor<'a> {
     /// raised says what.
     pub(super) fn last_words(&self, role: Role) -> String {
         let failed = matches!(self.processes[role].runs.last().map(|r| r.exit), Some(Exit::Status(code)) if code != 0);
-        match last_line(&self.run_dir.join("logs").join(format!("{role}.log"))).filter(|_| failed) {
+        match last_line(&self.run_dir.join(files::LOGS).join(format!("{role}.log"))).filter(|_| failed) {
             Some(line) => format!(": {line}"),
             None => String::new(),
         }

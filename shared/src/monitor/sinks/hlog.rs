@@ -13,6 +13,7 @@ use hdrhistogram::serialization::interval_log::{IntervalLogIterator, IntervalLog
 
 use crate::contract::clock::now_ns;
 use crate::contract::report::{HOPS, MonitorReport};
+use crate::contract::run_format::files;
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 use crate::monitor::stats::histogram;
 
@@ -106,11 +107,11 @@ struct IntervalLog {
 
 impl IntervalLog {
     fn open(dir: &Path, restarted: bool) -> Result<Self> {
-        let (file, new) = create(dir, "latency.hlog", restarted)?;
+        let (file, new) = create(dir, files::LATENCY_LOG, restarted)?;
         let base = if new {
             None
         } else {
-            let path = dir.join("latency.hlog");
+            let path = dir.join(files::LATENCY_LOG);
             let text = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
             // Only the header matters; a killed monitor may have left a broken last line.
             IntervalLogIterator::new(&text).map_while(Result::ok).find_map(|entry| match entry {

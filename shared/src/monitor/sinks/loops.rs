@@ -11,6 +11,7 @@ use anyhow::Result;
 
 use crate::config::launch::Mode;
 use crate::contract::msg::LoopTrace;
+use crate::contract::run_format::files;
 use crate::model::layout::column_name;
 use crate::monitor::sinks::text::{push_f64, push_int};
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
@@ -26,7 +27,7 @@ pub struct LoopsCsv {
 
 impl LoopsCsv {
     pub fn open(setup: &SinkSetup) -> Result<Self> {
-        let (mut file, new) = create(setup.run_dir, "loops.csv", setup.restarted)?;
+        let (mut file, new) = create(setup.run_dir, files::LOOPS, setup.restarted)?;
         if new {
             writeln!(file, "{}", columns().join(","))?;
         }

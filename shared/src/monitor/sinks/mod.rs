@@ -16,7 +16,7 @@ use anyhow::{Context as _, Result};
 use crate::config::launch::LaunchConfig;
 use crate::contract::msg::TickTiming;
 use crate::contract::report::MonitorReport;
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::monitor::cause::Explanation;
 use crate::monitor::join::LoopParts;
 use crate::runtime::run_file::{self, Existing};
@@ -29,7 +29,7 @@ pub struct SinkSetup<'a> {
     pub restarted: bool,
     /// The run's launch file (its faults with their ticks, the rate, the seed).
     pub config: &'a LaunchConfig,
-    pub layout: &'a Layout,
+    pub layout: &'a VectorLayout,
     /// The run has a core to spare for the files (an in-process run): run.mcap's chunks are
     /// compressed on a thread of their own. The monitor process leaves the loop's processes theirs.
     pub spare_core: bool,

@@ -15,6 +15,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::contract::run_format::files;
 use crate::monitor::sinks::text::{push_f64, push_int};
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
 
@@ -32,7 +33,7 @@ pub struct TrajectoryCsv {
 impl TrajectoryCsv {
     pub fn open(setup: &SinkSetup) -> Result<Self> {
         let layout = setup.layout;
-        let (mut file, new) = create(setup.run_dir, "trajectory.csv", setup.restarted)?;
+        let (mut file, new) = create(setup.run_dir, files::TRAJECTORY, setup.restarted)?;
         if new {
             writeln!(file, "{}", layout.trajectory_columns().join(","))?;
         }
@@ -86,11 +87,11 @@ mod tests {
     use super::*;
     use crate::contract::msg::{Command, Estimate, Measurements, PlantState};
     use crate::contract::report::MonitorReport;
-    use crate::model::layout::Layout;
+    use crate::model::layout::VectorLayout;
     use crate::monitor::join::LoopParts;
 
-    fn layout() -> Layout {
-        Layout::example()
+    fn layout() -> VectorLayout {
+        VectorLayout::example()
     }
 
     fn whole_loop() -> LoopParts {
@@ -154,7 +155,7 @@ mod tests {
     fn every_built_in_column_is_ascii_and_unique() {
         for entry in crate::scenarios::ALL {
             let (config, scenario) = crate::scenarios::resolve(entry.name, &[]).unwrap();
-            let columns = crate::model::layout::Layout::new(&config, scenario.as_ref()).trajectory_columns();
+            let columns = crate::model::layout::VectorLayout::new(&config, scenario.as_ref()).trajectory_columns();
             for column in &columns {
                 let allowed = |ch: char| ch.is_ascii_alphanumeric() || ch == '_' || ch == '.';
                 assert!(column.chars().all(allowed), "{}: column {column:?}", entry.name);

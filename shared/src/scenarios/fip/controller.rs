@@ -21,7 +21,7 @@ use super::params::Model;
 use super::reference::{EllipseReference, ORDERS};
 use crate::model::autodiff::{Dual, Scalar, Vec3, add, cross, dot, scale};
 use crate::model::reference::Reference;
-use crate::model::scenario::Controller;
+use crate::model::scenario::{Controller, freeze_value, thaw_value};
 
 /// `[controller]`: K_p = k_p I and K_v = k_v I (the paper's gains are scalar).
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
@@ -253,15 +253,14 @@ impl Controller for Backstepping {
     /// The law is static, but the reference's phase ϑ is integrated on from the last update:
     /// [t, ϑ(t)], so that a restarted controller computes the very same ϑ, not one integrated
     /// afresh from 0 (equal only to rounding).
-    fn freeze(&self) -> Option<crate::model::scenario::Calibration> {
-        let mut frozen = [0.0; 32];
-        let (t, theta) = self.reference.phase();
-        frozen[..2].copy_from_slice(&[t, theta]);
-        Some(frozen)
+    /// The reference's phase (t, θ): where on the ellipse the vehicle was sent.
+    fn freeze(&self) -> Option<Vec<u8>> {
+        Some(freeze_value(&self.reference.phase()))
     }
 
-    fn thaw(&mut self, frozen: &crate::model::scenario::Calibration) {
-        self.reference.resume_phase((frozen[0], frozen[1]));
+    fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
+        self.reference.resume_phase(thaw_value(frozen)?);
+        Ok(())
     }
 }
 

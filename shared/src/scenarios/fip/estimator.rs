@@ -24,7 +24,7 @@ use serde::Deserialize;
 use super::layout;
 use super::params::Model;
 use crate::contract::msg::SensorReading;
-use crate::model::scenario::{Calibration, Estimator};
+use crate::model::scenario::{Estimator, freeze_value, thaw_value};
 use crate::model::so3::{rotation, skew};
 
 type Vector9 = SVector<f64, 9>;
@@ -205,14 +205,14 @@ impl Estimator for KalmanBucy {
     }
 
     /// b̂ is the slow state worth keeping across a restart.
-    fn calibration(&self) -> Option<Calibration> {
-        let mut c = [0.0; 32];
-        c[..3].copy_from_slice(self.x.fixed_rows::<3>(6).as_slice());
-        Some(c)
+    fn freeze(&self) -> Option<Vec<u8>> {
+        Some(freeze_value(&<[f64; 3]>::try_from(self.x.fixed_rows::<3>(6).as_slice()).expect("3 rows")))
     }
 
-    fn resume(&mut self, calibration: &Calibration) {
-        self.x.fixed_rows_mut::<3>(6).copy_from_slice(&calibration[..3]);
+    fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
+        let bias: [f64; 3] = thaw_value(frozen)?;
+        self.x.fixed_rows_mut::<3>(6).copy_from_slice(&bias);
+        Ok(())
     }
 }
 

@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 use super::params::Model;
 use crate::contract::msg::SensorReading;
 use crate::model::integrate::rk4;
-use crate::model::scenario::Estimator;
+use crate::model::scenario::{Estimator, freeze_value, thaw_value};
 
 /// RK4 steps per loop interval: the fastest default error pole (about −200 s⁻¹ in the
 /// bias observer's l₁) stays far inside RK4's stability region at 1 kHz.
@@ -153,19 +153,16 @@ impl Estimator for PendulumEstimator {
     /// The bias estimate: it takes the observer about 0.4 s to find, and a restarted observer
     /// that starts from zero commands the full current limit the wrong way meanwhile (the
     /// pendulum falls), so it outlives the process.
-    fn calibration(&self) -> Option<crate::model::scenario::Calibration> {
+    fn freeze(&self) -> Option<Vec<u8>> {
         let (x, _) = self.state?;
-        (self.kind == Kind::BiasObserver).then(|| {
-            let mut c = [0.0; 32];
-            c[0] = x[2];
-            c
-        })
+        (self.kind == Kind::BiasObserver).then(|| freeze_value(&x[2]))
     }
 
-    fn resume(&mut self, calibration: &crate::model::scenario::Calibration) {
+    fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
         if self.kind == Kind::BiasObserver {
-            self.resumed_bias = calibration[0];
+            self.resumed_bias = thaw_value(frozen)?;
         }
+        Ok(())
     }
 }
 

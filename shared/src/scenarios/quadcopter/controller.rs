@@ -24,7 +24,7 @@ use super::layout;
 use super::params::Model;
 use super::reference::Reference;
 use crate::model::reference::Reference as _;
-use crate::model::scenario::Controller;
+use crate::model::scenario::{Controller, freeze_value, thaw_value};
 use crate::model::so3::{rotation, skew};
 
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -193,16 +193,15 @@ impl Controller for Backstepping {
 
     /// The rate command's integral and when it was last advanced: [1, t, ∫x, ∫y, ∫z], or all
     /// zero before the first update.
-    fn freeze(&self) -> Option<crate::model::scenario::Calibration> {
-        let mut frozen = [0.0; 32];
-        if let Some((t, integral)) = self.rate_integral {
-            frozen[..5].copy_from_slice(&[1.0, t, integral.x, integral.y, integral.z]);
-        }
-        Some(frozen)
+    /// The rate integral and the time it was last advanced, once it exists.
+    fn freeze(&self) -> Option<Vec<u8>> {
+        Some(freeze_value(&self.rate_integral.map(|(t, integral)| (t, <[f64; 3]>::from(integral)))))
     }
 
-    fn thaw(&mut self, frozen: &crate::model::scenario::Calibration) {
-        self.rate_integral = (frozen[0] == 1.0).then(|| (frozen[1], Vector3::new(frozen[2], frozen[3], frozen[4])));
+    fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
+        let rate_integral: Option<(f64, [f64; 3])> = thaw_value(frozen)?;
+        self.rate_integral = rate_integral.map(|(t, integral)| (t, Vector3::from(integral)));
+        Ok(())
     }
 }
 

@@ -25,7 +25,7 @@ use serde::Deserialize;
 use super::layout;
 use super::params::Model;
 use crate::contract::msg::SensorReading;
-use crate::model::scenario::{Calibration, Estimator};
+use crate::model::scenario::{Estimator, freeze_value, thaw_value};
 use crate::model::so3::{log_so3, orthonormalise, rotation};
 
 type Vector16 = SVector<f64, 16>;
@@ -306,29 +306,25 @@ impl Estimator for ParameterEstimator {
     /// The parameter estimates are what took the filter seconds of excitation to learn: they
     /// outlive a restart, with their variances (ξ̂ and the diagonal of its covariance block, m̂,
     /// ĵ and their filters' p). The fast states start again from the measurements.
-    fn calibration(&self) -> Option<Calibration> {
+    fn freeze(&self) -> Option<Vec<u8>> {
         self.last?;
-        let mut c = [0.0; 32];
-        for i in 0..10 {
-            c[i] = self.zeta[6 + i];
-            c[10 + i] = self.p[(6 + i, 6 + i)];
-        }
-        for (i, filter) in std::iter::once(&self.mass).chain(&self.inertia).enumerate() {
-            c[20 + 2 * i] = filter.estimate;
-            c[21 + 2 * i] = filter.p;
-        }
-        Some(c)
+        let xi: [f64; 10] = std::array::from_fn(|i| self.zeta[6 + i]);
+        let variances: [f64; 10] = std::array::from_fn(|i| self.p[(6 + i, 6 + i)]);
+        let filters: Vec<(f64, f64)> =
+            std::iter::once(&self.mass).chain(&self.inertia).map(|f| (f.estimate, f.p)).collect();
+        Some(freeze_value(&(xi, variances, filters)))
     }
 
-    fn resume(&mut self, c: &Calibration) {
+    fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
+        let (xi, variances, filters): ([f64; 10], [f64; 10], Vec<(f64, f64)>) = thaw_value(frozen)?;
         for i in 0..10 {
-            self.zeta[6 + i] = c[i];
-            self.p[(6 + i, 6 + i)] = c[10 + i];
+            self.zeta[6 + i] = xi[i];
+            self.p[(6 + i, 6 + i)] = variances[i];
         }
-        for (i, filter) in std::iter::once(&mut self.mass).chain(&mut self.inertia).enumerate() {
-            filter.estimate = c[20 + 2 * i];
-            filter.p = c[21 + 2 * i];
+        for (filter, (estimate, p)) in std::iter::once(&mut self.mass).chain(&mut self.inertia).zip(filters) {
+            (filter.estimate, filter.p) = (estimate, p);
         }
+        Ok(())
     }
 }
 

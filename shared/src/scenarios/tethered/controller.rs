@@ -21,7 +21,7 @@ use super::params::Model;
 use super::reference::{Point, TetheredReference};
 use crate::model::poly::coefficients_of_roots;
 use crate::model::reference::Reference;
-use crate::model::scenario::Controller;
+use crate::model::scenario::{Controller, freeze_value, thaw_value};
 
 /// `[controller]`.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -181,15 +181,13 @@ impl Controller for FlatnessController {
 
     /// The compensator and when it last ran: [u₁, u̇₁, ü₁, 1, t], or [u₁, u̇₁, ü₁, 0, 0] before
     /// the first update.
-    fn freeze(&self) -> Option<crate::model::scenario::Calibration> {
-        let mut frozen = [0.0; 32];
-        let last = self.last_t.map_or([0.0, 0.0], |t| [1.0, t]);
-        frozen[..5].copy_from_slice(&[self.u1, self.u1_dot, self.u1_ddot, last[0], last[1]]);
-        Some(frozen)
+    /// The thrust chain u₁, u̇₁, ü₁ and the time of the last update.
+    fn freeze(&self) -> Option<Vec<u8>> {
+        Some(freeze_value(&(self.u1, self.u1_dot, self.u1_ddot, self.last_t)))
     }
 
-    fn thaw(&mut self, frozen: &crate::model::scenario::Calibration) {
-        (self.u1, self.u1_dot, self.u1_ddot) = (frozen[0], frozen[1], frozen[2]);
-        self.last_t = (frozen[3] == 1.0).then_some(frozen[4]);
+    fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
+        (self.u1, self.u1_dot, self.u1_ddot, self.last_t) = thaw_value(frozen)?;
+        Ok(())
     }
 }

@@ -18,14 +18,14 @@
 use std::f64::consts::PI;
 
 use nalgebra::{Vector3, Vector4};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::layout;
 use super::params::Model;
 use crate::contract::msg::SensorReading;
 use crate::model::integrate::rk4;
 use crate::model::poly::{coefficients_of_roots, wrap};
-use crate::model::scenario::{Calibration, Estimator};
+use crate::model::scenario::{Estimator, freeze_value, thaw_value};
 
 /// `[estimator]`.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -89,7 +89,7 @@ struct BranchObserver {
 }
 
 /// What the IMU gave at one tick.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct Sample {
     t: f64,
     u3: f64,
@@ -275,22 +275,18 @@ impl Estimator for HighGainObserver {
     /// (ẑ₂ = ẑ₃ = 0 while the vehicle moves) peaks, and the loop loses the vehicle (measured with
     /// a kill at 5 s of the nominal run). A restarted estimator goes on from its predecessor's
     /// last update across the outage instead.
-    fn calibration(&self) -> Option<Calibration> {
+    fn freeze(&self) -> Option<Vec<u8>> {
         let last = self.last?;
-        let mut c = [0.0; 32];
-        for (i, b) in self.branches.iter().enumerate() {
-            c[4 * i..4 * i + 4].copy_from_slice(&[b.z[0], b.z[1], b.z[2], b.prediction_error]);
-        }
-        c[8..13].copy_from_slice(&[self.active as f64, last.t, last.u3, last.eta, last.w]);
-        Some(c)
+        let branches: Vec<([f64; 3], f64)> = self.branches.iter().map(|b| (b.z.into(), b.prediction_error)).collect();
+        Some(freeze_value(&(branches, self.active, last)))
     }
 
-    fn resume(&mut self, c: &Calibration) {
-        for (i, b) in self.branches.iter_mut().enumerate() {
-            b.z = Vector3::new(c[4 * i], c[4 * i + 1], c[4 * i + 2]);
-            b.prediction_error = c[4 * i + 3];
+    fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
+        let (branches, active, last): (Vec<([f64; 3], f64)>, usize, Sample) = thaw_value(frozen)?;
+        for (b, (z, prediction_error)) in self.branches.iter_mut().zip(branches) {
+            (b.z, b.prediction_error) = (Vector3::from(z), prediction_error);
         }
-        self.active = if c[8] > 0.5 { 1 } else { 0 };
-        self.last = Some(Sample { t: c[9], u3: c[10], eta: c[11], w: c[12] });
+        (self.active, self.last) = (active, Some(last));
+        Ok(())
     }
 }

@@ -32,7 +32,7 @@
 //! stand-in and keep the load bounded; why the prefilter stays slow is in `gains`.
 
 use nalgebra::Vector2;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::control_model::{InnerModel, OUTPUTS, OuterModel, ext};
 use super::dynamics::rotation;
@@ -41,7 +41,7 @@ use super::layout;
 use super::params::Params;
 use super::reference::TiltReference;
 use crate::config::launch::{LaunchConfig, LaunchError};
-use crate::model::scenario::Controller;
+use crate::model::scenario::{Controller, freeze_value, thaw_value};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, strum::Display)]
 pub enum Kind {
@@ -359,38 +359,37 @@ impl Controller for TwoLoop {
         };
     }
 
-    /// The thrust integrators (4), the integrals of the inner loop (4), of x, y (2) and of the
-    /// swing (2), then 1 and the φ_Ref and θ_Ref prefilters (4 + 4) once they exist: 21 numbers.
-    fn freeze(&self) -> Option<crate::model::scenario::Calibration> {
-        let mut frozen = [0.0; 32];
-        let parts: [&[f64]; 4] = [&self.thrust, &self.inner_integral, &self.xy_integral, &self.swing_integral];
-        let state = parts.concat();
-        frozen[..state.len()].copy_from_slice(&state);
-        if let Some([phi, theta]) = &self.prefilter {
-            let at = state.len();
-            frozen[at] = 1.0;
-            frozen[at + 1..at + 5].copy_from_slice(&phi.y);
-            frozen[at + 5..at + 9].copy_from_slice(&theta.y);
-        }
-        Some(frozen)
+    /// The thrust integrators, the integrals of the inner loop, of x, y and of the swing, and
+    /// the φ_Ref and θ_Ref prefilters once they exist.
+    fn freeze(&self) -> Option<Vec<u8>> {
+        Some(freeze_value(&Frozen {
+            thrust: self.thrust,
+            inner_integral: self.inner_integral,
+            xy_integral: self.xy_integral,
+            swing_integral: self.swing_integral,
+            prefilter: self.prefilter.as_ref().map(|[phi, theta]| [phi.y, theta.y]),
+        }))
     }
 
-    fn thaw(&mut self, frozen: &crate::model::scenario::Calibration) {
-        let mut rest = frozen.as_slice();
-        for part in [
-            &mut self.thrust[..],
-            &mut self.inner_integral[..],
-            &mut self.xy_integral[..],
-            &mut self.swing_integral[..],
-        ] {
-            let (head, tail) = rest.split_at(part.len());
-            part.copy_from_slice(head);
-            rest = tail;
-        }
+    fn thaw(&mut self, frozen: &[u8]) -> anyhow::Result<()> {
+        let frozen: Frozen = thaw_value(frozen)?;
+        (self.thrust, self.inner_integral) = (frozen.thrust, frozen.inner_integral);
+        (self.xy_integral, self.swing_integral) = (frozen.xy_integral, frozen.swing_integral);
         let omega = self.prefilter_rad_s;
-        let filter = |y: &[f64]| Prefilter { omega, y: [y[0], y[1], y[2], y[3]] };
-        self.prefilter = (rest[0] == 1.0).then(|| [filter(&rest[1..5]), filter(&rest[5..9])]);
+        self.prefilter = frozen.prefilter.map(|ys| ys.map(|y| Prefilter { omega, y }));
+        Ok(())
     }
+}
+
+/// What [`TwoLoop`] keeps across a restart.
+#[derive(Serialize, Deserialize)]
+struct Frozen {
+    thrust: [f64; 4],
+    inner_integral: [f64; OUTPUTS],
+    xy_integral: [f64; 2],
+    swing_integral: [f64; 2],
+    /// The φ_Ref and θ_Ref prefilters' y, y′, y″, y‴.
+    prefilter: Option<[[f64; 4]; 2]>,
 }
 
 #[cfg(test)]

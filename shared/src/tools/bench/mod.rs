@@ -45,6 +45,7 @@ use crate::config::wait::{CPUS_TO_POLL, LockstepWait, Strategy, WaitSettings};
 use crate::contract::clock::{TickTimer, now_ns};
 use crate::contract::msg::{LoopTrace, PlantState};
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 use crate::launcher::{Binaries, Outcome, Summary};
 use crate::model::catalog::Catalog;
 use crate::runtime::signals::{Interrupted, StopFlag};
@@ -132,7 +133,7 @@ fn timer_fd(timer: &TickTimer) -> i32 {
 /// The eight stamps of every recorded loop of a run (its loops.csv); a loop without a record
 /// has none.
 fn traces(run_dir: &Path) -> Result<Vec<[u64; 8]>> {
-    let loops = RunFolder::open(run_dir, &["loops.csv"])?.table("loops.csv")?;
+    let loops = RunFolder::open(run_dir, &[files::LOOPS])?.table(files::LOOPS)?;
     let stamps = loops.stamps()?;
     Ok((0..loops.len())
         .filter_map(|row| stamps.iter().map(|column| column[row]).collect::<Option<Vec<u64>>>()?.try_into().ok())

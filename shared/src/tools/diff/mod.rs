@@ -13,6 +13,7 @@ use anyhow::Context as _;
 use serde::Serialize;
 
 use crate::contract::report::Stats;
+use crate::contract::run_format::files;
 use crate::launcher::summary::Summary;
 use crate::tools::ToolError;
 use crate::tools::compare::{metric_text, ratio_label};
@@ -22,7 +23,7 @@ use crate::tools::run_folder::{RunFolder, Table};
 mod render;
 
 /// The files of a run folder diff reads.
-const INPUTS: [&str; 3] = ["launch.toml", "trajectory.csv", "summary.json"];
+const INPUTS: [&str; 3] = [files::LAUNCH, files::TRAJECTORY, files::SUMMARY];
 
 /// The name `--tolerance` takes for the latency's ratio.
 pub const LATENCY: &str = "latency";
@@ -364,7 +365,7 @@ struct Run {
 fn read_run(dir: &Path) -> Result<Run, ToolError> {
     let folder = RunFolder::open(dir, &INPUTS)?;
     let summary = folder.summary()?;
-    let table = folder.table("trajectory.csv")?;
+    let table = folder.table(files::TRAJECTORY)?;
     let columns: Vec<String> = table.header().map(String::from).collect();
     let k = table
         .column::<u64>("k")?

@@ -45,6 +45,7 @@ use anyhow::Context as _;
 use crate::contract::msg::LoopTrace;
 use crate::contract::report::HOPS;
 use crate::contract::role::Role;
+use crate::contract::run_format::files;
 use crate::launcher::sched_trace::TRACE_FILE as SCHED_TRACE;
 use crate::launcher::summary::Summary;
 use crate::tools::ToolError;
@@ -54,7 +55,7 @@ use crate::tools::run_folder::{RunFolder, Table};
 pub const FILE: &str = "run.perfetto-trace";
 
 /// The run folder's files the trace is made from.
-const FILES: [&str; 2] = ["loops.csv", "summary.json"];
+const FILES: [&str; 2] = [files::LOOPS, files::SUMMARY];
 
 /// The field numbers written, by message (perfetto/protos/perfetto/trace/…; checked against
 /// Perfetto's own descriptors by the integration test).
@@ -183,7 +184,7 @@ const LOOP_ROLES: [(Role, usize, Option<usize>); 4] = [
 pub fn write_perfetto(run_dir: &Path, out: Option<&Path>) -> Result<PathBuf, ToolError> {
     let folder = RunFolder::open(run_dir, &FILES)?;
     let summary = folder.summary()?;
-    let loops = folder.table("loops.csv")?;
+    let loops = folder.table(files::LOOPS)?;
     let sched_path = run_dir.join(SCHED_TRACE);
     let sched = match std::fs::read_to_string(&sched_path) {
         Ok(text) => Some(text),

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::contract::run_format::files;
 use crate::launcher::summary::FaultReport;
 use crate::model::figure::{RunColumns, runs};
 use crate::model::scenario::Scenario;
@@ -34,7 +35,7 @@ pub fn plot_faults(
     if summary.faults.is_empty() {
         return Ok(vec![]);
     }
-    let loops = folder.table("loops.csv")?;
+    let loops = folder.table(files::LOOPS)?;
     let (t_loops, end_to_end) = (loops.floats("t_s")?, loops.floats("end_to_end_ns")?);
     let latency_us: Vec<f64> = end_to_end.iter().map(|ns| ns / 1e3).collect();
     let misses = read_misses(&loops)?;

@@ -11,6 +11,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::contract::report::{HOPS, Stats};
+use crate::contract::run_format::files;
 use crate::launcher::summary::Summary;
 use crate::monitor::distribution::Distribution;
 use crate::tools::ToolError;
@@ -54,7 +55,7 @@ pub fn is_transport(name: &str) -> bool {
 /// down to the single slowest loop; its percentiles are taken through the monitor's
 /// [`Distribution`], so that they are the report's to the digit.
 pub fn read_run_latencies(run_dir: &Path) -> Result<Vec<Series>, ToolError> {
-    latencies_from_loops(&RunFolder::open(run_dir, &["loops.csv"])?.table("loops.csv")?)
+    latencies_from_loops(&RunFolder::open(run_dir, &[files::LOOPS])?.table(files::LOOPS)?)
 }
 
 /// [`read_run_latencies`] on a loops.csv, read by column name.
@@ -129,7 +130,7 @@ pub fn run_latency_chart(loops: &Table, summary: &Summary, name: &str) -> Result
 /// Writes the run's latency figure, `latency-cdf.png` in the run folder: per hop and end to end,
 /// from loops.csv, with the deadline. Returns its path.
 pub fn run_latency_figure(run_dir: &Path, summary: &Summary) -> Result<PathBuf, ToolError> {
-    let loops = RunFolder::open(run_dir, &["loops.csv"])?.table("loops.csv")?;
+    let loops = RunFolder::open(run_dir, &[files::LOOPS])?.table(files::LOOPS)?;
     let path = run_dir.join(RUN_FIGURE);
     let name = run_dir.canonicalize().ok().and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()));
     let chart = run_latency_chart(&loops, summary, name.as_deref().unwrap_or("run"))?;

@@ -3,18 +3,19 @@
 //! error and the deadline misses by cause, with every fault marked on the time axis.
 //!
 //! The CSV files are read by column name through the run folder's reader, the names a run of
-//! the launch file writes (`Layout::trajectory_columns`, `loops::columns`).
+//! the launch file writes (`VectorLayout::trajectory_columns`, `loops::columns`).
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::config::schema::Component;
+use crate::contract::run_format::files;
 use crate::launcher::summary::Summary;
 use crate::model::catalog::Catalog;
 use crate::model::figure::RunColumns;
 use crate::model::figure::runs;
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::model::scenario::Scenario;
 use crate::tools::plot::figure::{Colour, Curve, Draw as _, FaultMark, Figure, Line, Panel, series, steps, tick_label};
 use crate::tools::plot::latency;
@@ -37,7 +38,7 @@ pub struct Columns {
 }
 
 impl Columns {
-    pub fn of(layout: &Layout) -> Self {
+    pub fn of(layout: &VectorLayout) -> Self {
         let mut next = 2;
         let mut take = |n: usize| {
             next += n;
@@ -65,7 +66,7 @@ pub struct Ticks {
 pub struct RunData {
     pub config: LaunchConfig,
     pub scenario: Box<dyn Scenario>,
-    pub layout: Layout,
+    pub layout: VectorLayout,
     pub columns: Columns,
     /// trajectory.csv, column by column in the layout's order, each read by its name.
     pub trajectory: Vec<Vec<f64>>,
@@ -80,12 +81,12 @@ impl RunData {
     pub fn read(run_dir: &Path, catalog: &Catalog) -> Result<Self, ToolError> {
         let folder = RunFolder::open(run_dir, &RUN_FILES)?;
         let (config, scenario) = folder.launch(catalog)?;
-        let layout = Layout::new(&config, scenario.as_ref());
+        let layout = VectorLayout::new(&config, scenario.as_ref());
         let columns = Columns::of(&layout);
         let summary = folder.summary()?;
-        let table = folder.table("trajectory.csv")?;
+        let table = folder.table(files::TRAJECTORY)?;
         let trajectory = layout.trajectory_columns().iter().map(|name| table.floats(name)).collect::<Result<_, _>>()?;
-        let loops = folder.table("loops.csv")?;
+        let loops = folder.table(files::LOOPS)?;
         let ticks = Ticks {
             t: loops.floats("t_s")?,
             period_ns: loops.floats("tick_period_ns")?,
@@ -461,7 +462,7 @@ mod tests {
 
     #[test]
     fn columns_lie_in_the_monitors_order() {
-        let columns = Columns::of(&Layout::example());
+        let columns = Columns::of(&VectorLayout::example());
         // k, t, theta, omega, encoder's angle, imu's x and y, theta's estimate, u, applied u.
         assert_eq!(
             columns,

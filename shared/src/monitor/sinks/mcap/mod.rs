@@ -17,16 +17,16 @@ use crate::config::schema::Component;
 use crate::contract::msg::Header;
 use crate::contract::report::{FaultEffect, HOPS, MonitorReport};
 use crate::contract::role::Role;
-use crate::model::layout::Layout;
+use crate::contract::run_format::{FORMAT_VERSION, FORMAT_VERSION_KEY, channel, field, files};
+use crate::model::layout::VectorLayout;
 use crate::monitor::sinks::text::{push_int, push_json_f64};
 use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup};
 pub use file::Compression;
 use file::McapFile;
 use schemas::schemas;
 
-/// The first monitor's recording. An MCAP file cannot be appended to, so a restarted monitor
-/// writes the next free `run.<n>.mcap` (n = 1, 2, …: its incarnation).
-pub const FILE: &str = "run.mcap";
+/// The first monitor's recording ([`files::restarted_recording`] names a restarted monitor's).
+pub const FILE: &str = files::RECORDING;
 
 /// The recording's channels, in the order they are added.
 #[derive(Debug, Clone, Copy)]
@@ -53,13 +53,13 @@ impl Channel {
 
     fn topic(self) -> &'static str {
         match self {
-            Channel::State => "/state",
-            Channel::Measurements => "/measurements",
-            Channel::Estimate => "/estimate",
-            Channel::Command => "/command",
-            Channel::Loop => "/loop",
-            Channel::Latency => "/latency",
-            Channel::Faults => "/faults",
+            Channel::State => channel::STATE,
+            Channel::Measurements => channel::MEASUREMENTS,
+            Channel::Estimate => channel::ESTIMATE,
+            Channel::Command => channel::COMMAND,
+            Channel::Loop => channel::LOOP,
+            Channel::Latency => channel::LATENCY,
+            Channel::Faults => channel::FAULTS,
         }
     }
 }
@@ -68,11 +68,11 @@ impl Channel {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Detail {
     /// Everything the monitor received: every field a stage reads, which `looplab replay` plays
-    /// back (`runtime::recorded`).
+    /// back (`runtime::recording_reader`).
     Live,
     /// What a run folder's files keep (`looplab export`): no sensor sample times, sequence
     /// numbers or fresh and valid flags, no applied input in the messages, no lost flags or
-    /// incarnations; `runtime::recorded` refuses it.
+    /// incarnations; `runtime::recording_reader` refuses it.
     Files,
 }
 
@@ -98,7 +98,7 @@ fn key(name: &str) -> Vec<u8> {
 }
 
 impl Keys {
-    fn new(layout: &Layout) -> Self {
+    fn new(layout: &VectorLayout) -> Self {
         let keys = |components: &[Component]| components.iter().map(|c| key(c.name)).collect();
         Self {
             state: keys(&layout.state),
@@ -107,7 +107,9 @@ impl Keys {
                 .iter()
                 .map(|(name, components)| {
                     let mut prefix = key(name);
-                    prefix.extend_from_slice(br#"{"value":{"#);
+                    prefix.push(b'{');
+                    prefix.extend_from_slice(&key(field::VALUE));
+                    prefix.push(b'{');
                     (prefix, keys(components))
                 })
                 .collect(),
@@ -147,22 +149,24 @@ impl McapRecording {
     pub fn open(setup: &SinkSetup) -> Result<Self> {
         let mut path = setup.run_dir.join(FILE);
         if setup.restarted {
-            path =
-                (1..).map(|n| setup.run_dir.join(format!("run.{n}.mcap"))).find(|p| !p.exists()).expect("a free name");
+            path = (1..)
+                .map(|n| setup.run_dir.join(files::restarted_recording(n)))
+                .find(|p| !p.exists())
+                .expect("a free name");
         }
         let compression = if setup.spare_core { Compression::OnThread } else { Compression::Inline };
         Self::create_with(&path, setup.config, setup.layout, Detail::Live, compression)
     }
 
     /// A recording of a run of `config` into `path` (replaced if it exists).
-    pub fn create(path: &Path, config: &LaunchConfig, layout: &Layout, detail: Detail) -> Result<Self> {
+    pub fn create(path: &Path, config: &LaunchConfig, layout: &VectorLayout, detail: Detail) -> Result<Self> {
         Self::create_with(path, config, layout, detail, Compression::Inline)
     }
 
     fn create_with(
         path: &Path,
         config: &LaunchConfig,
-        layout: &Layout,
+        layout: &VectorLayout,
         detail: Detail,
         compression: Compression,
     ) -> Result<Self> {
@@ -170,10 +174,10 @@ impl McapRecording {
         // 14 MB) for about 1.5 µs a loop.
         let mut file = McapFile::create(path, compression)?;
         let wall_clock = config.mode == Mode::Realtime;
-        let metadata = BTreeMap::from([(
-            "log_time".to_string(),
-            if wall_clock { "wall_clock" } else { "simulation" }.to_string(),
-        )]);
+        let metadata = BTreeMap::from([
+            ("log_time".to_string(), if wall_clock { "wall_clock" } else { "simulation" }.to_string()),
+            (FORMAT_VERSION_KEY.to_string(), FORMAT_VERSION.to_string()),
+        ]);
         let schemas = schemas(layout, detail);
         let mut channel_ids = [0; Channel::ALL.len()];
         for (channel, schema) in Channel::ALL.iter().zip(&schemas) {
@@ -220,9 +224,10 @@ impl McapRecording {
         if *written_for != (k, t.to_bits()) {
             *written_for = (k, t.to_bits());
             prefix.clear();
-            prefix.extend_from_slice(br#"{"k":"#);
+            prefix.push(b'{');
+            prefix.extend_from_slice(&key(field::K));
             push_int(prefix, k);
-            prefix.extend_from_slice(br#","t":"#);
+            comma_key(prefix, field::T);
             push_json_f64(prefix, t);
         }
         self.buf.clear();
@@ -237,11 +242,12 @@ impl McapRecording {
             return;
         }
         if header.lost != 0 {
-            self.buf.extend_from_slice(br#","lost":true"#);
+            comma_key(&mut self.buf, field::LOST);
+            boolean(&mut self.buf, true);
         }
         let incarnation = header.incarnations[sender.slot().expect("a loop process")];
         if incarnation != 0 {
-            self.buf.extend_from_slice(br#","incarnation":"#);
+            comma_key(&mut self.buf, field::INCARNATION);
             push_int(&mut self.buf, incarnation);
         }
     }
@@ -250,7 +256,8 @@ impl McapRecording {
     /// keep it once, in trajectory.csv's `applied.*`, which export puts nowhere).
     fn applied(&mut self, u_applied: &[f64]) {
         if self.detail == Detail::Live {
-            self.buf.extend_from_slice(br#","applied":{"#);
+            comma_key(&mut self.buf, field::APPLIED);
+            self.buf.push(b'{');
             fields(&mut self.buf, &self.keys.input, u_applied, false);
             self.buf.push(b'}');
         }
@@ -339,6 +346,13 @@ fn boolean(buf: &mut Vec<u8>, value: bool) {
     buf.extend_from_slice(if value { b"true" } else { b"false" });
 }
 
+/// `,"name":` for a field of the run format (plain ASCII names).
+fn comma_key(buf: &mut Vec<u8>, name: &str) {
+    buf.extend_from_slice(b",\"");
+    buf.extend_from_slice(name.as_bytes());
+    buf.extend_from_slice(b"\":");
+}
+
 /// `,"a":1,"b":2`, or without the first comma.
 fn fields<T: JsonNumber>(buf: &mut Vec<u8>, keys: &[Vec<u8>], values: &[T], leading_comma: bool) {
     for (i, (key, value)) in keys.iter().zip(values).enumerate() {
@@ -384,13 +398,13 @@ impl RunSink for McapRecording {
                 fields(&mut self.buf, components, &reading.value, false);
                 self.buf.push(b'}');
                 if self.detail == Detail::Live {
-                    self.buf.extend_from_slice(br#","sample_time":"#);
+                    comma_key(&mut self.buf, field::SAMPLE_TIME);
                     number(&mut self.buf, reading.sample_time);
-                    self.buf.extend_from_slice(br#","seq":"#);
+                    comma_key(&mut self.buf, field::SEQ);
                     number(&mut self.buf, reading.seq);
-                    self.buf.extend_from_slice(br#","fresh":"#);
+                    comma_key(&mut self.buf, field::FRESH);
                     boolean(&mut self.buf, reading.fresh != 0);
-                    self.buf.extend_from_slice(br#","valid":"#);
+                    comma_key(&mut self.buf, field::VALID);
                     boolean(&mut self.buf, reading.valid != 0);
                 }
                 self.buf.push(b'}');
@@ -415,14 +429,15 @@ impl RunSink for McapRecording {
             let log_time = self.log_time(k, &record.header);
             let arrived = record.header.trace.plant_receive;
             self.begin(k, t);
-            self.buf.extend_from_slice(br#","deadline_miss":"#);
+            comma_key(&mut self.buf, field::DEADLINE_MISS);
             boolean(&mut self.buf, record.deadline_miss != 0);
-            self.buf.extend_from_slice(br#","rejected":"#);
+            comma_key(&mut self.buf, field::REJECTED);
             boolean(&mut self.buf, record.rejected != 0);
             if self.detail == Detail::Live {
-                self.buf.extend_from_slice(br#","lost":"#);
+                comma_key(&mut self.buf, field::LOST);
                 boolean(&mut self.buf, record.lost != 0);
-                self.buf.extend_from_slice(br#","incarnations":{"#);
+                comma_key(&mut self.buf, field::INCARNATIONS);
+                self.buf.push(b'{');
                 fields(&mut self.buf, &self.keys.incarnations, &record.header.incarnations, false);
                 self.buf.push(b'}');
             }
@@ -460,5 +475,5 @@ impl RunSink for McapRecording {
 }
 
 #[cfg(test)]
-#[path = "recorded_tests.rs"]
-mod recorded_tests;
+#[path = "recording_reader_tests.rs"]
+mod recording_reader_tests;

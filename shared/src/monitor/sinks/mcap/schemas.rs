@@ -6,11 +6,12 @@ use serde_json::{Value, json};
 use super::{Detail, HEADER_ROLES};
 use crate::config::schema::Component;
 use crate::contract::report::{FaultEffect, HOPS};
-use crate::model::layout::Layout;
+use crate::contract::run_format::field;
+use crate::model::layout::VectorLayout;
 
 /// The JSON Schemas of the channels, in [`Channel::ALL`]'s order. Every float may be null: a
 /// non-finite value (a corrupted command's NaN), which JSON cannot hold.
-pub(super) fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
+pub(super) fn schemas(layout: &VectorLayout, detail: Detail) -> Vec<Value> {
     let float = || json!({"type": ["number", "null"]});
     // A component's field keeps its name (a viewer plots by name) and gives its unit here.
     let component = |c: &Component| {
@@ -33,8 +34,8 @@ pub(super) fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
     };
     let loop_fields = || {
         vec![
-            ("k".to_string(), integer("loop index: the plant tick the data derives from")),
-            ("t".to_string(), json!({"type": "number", "description": "simulation time of tick k, s"})),
+            (field::K.to_string(), integer("loop index: the plant tick the data derives from")),
+            (field::T.to_string(), json!({"type": "number", "description": "simulation time of tick k, s"})),
         ]
     };
     let vector = |title: &str, components: &[Component]| {
@@ -47,7 +48,7 @@ pub(super) fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
         let description = "the input the actuator applied over the last interval";
         let mut applied = object("looplab.Applied", layout.input.iter().map(component).collect());
         applied["description"] = description.into();
-        ("applied".to_string(), applied)
+        (field::APPLIED.to_string(), applied)
     };
     // Only on a message whose header says an upstream stage dropped the loop's output.
     let lost = boolean("an upstream stage dropped this loop's output (lockstep drop fault); absent: not lost");
@@ -55,22 +56,24 @@ pub(super) fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
     let incarnation = integer("the incarnation of the process that sent it; absent: 0");
     let with_lost = |mut schema: Value| {
         if live {
-            schema["properties"]["lost"] = lost.clone();
-            schema["properties"]["incarnation"] = incarnation.clone();
+            schema["properties"][field::LOST] = lost.clone();
+            schema["properties"][field::INCARNATION] = incarnation.clone();
         }
         schema
     };
 
     let mut measurements = loop_fields();
     for (name, components) in &layout.sensors {
-        let mut sensor =
-            vec![("value".to_string(), object(&format!("{name} value"), components.iter().map(component).collect()))];
+        let mut sensor = vec![(
+            field::VALUE.to_string(),
+            object(&format!("{name} value"), components.iter().map(component).collect()),
+        )];
         if live {
             sensor.extend([
-                ("sample_time".into(), json!({"type": "number", "description": "when the truth behind the value was sampled (simulation time), s"})),
-                ("seq".into(), integer("samples this sensor delivered before this one")),
-                ("fresh".into(), boolean("delivered at this tick (else held)")),
-                ("valid".into(), boolean("the sensor's first sample has arrived")),
+                (field::SAMPLE_TIME.into(), json!({"type": "number", "description": "when the truth behind the value was sampled (simulation time), s"})),
+                (field::SEQ.into(), integer("samples this sensor delivered before this one")),
+                (field::FRESH.into(), boolean("delivered at this tick (else held)")),
+                (field::VALID.into(), boolean("the sensor's first sample has arrived")),
             ]);
         }
         measurements.push((name.clone(), object(&format!("looplab.Reading.{name}"), sensor)));
@@ -86,12 +89,12 @@ pub(super) fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
 
     let ns = |description: &str| json!({"type": "integer", "description": format!("{description}, ns")});
     let mut record = loop_fields();
-    record.push(("deadline_miss".into(), boolean("the command reached the plant after tick k+1 was due")));
-    record.push(("rejected".into(), boolean("the plant rejected the command (non-finite or out of range)")));
+    record.push((field::DEADLINE_MISS.into(), boolean("the command reached the plant after tick k+1 was due")));
+    record.push((field::REJECTED.into(), boolean("the plant rejected the command (non-finite or out of range)")));
     if live {
-        record.push(("lost".into(), boolean("the command arrived marked lost (lockstep drop fault)")));
+        record.push((field::LOST.into(), boolean("the command arrived marked lost (lockstep drop fault)")));
         let incarnations = HEADER_ROLES.iter().map(|r| (r.name().to_string(), integer("0 before the first restart")));
-        record.push(("incarnations".into(), object("looplab.Incarnations", incarnations.collect())));
+        record.push((field::INCARNATIONS.into(), object("looplab.Incarnations", incarnations.collect())));
     }
 
     let mut latency = loop_fields();
@@ -137,8 +140,8 @@ pub(super) fn schemas(layout: &Layout, detail: Detail) -> Vec<Value> {
 mod tests {
     use super::*;
 
-    fn layout() -> Layout {
-        Layout::example()
+    fn layout() -> VectorLayout {
+        VectorLayout::example()
     }
 
     #[test]
@@ -201,7 +204,7 @@ mod tests {
         // `applied` in /state and /measurements (whose sensors are fields too).
         for entry in crate::scenarios::ALL {
             let (config, scenario) = crate::scenarios::resolve(entry.name, &[]).unwrap();
-            let layout = Layout::new(&config, scenario.as_ref());
+            let layout = VectorLayout::new(&config, scenario.as_ref());
             let components = layout.state.iter().chain(&layout.estimate).chain(&layout.input).map(|c| c.name);
             for name in components.chain(layout.sensors.iter().map(|(name, _)| name.as_str())) {
                 assert!(!["k", "t", "lost", "applied"].contains(&name), "{}: a field is named {name}", entry.name);

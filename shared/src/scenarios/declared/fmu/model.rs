@@ -139,18 +139,18 @@ impl PlantModel for FmuModel {
         result.map_err(self.at(t))
     }
 
-    fn save(&mut self) -> Result<Option<Vec<u8>>> {
+    fn freeze(&mut self) -> Result<Option<Vec<u8>>> {
         if !self.can_serialize {
             return Ok(None);
         }
         self.instance.save().map(Some)
     }
 
-    fn load(&mut self, bytes: &[u8]) -> Result<()> {
+    fn thaw(&mut self, frozen: &[u8]) -> Result<()> {
         if !self.can_serialize {
             bail!("{} cannot restore a saved state (canSerializeFMUstate is false)", self.describe);
         }
-        self.instance.load(bytes)
+        self.instance.load(frozen)
     }
 
     fn set_state(&mut self, x: &[f64]) -> Result<()> {

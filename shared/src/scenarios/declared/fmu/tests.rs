@@ -142,9 +142,9 @@ fn a_saved_state_restores_into_a_fresh_instance() {
                 }
             };
             (0..100).for_each(|k| step(&mut first, &mut x, k));
-            let bytes = first.save().unwrap().expect("the pendulum FMU serialises its state");
+            let bytes = first.freeze().unwrap().expect("the pendulum FMU serialises its state");
             let mut second = load_as(&pendulum_spec(), &path, Some(kind)).unwrap();
-            second.load(&bytes).unwrap();
+            second.thaw(&bytes).unwrap();
             second.set_state(&x).or_else(|e| if kind == FmiKind::CoSimulation { Ok(()) } else { Err(e) }).unwrap();
             let mut x2 = x.clone();
             for k in 100..200 {
@@ -152,7 +152,7 @@ fn a_saved_state_restores_into_a_fresh_instance() {
                 step(&mut second, &mut x2, k);
             }
             assert_eq!(x, x2, "{version:?} {kind:?}");
-            assert!(second.load(&bytes[1..]).is_err(), "a truncated state is refused");
+            assert!(second.thaw(&bytes[1..]).is_err(), "a truncated state is refused");
         }
     }
 }
@@ -368,7 +368,7 @@ fn step_cost_per_tick() {
         });
         let mut saved = 0;
         time(&format!("{version:?} Co-Simulation save (serialise)"), &mut |_| {
-            saved = cs.save().unwrap().unwrap().len()
+            saved = cs.freeze().unwrap().unwrap().len()
         });
         println!("{version:?} serialised state: {saved} bytes");
     }

@@ -18,11 +18,10 @@ use crate::config::schema::Component;
 use crate::contract::msg::{Command, Estimate, Header, LoopRecord, Measurements, PlantState};
 use crate::contract::role::Role;
 use crate::contract::role::Topic;
-use crate::model::layout::Layout;
+use crate::contract::run_format::{FORMAT_VERSION, FORMAT_VERSION_KEY, channel, field, files};
+use crate::model::layout::VectorLayout;
 
-/// The first monitor's recording (`monitor::sinks::mcap::FILE`, a layer above); a restarted
-/// monitor's is `run.<n>.mcap`, n = 1, 2, ….
-const FILE: &str = "run.mcap";
+const FILE: &str = files::RECORDING;
 
 /// One loop of a recording: each message the monitor received for it (None: none came).
 /// Headers hold k, t, `lost` and the incarnations; the loop trace is zero.
@@ -40,14 +39,14 @@ pub struct RecordedLoop {
 /// (from its own launch file). Fails with one line naming the file when the folder has no
 /// `run.mcap`, when it was written by `looplab export` (no sample times or flags), or by a
 /// version of LoopLab that did not record a field a stage reads.
-pub fn load(run_dir: &Path, layout: &Layout, loops: u64) -> Result<Vec<RecordedLoop>> {
+pub fn load(run_dir: &Path, layout: &VectorLayout, loops: u64) -> Result<Vec<RecordedLoop>> {
     let first = run_dir.join(FILE);
     if std::fs::symlink_metadata(&first).is_err() {
         bail!("{} has no {FILE}; replay needs the recording a run writes", run_dir.display());
     }
     let loops = usize::try_from(loops).context("more loops than this machine can index")?;
     let mut recorded = vec![RecordedLoop::default(); loops];
-    let restarted = (1..).map(|n| run_dir.join(format!("run.{n}.mcap"))).take_while(|p| p.exists());
+    let restarted = (1..).map(|n| run_dir.join(files::restarted_recording(n))).take_while(|p| p.exists());
     for path in std::iter::once(first).chain(restarted) {
         read_file(&path, layout, &mut recorded)?;
     }
@@ -57,18 +56,19 @@ pub fn load(run_dir: &Path, layout: &Layout, loops: u64) -> Result<Vec<RecordedL
 
 /// The topic of a channel of the recording (`/state` …); None for the others (`/latency`,
 /// `/faults`).
-fn topic_of(channel: &str) -> Option<Topic> {
-    Topic::ALL.into_iter().find(|t| channel.strip_prefix('/') == Some(t.name()))
+fn topic_of(name: &str) -> Option<Topic> {
+    Topic::ALL.into_iter().find(|t| channel::of(*t) == name)
 }
 
 /// Adds one recording file's messages to `recorded`, where no earlier file (or message) has one
 /// for that topic and loop.
-fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Result<()> {
+fn read_file(path: &Path, layout: &VectorLayout, recorded: &mut [RecordedLoop]) -> Result<()> {
     let bytes = std::fs::read(path).with_context(|| format!("read {}", path.display()))?;
     refuse_export(path, &bytes)?;
     check_names(path, layout)?;
     let stream = mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
         .map_err(|e| anyhow!("{}: not an MCAP recording ({e})", path.display()))?;
+    let mut version_checked = false;
     for message in stream {
         let message = match message {
             Ok(message) => message,
@@ -77,6 +77,10 @@ fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Res
             Err(e @ mcap::McapError::BadMagic) => bail!("{}: not an MCAP recording ({e})", path.display()),
             Err(e) => bail!("{}: unreadable ({e})", path.display()),
         };
+        if !version_checked {
+            check_version(path, message.channel.metadata.get(FORMAT_VERSION_KEY))?;
+            version_checked = true;
+        }
         let Some(topic) = topic_of(&message.channel.topic) else { continue };
         let json: Value = serde_json::from_slice(&message.data)
             .map_err(|e| anyhow!("{}: a {} message is not JSON ({e})", path.display(), message.channel.topic))?;
@@ -84,10 +88,10 @@ fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Res
             bail!("{}: a {} message is not a JSON object", path.display(), message.channel.topic);
         };
         let mut at = At { path, topic: &message.channel.topic, k: None };
-        let k = at.unsigned(fields, "k")?;
+        let k = at.unsigned(fields, field::K)?;
         at.k = Some(k);
         let Some(slot) = usize::try_from(k).ok().and_then(|k| recorded.get_mut(k)) else { continue };
-        let t = at.float(fields, "t")?;
+        let t = at.float(fields, field::T)?;
         let mut header = Header { k, t, lost: at.lost(fields)?, ..Header::default() };
         if let Some(sender) = topic.writer().slot() {
             header.incarnations[sender] = at.incarnation(fields)?;
@@ -114,14 +118,28 @@ fn read_file(path: &Path, layout: &Layout, recorded: &mut [RecordedLoop]) -> Res
     Ok(())
 }
 
+/// A recording of this run format's version: one written before the version was recorded is
+/// of the first.
+fn check_version(path: &Path, version: Option<&String>) -> Result<()> {
+    match version.map(String::as_str) {
+        None => Ok(()),
+        Some(v) if v == FORMAT_VERSION.to_string() => Ok(()),
+        Some(v) => bail!(
+            "{}: run format version {v}; this LoopLab reads version {FORMAT_VERSION}: replay it with the LoopLab that \
+             recorded it",
+            path.display()
+        ),
+    }
+}
+
 /// `looplab export` writes its recording through the same sink from the run folder's files,
 /// which keep no sensor sample times, flags or incarnations (its schemas leave them out). Its
 /// file is always finished, so its summary names the channels.
 fn refuse_export(path: &Path, bytes: &[u8]) -> Result<()> {
     let Ok(Some(summary)) = mcap::Summary::read(bytes) else { return Ok(()) };
-    let loop_schema = summary.channels.values().find(|c| c.topic == "/loop").and_then(|c| c.schema.as_ref());
+    let loop_schema = summary.channels.values().find(|c| c.topic == channel::LOOP).and_then(|c| c.schema.as_ref());
     let Some(schema) = loop_schema.and_then(|s| serde_json::from_slice::<Value>(&s.data).ok()) else { return Ok(()) };
-    if schema["properties"].get("incarnations").is_none() {
+    if schema["properties"].get(field::INCARNATIONS).is_none() {
         bail!(
             "{}: written by `looplab export`, which keeps no sample times or flags: record the run again",
             path.display()
@@ -131,17 +149,17 @@ fn refuse_export(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// A component named like a field of the message itself would be read as that field.
-fn check_names(path: &Path, layout: &Layout) -> Result<()> {
+fn check_names(path: &Path, layout: &VectorLayout) -> Result<()> {
     let vectors = [
-        ("state", &layout.state, &["applied"][..]),
+        ("state", &layout.state, &[field::APPLIED][..]),
         ("estimate", &layout.estimate, &[]),
         ("input", &layout.input, &[]),
     ];
-    let sensors = layout.sensors.iter().map(|(name, _)| ("sensor", name.as_str(), &["applied"][..]));
+    let sensors = layout.sensors.iter().map(|(name, _)| ("sensor", name.as_str(), &[field::APPLIED][..]));
     let components =
         vectors.iter().flat_map(|(what, components, also)| components.iter().map(move |c| (*what, c.name, *also)));
     for (what, name, also) in components.chain(sensors) {
-        if ["k", "t", "lost", "incarnation"].contains(&name) || also.contains(&name) {
+        if [field::K, field::T, field::LOST, field::INCARNATION].contains(&name) || also.contains(&name) {
             bail!(
                 "{}: the {what} {name:?} has the name of a field every message has; replay cannot tell them apart",
                 path.display()
@@ -204,18 +222,18 @@ impl At<'_> {
 
     /// `"incarnation"` is written only after the sender's first restart.
     fn incarnation(&self, fields: &Map<String, Value>) -> Result<u32> {
-        match fields.get("incarnation") {
+        match fields.get(field::INCARNATION) {
             None => Ok(0),
-            Some(_) => u32::try_from(self.unsigned(fields, "incarnation")?)
-                .map_err(|_| self.bad("incarnation", "an incarnation")),
+            Some(_) => u32::try_from(self.unsigned(fields, field::INCARNATION)?)
+                .map_err(|_| self.bad(field::INCARNATION, "an incarnation")),
         }
     }
 
     /// `"lost":true` is written only on a lost message.
     fn lost(&self, fields: &Map<String, Value>) -> Result<u32> {
-        match fields.get("lost") {
+        match fields.get(field::LOST) {
             None => Ok(0),
-            Some(_) => self.flag(fields, "lost"),
+            Some(_) => self.flag(fields, field::LOST),
         }
     }
 
@@ -227,33 +245,33 @@ impl At<'_> {
         Ok(())
     }
 
-    fn state(&self, fields: &Map<String, Value>, header: Header, layout: &Layout) -> Result<PlantState> {
+    fn state(&self, fields: &Map<String, Value>, header: Header, layout: &VectorLayout) -> Result<PlantState> {
         let mut state = PlantState { header, ..PlantState::default() };
         self.floats(fields, &layout.state, &mut state.x)?;
-        self.floats(self.object(fields, "applied")?, &layout.input, &mut state.u_applied)?;
+        self.floats(self.object(fields, field::APPLIED)?, &layout.input, &mut state.u_applied)?;
         Ok(state)
     }
 
-    fn measurements(&self, fields: &Map<String, Value>, header: Header, layout: &Layout) -> Result<Measurements> {
+    fn measurements(&self, fields: &Map<String, Value>, header: Header, layout: &VectorLayout) -> Result<Measurements> {
         let mut m = Measurements { header, ..Measurements::default() };
         for ((name, components), reading) in layout.sensors.iter().zip(m.readings.iter_mut()) {
             let sensor = self.object(fields, name)?;
-            self.floats(self.object(sensor, "value")?, components, &mut reading.value)?;
-            reading.sample_time = self.float(sensor, "sample_time")?;
-            reading.seq = self.unsigned(sensor, "seq")?;
-            reading.fresh = self.flag(sensor, "fresh")?;
-            reading.valid = self.flag(sensor, "valid")?;
+            self.floats(self.object(sensor, field::VALUE)?, components, &mut reading.value)?;
+            reading.sample_time = self.float(sensor, field::SAMPLE_TIME)?;
+            reading.seq = self.unsigned(sensor, field::SEQ)?;
+            reading.fresh = self.flag(sensor, field::FRESH)?;
+            reading.valid = self.flag(sensor, field::VALID)?;
         }
-        self.floats(self.object(fields, "applied")?, &layout.input, &mut m.u_applied)?;
+        self.floats(self.object(fields, field::APPLIED)?, &layout.input, &mut m.u_applied)?;
         Ok(m)
     }
 
     /// The loop record: its flags and the incarnations that handled the loop (its header's,
     /// the command's); its `lost` is the command's.
     fn record(&self, fields: &Map<String, Value>, mut header: Header) -> Result<LoopRecord> {
-        let lost = self.flag(fields, "lost")?;
+        let lost = self.flag(fields, field::LOST)?;
         header.lost = lost;
-        let incarnations = self.object(fields, "incarnations")?;
+        let incarnations = self.object(fields, field::INCARNATIONS)?;
         for role in Role::LOOP {
             let value = self.unsigned(incarnations, role.name())?;
             let slot = role.slot().expect("a loop process has a slot");
@@ -261,8 +279,8 @@ impl At<'_> {
         }
         Ok(LoopRecord {
             header,
-            deadline_miss: self.flag(fields, "deadline_miss")?,
-            rejected: self.flag(fields, "rejected")?,
+            deadline_miss: self.flag(fields, field::DEADLINE_MISS)?,
+            rejected: self.flag(fields, field::REJECTED)?,
             lost,
             ..LoopRecord::default()
         })

@@ -1,4 +1,4 @@
-//! `runtime::recorded::load` against what this sink writes: every field a stage reads comes
+//! `runtime::recording_reader::load` against what this sink writes: every field a stage reads comes
 //! back bit for bit. Here, a layer above the reader, because the tests write with the monitor's
 //! own sink (tests/recorded.rs reads back real runs).
 
@@ -6,11 +6,11 @@ use std::path::Path;
 
 use crate::config::launch::{LaunchConfig, Mode};
 use crate::contract::msg::{Command, Estimate, Header, LoopRecord, Measurements, PlantState, SensorReading};
-use crate::model::layout::Layout;
+use crate::model::layout::VectorLayout;
 use crate::monitor::join::LoopParts;
 use crate::monitor::sinks::mcap::{Detail, McapRecording};
 use crate::monitor::sinks::{JoinedLoop, RunSink};
-use crate::runtime::recorded::{RecordedLoop, load};
+use crate::runtime::recording_reader::{RecordedLoop, load};
 
 /// Floats JSON text gets wrong unless written shortest-round-trip and parsed exactly.
 const AWKWARD: [f64; 10] = [
@@ -51,7 +51,7 @@ fn lockstep_pendulum(duration_s: f64) -> LaunchConfig {
 
 /// Loop k's parts, every float awkward (shifted by `shift`, so that two files differ), its
 /// header's `lost` and incarnations set, and its trace stamped (which the reader drops).
-fn awkward_loop(k: u64, layout: &Layout, shift: usize) -> LoopParts {
+fn awkward_loop(k: u64, layout: &VectorLayout, shift: usize) -> LoopParts {
     let n = k as usize + shift;
     let header = Header {
         k,
@@ -98,7 +98,7 @@ fn awkward_loop(k: u64, layout: &Layout, shift: usize) -> LoopParts {
 
 /// Writes loops `ks` of [`awkward_loop`] to `path` through the monitor's sink.
 fn write(path: &Path, detail: Detail, ks: std::ops::Range<u64>, shift: usize, finish: bool) -> Vec<LoopParts> {
-    let layout = Layout::example();
+    let layout = VectorLayout::example();
     let mut recording = McapRecording::create(path, &lockstep_pendulum(1.0), &layout, detail).unwrap();
     let written: Vec<LoopParts> = ks.map(|k| awkward_loop(k, &layout, shift)).collect();
     for parts in &written {
@@ -124,7 +124,7 @@ fn assert_header(got: &Header, written: &Header, processes: usize, what: &str) {
 }
 
 /// Every field the reader restores, against what was written.
-fn assert_loop(got: &RecordedLoop, written: &LoopParts, layout: &Layout) {
+fn assert_loop(got: &RecordedLoop, written: &LoopParts, layout: &VectorLayout) {
     let k = written.state.unwrap().header.k;
     let (n_state, n_input, n_estimate) = (layout.state.len(), layout.input.len(), layout.estimate.len());
 
@@ -159,7 +159,7 @@ fn assert_loop(got: &RecordedLoop, written: &LoopParts, layout: &Layout) {
 #[test]
 fn awkward_floats_and_every_flag_come_back_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
-    let layout = Layout::example();
+    let layout = VectorLayout::example();
     let written = write(&dir.path().join("run.mcap"), Detail::Live, 0..20, 0, true);
     let recorded = load(dir.path(), &layout, 22).unwrap();
     assert_eq!(recorded.len(), 22);
@@ -180,7 +180,7 @@ fn awkward_floats_and_every_flag_come_back_bit_for_bit() {
 #[test]
 fn a_restarted_monitors_file_fills_in_and_the_first_message_of_a_loop_wins() {
     let dir = tempfile::tempdir().unwrap();
-    let layout = Layout::example();
+    let layout = VectorLayout::example();
     let first = write(&dir.path().join("run.mcap"), Detail::Live, 0..15, 0, true);
     let mut second = write(&dir.path().join("run.1.mcap"), Detail::Live, 10..20, 1, true);
     let recorded = load(dir.path(), &layout, 20).unwrap();
@@ -225,7 +225,7 @@ fn a_restarted_monitors_file_fills_in_and_the_first_message_of_a_loop_wins() {
 #[test]
 fn a_killed_monitors_file_reads_up_to_where_it_last_flushed() {
     let dir = tempfile::tempdir().unwrap();
-    let layout = Layout::example();
+    let layout = VectorLayout::example();
     let path = dir.path().join("run.mcap");
     let mut recording = McapRecording::create(&path, &lockstep_pendulum(1.0), &layout, Detail::Live).unwrap();
     let written: Vec<LoopParts> = (0..20).map(|k| awkward_loop(k, &layout, 0)).collect();
@@ -250,7 +250,7 @@ fn a_killed_monitors_file_reads_up_to_where_it_last_flushed() {
 
 #[test]
 fn what_replay_cannot_play_back_is_one_line_naming_the_file() {
-    let layout = Layout::example();
+    let layout = VectorLayout::example();
     let error = |dir: &Path| {
         let message = format!("{:#}", load(dir, &layout, 10).unwrap_err());
         assert_eq!(message.lines().count(), 1, "{message}");
@@ -292,4 +292,38 @@ fn what_replay_cannot_play_back_is_one_line_naming_the_file() {
     std::fs::write(&path, "not a recording").unwrap();
     let message = error(dir.path());
     assert!(message.starts_with(&format!("{}: not an MCAP recording", path.display())), "{message}");
+}
+
+#[test]
+fn every_channel_says_its_run_format_version_and_another_version_is_refused() {
+    use crate::contract::run_format::{FORMAT_VERSION, FORMAT_VERSION_KEY};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    write(&path, Detail::Live, 0..3, 0, true);
+    let bytes = std::fs::read(&path).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a finished file has a summary");
+    assert_eq!(summary.channels.len(), 7);
+    for channel in summary.channels.values() {
+        assert_eq!(channel.metadata.get(FORMAT_VERSION_KEY), Some(&FORMAT_VERSION.to_string()), "{}", channel.topic);
+    }
+    // Another version's recording: the same bytes with the version's digit changed.
+    let ours = format!("{FORMAT_VERSION_KEY}\x01\0\0\0{FORMAT_VERSION}");
+    let theirs = format!("{FORMAT_VERSION_KEY}\x01\0\0\0{}", FORMAT_VERSION + 1);
+    assert_eq!(ours.len(), theirs.len(), "one digit either way");
+    let needle = ours.as_bytes();
+    let mut changed = bytes.clone();
+    let mut replaced = 0;
+    let mut i = 0;
+    while i + needle.len() <= changed.len() {
+        if &changed[i..i + needle.len()] == needle {
+            changed[i..i + needle.len()].copy_from_slice(theirs.as_bytes());
+            replaced += 1;
+        }
+        i += 1;
+    }
+    assert_eq!(replaced, 14, "each channel's record, in the data and in the summary");
+    std::fs::write(&path, changed).unwrap();
+    let e = format!("{:#}", load(dir.path(), &VectorLayout::example(), 3).unwrap_err());
+    let expected = format!("run format version {}; this LoopLab reads version {FORMAT_VERSION}", FORMAT_VERSION + 1);
+    assert!(e.contains(&expected), "{e}");
 }
