@@ -2,5 +2,5 @@
 
 fn main() -> std::process::ExitCode {
     use looplab_shared::{contract::role::Role, runtime, scenarios};
-    runtime::child::process_main_with(Role::Controller, runtime::builtin::controller, &scenarios::builtin())
+    runtime::stage::child::process_main_with(Role::Controller, runtime::builtin::controller, &scenarios::builtin())
 }

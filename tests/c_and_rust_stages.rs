@@ -244,3 +244,63 @@ fn the_c_header_compiles_on_its_own_under_strict_warnings() {
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_stage_is_built_before_its_run_and_again_only_when_what_its_build_names_changed() {
+    let lib = built().display().to_string();
+    let dir = fresh_dir("c-build");
+    std::fs::create_dir_all(&dir).unwrap();
+    let source = std::fs::read_to_string(Path::new(REPO).join("services/examples/c/pendulum_controller.c")).unwrap();
+    std::fs::write(dir.join("ctl.c"), &source).unwrap();
+    let launch = dir.join("ctl.toml");
+    std::fs::write(
+        &launch,
+        format!(
+            "scenario = \"pendulum\"\n\n[stages.controller]\nbuild = [\"cc\", \"-O2\", \"-std=c11\", \
+             \"-ffp-contract=off\", \"-I\", {lib:?}, \"ctl.c\", \"-L\", {lib:?}, \"-llooplab_stage\", \
+             \"-Wl,-rpath,{lib}\", \"-o\", \"ctl\"]\ncommand = [\"./ctl\"]\n"
+        ),
+    )
+    .unwrap();
+    // Its own stamps, so that another test's (or an earlier run's) cannot say "unchanged".
+    let cache = dir.join("cache");
+    let run_it = |name: &str| {
+        let out = dir.join(name);
+        let output = looplab()
+            .env("XDG_CACHE_HOME", &cache)
+            .arg("run")
+            .arg(&launch)
+            .args(["--mode", "lockstep", "--duration", "1", "-q", "--out"])
+            .arg(&out)
+            .output()
+            .expect("start looplab");
+        (output, out)
+    };
+    let built_line = "controller: built with `cc -O2";
+    let stderr = |output: &std::process::Output| String::from_utf8_lossy(&output.stderr).into_owned();
+
+    let (first, out) = run_it("first");
+    assert!(first.status.success() && stderr(&first).contains(built_line), "{}", stderr(&first));
+    let builtin = run("c-build-builtin", &["pendulum", "--mode", "lockstep", "--duration", "1"]);
+    let trajectory = |dir: &Path| std::fs::read(dir.join("trajectory.csv")).expect("trajectory.csv");
+    assert!(trajectory(&out) == trajectory(&builtin.dir), "the program built is not the built-in law");
+    assert_nothing_left(&load_summary(&out));
+
+    let (second, _) = run_it("second");
+    assert!(second.status.success(), "{}", stderr(&second));
+    assert!(!stderr(&second).contains("built with"), "built again with nothing changed: {}", stderr(&second));
+
+    std::fs::write(dir.join("ctl.c"), format!("{source}\n/* changed */\n")).unwrap();
+    let (third, _) = run_it("third");
+    assert!(third.status.success() && stderr(&third).contains(built_line), "not built again: {}", stderr(&third));
+
+    // A build that fails is bad input: one line with the compiler's last one, exit 2, no run.
+    std::fs::write(dir.join("ctl.c"), format!("#error this controller does not compile\n{source}")).unwrap();
+    let (fourth, out) = run_it("fourth");
+    let said = stderr(&fourth);
+    assert_eq!(fourth.status.code(), Some(2), "{said}");
+    assert_eq!(said.lines().count(), 1, "{said}");
+    assert!(said.contains("stages.controller.build") && said.contains("this controller does not compile"), "{said}");
+    assert!(!out.exists(), "a failed build must not create the run folder");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -8,7 +8,7 @@ use common::*;
 
 fn assert_clean(s: &Summary) {
     assert!(s.shared_memory.clean, "{:?}", s.shared_memory);
-    let left = looplab_shared::runtime::ipc::files_of_run(&s.run_id);
+    let left = looplab_shared::runtime::storage::run_storage::files_of_run(&s.run_id);
     assert!(left.is_empty(), "files left behind: {left:?}");
     for p in &s.processes {
         assert!(!alive(i64::from(p.pid)), "{p:?} is still running");

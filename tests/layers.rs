@@ -489,14 +489,14 @@ fn a_cycle_between_two_folders_is_reported() {
 fn an_upward_import_is_reported() {
     let files = crate_of(&[
         ("model/mod.rs", "pub mod so3;"),
-        ("model/so3.rs", "use crate::runtime::plant::PlantCore;\nuse crate::contract::msg::Header;"),
-        ("runtime/plant.rs", "use crate::model::so3::skew;"),
+        ("model/so3.rs", "use crate::runtime::stage::plant::PlantCore;\nuse crate::contract::msg::Header;"),
+        ("runtime/stage/plant.rs", "use crate::model::so3::skew;"),
         ("cli.rs", "use crate::nowhere::X;"),
     ]);
     assert_eq!(
         check(&files),
         [
-            "model/so3.rs: imports `crate::runtime::plant::PlantCore` from a layer above its own",
+            "model/so3.rs: imports `crate::runtime::stage::plant::PlantCore` from a layer above its own",
             "cli.rs: `crate::nowhere::X` is not a layer path",
         ]
     );

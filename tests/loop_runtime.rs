@@ -22,7 +22,7 @@ const HOPS: [&str; 7] = [
 ];
 
 fn assert_no_files_left(run_id: &str) {
-    let left = looplab_shared::runtime::ipc::files_of_run(run_id);
+    let left = looplab_shared::runtime::storage::run_storage::files_of_run(run_id);
     assert!(left.is_empty(), "files of run {run_id} left behind: {left:?}");
 }
 
@@ -417,7 +417,7 @@ fn a_plant_killed_at_the_last_tick_still_makes_a_complete_run() {
 #[test]
 #[cfg_attr(netns_unavailable, ignore = "needs root, to plant a file as another user")]
 fn an_entry_another_user_planted_with_a_runs_name_is_reported_not_fatal() {
-    use looplab_shared::runtime::ipc::{clean_up_run, create_run_storage, file_prefix};
+    use looplab_shared::runtime::storage::run_storage::{clean_up_run, create_run_storage, file_prefix};
     let run_id = looplab_shared::launcher::run_dir::new_run_id();
     let lock = create_run_storage(&run_id).unwrap();
     let planted = std::path::Path::new("/dev/shm").join(format!("{}planted", file_prefix(&run_id)));

@@ -1,5 +1,5 @@
 //! A crate of its own that adds a scenario (`Catalog::with`) builds LoopLab's six binaries with
-//! its catalog (`runtime::child::process_main_with`). This test binary is that crate: linked
+//! its catalog (`runtime::stage::child::process_main_with`). This test binary is that crate: linked
 //! under the six names it is the launcher and the five loop processes with the built-in catalog
 //! plus `pendulum-stiff` (the pendulum's code under another name, other default gains). A
 //! Python controller of the user's own (the example's) runs on the added scenario, five
@@ -17,7 +17,8 @@ use std::process::{Command, ExitCode};
 use common::{STIFF_GAINS, fresh_dir, python_module_dir, stiff_pendulum};
 use looplab_shared::contract::role::Role;
 use looplab_shared::model::catalog::Catalog;
-use looplab_shared::runtime::{builtin, child::process_main_with};
+use looplab_shared::runtime::builtin;
+use looplab_shared::runtime::stage::child::process_main_with;
 use looplab_shared::scenarios;
 
 fn catalog() -> Catalog {

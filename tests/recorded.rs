@@ -1,4 +1,4 @@
-//! A real run's `run.mcap` read back by `runtime::recording_reader::load` (what `looplab replay` plays
+//! A real run's `run.mcap` read back by `runtime::replay::recording_reader::load` (what `looplab replay` plays
 //! back): trajectory.csv's numbers exactly, and the flags the monitor saw. The reader's
 //! round trip of awkward floats and its errors are unit tests (`monitor/sinks/recorded_tests.rs`).
 
@@ -6,7 +6,7 @@ use crate::common;
 
 use common::{Run, run, run_in_process};
 use looplab_shared::model::layout::VectorLayout;
-use looplab_shared::runtime::recording_reader::{RecordedLoop, load};
+use looplab_shared::runtime::replay::recording_reader::{RecordedLoop, load};
 
 /// Equal bits, or both NaN.
 fn same(a: f64, b: f64) -> bool {

@@ -259,7 +259,7 @@ fn links_planted_in_a_run_folder_are_refused_not_followed() {
     for name in ["trajectory.csv", "summary.partial"] {
         assert_eq!(std::fs::read(victims.join(name)).unwrap(), b"precious", "{name} was written through");
     }
-    let left = looplab_shared::runtime::ipc::files_of_run(&run_id);
+    let left = looplab_shared::runtime::storage::run_storage::files_of_run(&run_id);
     assert!(left.is_empty(), "files of run {run_id} left behind: {left:?}");
     std::fs::remove_dir_all(&dir).unwrap();
     std::fs::remove_dir_all(&victims).unwrap();

@@ -71,6 +71,6 @@ fn under_cpu_and_fsync_load_every_killed_process_comes_back_and_nothing_is_lost_
         assert!(!alive(i64::from(p.pid)), "{p:?} is still running");
     }
     assert!(s.shared_memory.clean, "{:?}", s.shared_memory);
-    let left = looplab_shared::runtime::ipc::files_of_run(&s.run_id);
+    let left = looplab_shared::runtime::storage::run_storage::files_of_run(&s.run_id);
     assert!(left.is_empty(), "files left behind: {left:?}");
 }

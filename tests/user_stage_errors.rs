@@ -18,7 +18,9 @@ const OTHER_LAYOUT: &str = "0123456789abcdef";
 
 fn main() -> std::process::ExitCode {
     if std::env::var_os("LOOPLAB_ROLE").is_some() {
-        return looplab_shared::runtime::user_stage::run_step_as_build(OTHER_LAYOUT, |_| Ok(Box::new(NeverSteps)));
+        return looplab_shared::runtime::stage::user_stage::run_step_as_build(OTHER_LAYOUT, |_| {
+            Ok(Box::new(NeverSteps))
+        });
     }
     let tests: [(&str, fn()); 5] = [
         ("every_port_refuses_a_service_made_with_other_layouts_naming_both", port_refuses_other_layouts),
@@ -44,7 +46,7 @@ fn main() -> std::process::ExitCode {
 /// The stage from another build: it is refused before its first loop.
 struct NeverSteps;
 
-impl looplab_shared::runtime::user_stage::Step for NeverSteps {
+impl looplab_shared::runtime::stage::user_stage::Step for NeverSteps {
     fn step(&mut self, _t: f64, _input: &[f64], _output: &mut [f64]) -> anyhow::Result<()> {
         anyhow::bail!("a stage from another build never gets its input")
     }
@@ -142,12 +144,14 @@ fn started_by_hand() {
 
 fn port_refuses_other_layouts() {
     use looplab_shared::contract::msg::{Command, layout_fingerprint};
-    use looplab_shared::runtime::ipc::{Ipc, Topic, clean_up_run, create_run_storage};
+    use looplab_shared::runtime::storage::run_storage::{clean_up_run, create_run_storage};
+    use looplab_shared::runtime::transport::ipc::{Ipc, Topic};
     let run_id = looplab_shared::launcher::run_dir::new_run_id();
     let lock = create_run_storage(&run_id).unwrap();
     let refused = {
         let other = Ipc::with_layout("other", &run_id, common::Mode::Lockstep, OTHER_LAYOUT).unwrap();
-        let _publisher = other.publisher::<Command>(Topic::Command, looplab_shared::runtime::ipc::Wake::Never).unwrap();
+        let _publisher =
+            other.publisher::<Command>(Topic::Command, looplab_shared::runtime::transport::ipc::Wake::Never).unwrap();
         let ours = Ipc::new("ours", &run_id, common::Mode::Lockstep).unwrap();
         ours.stage_subscriber::<Command>(Topic::Command, false).err().expect("refused")
     };

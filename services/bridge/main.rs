@@ -24,9 +24,10 @@ use looplab_shared::contract::clock::now_ns;
 use looplab_shared::contract::protocol::{BridgeReport, ChildEvent, CrossingCounts, LinkCounts, Outage, ProcessArgs};
 use looplab_shared::contract::role::{Role, Topic};
 use looplab_shared::runtime::bridge::{self, Inbound, Outbound, Plan, WireLayout};
-use looplab_shared::runtime::child::{WAIT_SLICE, emit, wait, waitset};
-use looplab_shared::runtime::ipc::{self, Ipc};
 use looplab_shared::runtime::signals::StopFlag;
+use looplab_shared::runtime::stage::child::{WAIT_SLICE, emit, wait, waitset};
+use looplab_shared::runtime::storage::run_storage;
+use looplab_shared::runtime::transport::ipc::Ipc;
 
 /// How long this host's bridge waits for the other's answer before giving up.
 const MEET_TIMEOUT: Duration = Duration::from_secs(15);
@@ -109,7 +110,7 @@ fn run(args: &Args) -> Result<BridgeReport> {
     let run_id = args.process.run_id.clone();
     let remote = role == Role::BridgeRemote;
     // The remote bridge is the run's first process on its host: it makes the run's folder there.
-    let storage = if remote { Some(ipc::take_run_storage(&run_id)?) } else { None };
+    let storage = if remote { Some(run_storage::take_run_storage(&run_id)?) } else { None };
     let plan = Plan::of(&config.hosts, role);
     let session = open_session(&host.endpoint(), remote)?;
 
@@ -228,7 +229,7 @@ fn run(args: &Args) -> Result<BridgeReport> {
     let leftover = match storage {
         // The last of the run on its host (the launcher stops the stages first): tidy up there.
         Some(lock) => {
-            let leftover = ipc::clean_up_run(&run_id)?.leftover;
+            let leftover = run_storage::clean_up_run(&run_id)?.leftover;
             drop(lock);
             leftover
         }

@@ -11,7 +11,7 @@ use clap::{Args, CommandFactory, Parser, Subcommand};
 use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::model::catalog::Catalog;
-use crate::runtime::ipc;
+use crate::runtime::storage::run_storage;
 use crate::scenarios;
 use crate::tools::{ToolError, bench, compare, diff, export, perfetto, plot, replay, sweep};
 
@@ -353,7 +353,7 @@ pub fn main() -> ExitCode {
 
 /// The launcher with the scenarios of `catalog`: every command (`run`, `show`, `list`, `sweep`,
 /// `bench`, `plot`, `export`) knows these. Its loop processes must load the same catalog: how a
-/// crate of its own builds the six binaries is told at [`crate::runtime::child::process_main_with`].
+/// crate of its own builds the six binaries is told at [`crate::runtime::stage::child::process_main_with`].
 pub fn main_with(catalog: &Catalog) -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
@@ -501,7 +501,7 @@ fn figures(written: Result<Vec<PathBuf>, ToolError>) -> ExitCode {
 }
 
 /// Tells what the clean-up of runs whose launcher was killed found.
-fn report_abandoned(done: &ipc::Abandoned) {
+fn report_abandoned(done: &run_storage::Abandoned) {
     if !done.runs.is_empty() {
         tell!(
             "looplab: removed the shared-memory files of {} run(s) whose launcher was killed ({}){}",
@@ -516,10 +516,10 @@ fn report_abandoned(done: &ipc::Abandoned) {
 }
 
 fn clean() -> ExitCode {
-    let done = ipc::clean_abandoned_runs();
+    let done = run_storage::clean_abandoned_runs();
     report_abandoned(&done);
     if done.runs.is_empty() {
-        say!("nothing to clean: no abandoned run of this user in {}", ipc::SHM_DIR);
+        say!("nothing to clean: no abandoned run of this user in {}", run_storage::SHM_DIR);
     }
     if done.leftover.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE }
 }
@@ -636,7 +636,9 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
     {
         return bad_input(format!("--in-process: {why}; leave out --in-process to run the five processes"));
     }
-    if let Some((key, why)) = crate::runtime::realtime::refusal(&config, crate::runtime::wait::available_cpus()) {
+    if let Some((key, why)) =
+        crate::runtime::stage::realtime::refusal(&config, crate::runtime::transport::wait::available_cpus())
+    {
         return bad_input(config.error(key, why));
     }
     if args.dashboard && !std::io::stdout().is_terminal() {
@@ -657,7 +659,7 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
     };
     let ran = match &binaries {
         Some(binaries) => {
-            report_abandoned(&ipc::clean_abandoned_runs());
+            report_abandoned(&run_storage::clean_abandoned_runs());
             let view = match (args.dashboard, args.quiet) {
                 (true, _) => launcher::LiveView::Dashboard,
                 (false, true) => launcher::LiveView::Quiet,

@@ -55,7 +55,7 @@ pub fn python_module_dir() -> &'static Path {
 /// /dev/shm, and none of its processes is alive.
 pub fn assert_nothing_left(s: &Summary) {
     assert!(s.shared_memory.clean, "{:?}", s.shared_memory);
-    let left = looplab_shared::runtime::ipc::files_of_run(&s.run_id);
+    let left = looplab_shared::runtime::storage::run_storage::files_of_run(&s.run_id);
     assert!(left.is_empty(), "files of run {} left behind: {left:?}", s.run_id);
     for p in &s.processes {
         assert!(!alive(i64::from(p.pid)), "{} (pid {}) is still running", p.name, p.pid);

@@ -1,5 +1,5 @@
 //! `liblooplab_stage.so`: a stage of your own in C, run by LoopLab's own runner
-//! (`looplab_sdk::runtime::user_stage`). The C program implements a `looplab_step` and calls
+//! (`looplab_sdk::runtime::stage::user_stage`). The C program implements a `looplab_step` and calls
 //! `looplab_run`; everything else (waiting, stamps, faults, the ready and report lines, signals)
 //! is the same relay the built-in stages run. `build.rs` writes the header `looplab_stage.h`
 //! beside the library.
@@ -14,7 +14,7 @@ use std::sync::OnceLock;
 use anyhow::{Result, bail};
 use looplab_sdk::contract::protocol::{ProcessArgs, stage_env};
 use looplab_sdk::contract::role::Role;
-use looplab_sdk::runtime::user_stage::{self, MAX_FROZEN_BYTES, Step, config_number, stage_names};
+use looplab_sdk::runtime::stage::user_stage::{self, MAX_FROZEN_BYTES, Step, config_number, stage_names};
 
 /// The most bytes a `looplab_freeze` may write (a snapshot's room for a stage's state: 64 KiB).
 pub const LOOPLAB_MAX_FROZEN_BYTES: usize = 65536;

@@ -1,5 +1,5 @@
-/* Build (from the repository root, after `cargo build --release`, which builds the library):
- * cc -O2 -std=c11 -ffp-contract=off -Wall -I target/release services/examples/c/pendulum_controller.c -L target/release -llooplab_stage -Wl,-rpath,"$PWD/target/release" -o target/release/pendulum_controller
+/* `looplab run services/examples/c/pendulum_c.toml` builds it (the launch file's `build`, after
+ * `cargo build --release`, which builds the library) and runs it.
  * The pendulum's built-in controller (shared/src/scenarios/pendulum/controller.rs) in C, the same
  * arithmetic in the same order: u = -(K·x) clamped to ±current_limit_a, x = the estimate minus the
  * upright reference, which is zero. -ffp-contract=off: no fused multiply-add, so the numbers are

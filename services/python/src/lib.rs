@@ -26,7 +26,7 @@
 //!         y[0] = x[0]
 //! ```
 //!
-//! `run` hands the process to [`looplab_sdk::runtime::user_stage::run_step`] with the GIL
+//! `run` hands the process to [`looplab_sdk::runtime::stage::user_stage::run_step`] with the GIL
 //! released; the runner takes it back only to call the user's methods (see [`step`]).
 
 mod plant;
@@ -34,8 +34,8 @@ mod step;
 
 use std::process::ExitCode;
 
-use looplab_sdk::runtime::user_plant::run_plant_holding;
-use looplab_sdk::runtime::user_stage::{StageInfo, run_step};
+use looplab_sdk::runtime::stage::user_plant::run_plant_holding;
+use looplab_sdk::runtime::stage::user_stage::{StageInfo, run_step};
 use pyo3::exceptions::PySystemExit;
 use pyo3::prelude::*;
 
@@ -166,6 +166,6 @@ fn looplab(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run_plant, m)?)?;
     m.add_function(wrap_pyfunction!(check_plant, m)?)?;
     m.add_function(wrap_pyfunction!(plant_step_ns, m)?)?;
-    m.add("MAX_FROZEN_BYTES", looplab_sdk::runtime::user_stage::MAX_FROZEN_BYTES)?;
+    m.add("MAX_FROZEN_BYTES", looplab_sdk::runtime::stage::user_stage::MAX_FROZEN_BYTES)?;
     Ok(())
 }

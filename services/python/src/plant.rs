@@ -7,7 +7,7 @@
 
 use anyhow::{Result, anyhow, bail};
 use looplab_sdk::model::plant_model::{PlantModel, Stepping};
-use looplab_sdk::runtime::user_plant::PlantInfo;
+use looplab_sdk::runtime::stage::user_plant::PlantInfo;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyModule};
 
@@ -60,7 +60,7 @@ impl Plant {
     }
 }
 
-/// Runs one plant step with the GIL held (see [`looplab_sdk::runtime::user_plant::Hold`]).
+/// Runs one plant step with the GIL held (see [`looplab_sdk::runtime::stage::user_plant::Hold`]).
 pub fn hold(step: &mut dyn FnMut() -> Result<()>) -> Result<()> {
     Python::attach(|_| step())
 }

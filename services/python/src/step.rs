@@ -7,7 +7,7 @@
 use std::ptr::NonNull;
 
 use anyhow::{Result, anyhow};
-use looplab_sdk::runtime::user_stage::{StageInfo, Step};
+use looplab_sdk::runtime::stage::user_stage::{StageInfo, Step};
 use pyo3::ffi;
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;

@@ -232,7 +232,7 @@ pub fn spawn<E: Send + 'static>(
 ) -> Result<Spawned> {
     let log_path = args.run_dir.join(files::LOGS).join(format!("{role}.log"));
     // A restarted process appends to its log.
-    let log = crate::runtime::run_file::open(&log_path, crate::runtime::run_file::Existing::Append)?;
+    let log = crate::runtime::storage::run_file::open(&log_path, crate::runtime::storage::run_file::Existing::Append)?;
     let process_args = ProcessArgs {
         launch: args.launch_file.to_path_buf(),
         run_id: args.run_id.to_owned(),

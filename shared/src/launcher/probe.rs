@@ -27,7 +27,7 @@ use crate::config::launch::LaunchConfig;
 use crate::contract::clock::now_ns;
 use crate::contract::report::Stats;
 use crate::monitor::distribution::Distribution;
-use crate::runtime::wait::{allowed_cpus, pin_to_cpu, sleep_until, tighten_timer_slack};
+use crate::runtime::transport::wait::{allowed_cpus, pin_to_cpu, sleep_until, tighten_timer_slack};
 
 /// What the probe measured (`summary.json`'s `probe`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]

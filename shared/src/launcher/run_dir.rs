@@ -7,7 +7,7 @@ use anyhow::{Context as _, Result, bail};
 use crate::config::launch::{LaunchConfig, run_vectors};
 use crate::contract::run_format::files;
 use crate::model::scenario::Scenario;
-use crate::runtime::run_file;
+use crate::runtime::storage::run_file;
 
 /// Begins a run in its folder: writes the resolved `launch.toml` (the file the processes load)
 /// and returns its path and the wall-clock start (UTC, RFC 3339) for the summary.

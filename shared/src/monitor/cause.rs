@@ -4,7 +4,7 @@
 //! The response time of loop k runs from when tick k was due to when command k reached the plant
 //! (in lockstep, which has no clock: the end-to-end latency). Its parts, in the order they pass:
 //! - the timer: the plant woke after tick k was due; of that, the time the plant sat on the run
-//!   queue (its schedstat, `runtime::sched`) is `queued: plant`, the rest `timer` (the OS's own
+//!   queue (its schedstat, `runtime::stage::sched`) is `queued: plant`, the rest `timer` (the OS's own
 //!   wake-up, interrupts, and time the hypervisor ran something else);
 //! - `compute: plant`: from its wake-up (or the tick's due time, if it woke earlier for a
 //!   command) to the state going out (integration and snapshot);

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::runtime::private_file;
+use crate::runtime::storage::private_file;
 
 /// What became of one fault the launcher injects.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -31,8 +31,8 @@ pub type Injections = BTreeMap<usize, Injection>;
 
 /// The injections file of run `run_id`.
 pub fn path(run_id: &str) -> Result<PathBuf> {
-    let folder = crate::runtime::ipc::run_folder(run_id);
-    crate::runtime::ipc::check_private(&folder)?;
+    let folder = crate::runtime::storage::run_storage::run_folder(run_id);
+    crate::runtime::storage::run_storage::check_private(&folder)?;
     Ok(folder.join("injections.json"))
 }
 

@@ -20,12 +20,12 @@ use crate::contract::msg::MONITOR_BUFFER;
 use crate::contract::protocol::ChildEvent;
 use crate::model::scenario::Scenario;
 use crate::monitor::join::Sample;
-use crate::monitor::recording_thread::{RecorderOptions, RecordingThread};
 use crate::monitor::recording::{Recording, StatusCallback};
+use crate::monitor::recording_thread::{RecorderOptions, RecordingThread};
 use crate::monitor::stall::StallWatch;
-use crate::runtime::child::Context;
-use crate::runtime::child::{emit, emit_if_room};
-use crate::runtime::ipc::{Topic, TopicSubscriber};
+use crate::runtime::stage::child::Context;
+use crate::runtime::stage::child::{emit, emit_if_room};
+use crate::runtime::transport::ipc::{Topic, TopicSubscriber};
 
 /// Sleep between drains when the queues were nearly empty.
 const POLL_PERIOD: Duration = Duration::from_millis(5);

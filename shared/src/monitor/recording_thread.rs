@@ -50,7 +50,7 @@ impl RecordingThread {
         let (samples, received) = batches(BATCH, options.in_flight);
         let thread = std::thread::Builder::new().name("recording".into()).spawn(move || {
             if options.background {
-                crate::runtime::wait::run_in_background();
+                crate::runtime::transport::wait::run_in_background();
             }
             let mut last_checkpoint = Instant::now();
             loop {

@@ -2,7 +2,7 @@
 //! report so far, every distribution, the fault trackers, the scenario's metrics) is written to
 //! one file, so that the next monitor's report covers the whole run and not only its own span.
 //!
-//! The file lies in the run's private folder on tmpfs ([`crate::runtime::ipc::run_folder`]):
+//! The file lies in the run's private folder on tmpfs ([`crate::runtime::storage::run_storage::run_folder`]):
 //! no other user can read or forge it, it never waits for a disk, and the run's clean-up removes
 //! it. It is written under another name and renamed into place, so a monitor killed mid-write
 //! leaves the previous one whole.
@@ -16,12 +16,12 @@ use crate::contract::codec;
 use crate::contract::msg::PlantCounters;
 use crate::monitor::fault_effect::FaultTracker;
 use crate::monitor::stats::LoopStats;
-use crate::runtime::private_file;
+use crate::runtime::storage::private_file;
 
 /// The snapshot file of run `run_id`'s monitor.
 pub fn path(run_id: &str) -> Result<PathBuf> {
-    let folder = crate::runtime::ipc::run_folder(run_id);
-    crate::runtime::ipc::check_private(&folder)?;
+    let folder = crate::runtime::storage::run_storage::run_folder(run_id);
+    crate::runtime::storage::run_storage::check_private(&folder)?;
     Ok(folder.join("monitor.state"))
 }
 

@@ -17,9 +17,9 @@ use crate::contract::role::{Role, Topic};
 use iceoryx2::prelude::ipc;
 use iceoryx2::waitset::{WaitSet, WaitSetGuard};
 
-use crate::runtime::faults::{LinkCut, OnLink};
-use crate::runtime::ipc::{Ipc, TopicPublisher, TopicSubscriber, Wake};
-use crate::runtime::wait::reader_blocks;
+use crate::runtime::stage::faults::{LinkCut, OnLink};
+use crate::runtime::transport::ipc::{Ipc, TopicPublisher, TopicSubscriber, Wake};
+use crate::runtime::transport::wait::reader_blocks;
 
 /// The key of a topic on the link: the run's id keeps two runs on one network apart.
 pub fn link_key(run_id: &str, topic: Topic) -> String {

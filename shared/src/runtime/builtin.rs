@@ -1,5 +1,5 @@
 //! The bodies of LoopLab's own loop processes (`services/`, and a crate of its own that builds
-//! them with its catalog: `runtime::child::process_main_with`): each runs its part of the
+//! them with its catalog: `runtime::stage::child::process_main_with`): each runs its part of the
 //! scenario, or in an open-loop replay plays its recording back.
 
 use anyhow::Result;
@@ -7,11 +7,11 @@ use anyhow::Result;
 use crate::contract::protocol::ChildEvent;
 use crate::contract::role::Role;
 use crate::model::scenario::Scenario;
-use crate::runtime::child::Context;
-use crate::runtime::plant::run_with;
-use crate::runtime::playback::Playback;
-use crate::runtime::relay::relay;
-use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask};
+use crate::runtime::replay::playback::Playback;
+use crate::runtime::stage::child::Context;
+use crate::runtime::stage::plant::run_with;
+use crate::runtime::stage::relay::relay;
+use crate::runtime::stage::task::{ControllerTask, EstimatorTask, SensorsTask};
 
 pub fn plant(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
     let limits = scenario.input_limits();

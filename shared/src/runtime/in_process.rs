@@ -15,10 +15,10 @@ use crate::contract::msg::{Command, Estimate, LoopMessage, Measurements, Message
 use crate::contract::protocol::{PlantReport, StageReport};
 use crate::contract::role::Role;
 use crate::model::scenario::Scenario;
-use crate::runtime::plant::PlantCore;
-use crate::runtime::playback::Playback;
+use crate::runtime::replay::playback::Playback;
 use crate::runtime::signals::StopFlag;
-use crate::runtime::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
+use crate::runtime::stage::plant::PlantCore;
+use crate::runtime::stage::task::{ControllerTask, EstimatorTask, SensorsTask, StageRunner, Task};
 
 /// What the in-process run's "processes" report at its end.
 #[derive(Debug, Clone)]
@@ -68,7 +68,7 @@ pub fn refusal(config: &LaunchConfig) -> Option<String> {
 
 /// Runs every loop of `config` in order, handing each message to `observe` as the monitor
 /// would receive it, until the run ends or a stop is requested. In an open-loop replay
-/// (`runtime::playback`) the processes other than the replayed stage play the recording back.
+/// (`runtime::replay::playback`) the processes other than the replayed stage play the recording back.
 pub fn run(
     config: &LaunchConfig,
     scenario: &dyn Scenario,
@@ -172,7 +172,7 @@ impl<'a, T: Task, M: Fn() -> T> Stage<'a, T, M> {
         if self.kills.contains(&k) {
             // The process keeps its frozen state before each output goes out (lockstep), and its
             // successor thaws it before its first input.
-            let frozen = crate::runtime::snapshot::stage_frozen(self.runner.task.freeze()?)?;
+            let frozen = crate::runtime::storage::snapshot::stage_frozen(self.runner.task.freeze()?)?;
             let incarnation = self.earlier.len() as u32 + 1;
             let next = StageRunner::new((self.make)(), self.role, self.config, incarnation);
             let last = std::mem::replace(&mut self.runner, next);

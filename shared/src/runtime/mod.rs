@@ -8,8 +8,7 @@ pub use looplab_sdk::runtime::*;
 pub mod bridge;
 pub mod builtin;
 pub mod in_process;
-pub mod playback;
-pub mod recording_reader;
+pub mod replay;
 
 #[cfg(test)]
 mod plant_tests;

@@ -5,7 +5,7 @@
 use crate::config::launch::Override;
 use crate::contract::msg::*;
 use crate::contract::role::Role;
-use crate::runtime::plant::*;
+use crate::runtime::stage::plant::*;
 
 /// Tick 0 is due here (any time will do: the core only compares times).
 const START: u64 = 1_000_000_000;

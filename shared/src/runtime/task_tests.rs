@@ -8,7 +8,7 @@ use crate::config::faults::CorruptValue;
 use crate::config::launch::{LaunchConfig, Override};
 use crate::contract::msg::{Command, Estimate, Measurements};
 use crate::contract::role::Role;
-use crate::runtime::task::*;
+use crate::runtime::stage::task::*;
 
 /// Echoes its input's first value into the command, counting its calls.
 #[derive(Default)]
@@ -207,7 +207,7 @@ fn restart_controller(scenario_name: &str, at: u64, after: u64) -> (bool, bool) 
     let overrides = [Override::parse("mode=\"lockstep\"").unwrap()];
     let (config, scenario) = crate::scenarios::resolve(scenario_name, &overrides).unwrap();
     let s = scenario.as_ref();
-    let mut plant = crate::runtime::plant::PlantCore::new(&config, s, 0);
+    let mut plant = crate::runtime::stage::plant::PlantCore::new(&config, s, 0);
     let (mut sensors, mut estimator) = (SensorsTask::new(&config, s), EstimatorTask::new(&config, s));
     let mut controller = ControllerTask::new(&config, s);
     let (mut thawed, mut fresh) = (ControllerTask::new(&config, s), ControllerTask::new(&config, s));

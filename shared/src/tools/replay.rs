@@ -2,7 +2,7 @@
 //! in a run folder, loop by loop, in lockstep, and writes a new run folder.
 //!
 //! Open loop (the default), the plant, and every stage but the replayed one, play the
-//! recording back (`runtime::playback`): the stage gets exactly the messages its recording got,
+//! recording back (`runtime::replay::playback`): the stage gets exactly the messages its recording got,
 //! and its outputs go nowhere that changes what comes next. Closed loop (`--closed-loop`), the
 //! whole loop runs again from the recording's initial state, the recorded plant replaced by the
 //! scenario's (or the declared system's) model: a lockstep run of the recording's launch file
@@ -29,8 +29,8 @@ use crate::contract::run_format::files;
 use crate::launcher::outcome::Outcome;
 use crate::model::catalog::Catalog;
 use crate::model::layout::VectorLayout;
-use crate::runtime::faults::{AddedDelay, StageFaults};
-use crate::runtime::recording_reader::{self, RecordedLoop};
+use crate::runtime::replay::recording_reader::{self, RecordedLoop};
+use crate::runtime::stage::faults::{AddedDelay, StageFaults};
 use crate::tools::ToolError;
 
 /// `looplab replay`'s options.
@@ -128,7 +128,8 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
     let target = launch_file.display().to_string();
     let (recorded_config, recorded_scenario) = catalog.resolve(&target, &[]).map_err(|e| bad(e.to_string()))?;
     let layout = VectorLayout::new(&recorded_config, recorded_scenario.as_ref());
-    let loops = recording_reader::load(&recording, &layout, recorded_config.loops()).map_err(|e| bad(format!("{e:#}")))?;
+    let loops =
+        recording_reader::load(&recording, &layout, recorded_config.loops()).map_err(|e| bad(format!("{e:#}")))?;
     let seen = RecordedStage::new(&recorded_config, role, &loops);
 
     let mut overrides = vec![set("mode", "lockstep".into())];
@@ -185,7 +186,7 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         let started = Instant::now();
         let (summary, outcome) = match &binaries {
             Some(binaries) => {
-                crate::runtime::ipc::clean_abandoned_runs();
+                crate::runtime::storage::run_storage::clean_abandoned_runs();
                 let view = crate::launcher::LiveView::Quiet;
                 crate::launcher::run_with(&config, scenario.as_ref(), binaries, dir, view)?
             }

@@ -297,7 +297,7 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
     let path = out.join("sweep.json");
     let written = serde_json::to_string_pretty(&report)
         .map_err(anyhow::Error::from)
-        .and_then(|text| crate::runtime::run_file::write(&path, (text + "\n").as_bytes()));
+        .and_then(|text| crate::runtime::storage::run_file::write(&path, (text + "\n").as_bytes()));
     if let Err(e) = written {
         tell!("error: {e:#}");
         return ExitCode::FAILURE;

@@ -5,7 +5,7 @@
 //! `looplab run services/examples/rust-controller/pendulum_rust.toml`.
 
 use looplab_sdk::model::scenario::Controller;
-use looplab_sdk::runtime::user_stage::run_controller;
+use looplab_sdk::runtime::stage::user_stage::run_controller;
 
 struct StateFeedback {
     gains: [f64; 3],

@@ -1,6 +1,6 @@
 //! Faults to inject and how the launcher supervises the processes: the `[[faults]]` list and the
 //! `[supervision]` section of a launch file, the `--fault` text form, and the part of a fault
-//! that a stage applies to itself (delay, drop, corrupt: applied by `crate::runtime::faults`).
+//! that a stage applies to itself (delay, drop, corrupt: applied by `crate::runtime::stage::faults`).
 //!
 //! `kill` and `stop` are done to a process from outside, by the launcher; `delay`, `drop` and
 //! `corrupt` change what a process does, so the process applies them itself, by loop index k,

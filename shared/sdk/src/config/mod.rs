@@ -10,6 +10,7 @@ pub mod realtime;
 pub mod replay;
 pub mod schema;
 pub mod seed;
+pub mod stage_build;
 pub mod stages;
 pub mod validate;
 pub mod wait;

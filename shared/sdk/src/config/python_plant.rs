@@ -9,7 +9,7 @@
 //! The launcher starts the plant role as `python3` running `looplab.run_plant` (the `looplab`
 //! Python module, `services/python`) in the launch file's folder, as it starts a `[stages]`
 //! command; the module builds the model over an instance of the class and runs LoopLab's own plant
-//! process with it (`runtime::user_plant`). Before anything starts, the launcher checks that the
+//! process with it (`runtime::stage::user_plant`). Before anything starts, the launcher checks that the
 //! file imports and that its class has `derivative`: a plant that cannot start is bad input.
 
 use std::path::PathBuf;
@@ -45,7 +45,7 @@ pub fn parse(document: &toml::Table, dir: PathBuf) -> Result<Option<StageCommand
         return Err(format!("\"{spec}\": {class:?} is not a Python class name"));
     }
     let command = ["python3", "-c", RUN_PLANT, spec].map(str::to_owned).to_vec();
-    Ok(Some(StageCommand { command, dir }))
+    Ok(Some(StageCommand { command, build_dir: dir.clone(), dir, build: Vec::new() }))
 }
 
 /// `file.py:Class` of a Python plant's command (what [`parse`] made).

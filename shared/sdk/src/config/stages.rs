@@ -4,16 +4,18 @@
 //! [stages.controller]
 //! command = ["python3", "my_controller.py"]   # the program and its arguments
 //! # dir = "/home/me/loop"                     # where it starts (default: the launch file's folder)
+//! # build = ["cc", "-O2", "c.c", "-o", "c"]   # run first, in `dir`, when what it names changed
 //! ```
 //!
 //! The launcher starts the command in place of the built-in stage, with the run's arguments in
 //! its environment (`contract::protocol::stage_env`); the program hands its computation to
-//! LoopLab's runner (`runtime::user_stage`: the `looplab` Python module, the `looplab_stage` C
+//! LoopLab's runner (`runtime::stage::user_stage`: the `looplab` Python module, the `looplab_stage` C
 //! library, or the Rust library), so it is stamped, supervised and faulted as a built-in stage is.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use crate::config::stage_build;
 use crate::contract::role::Role;
 
 /// The stages a launch file may replace.
@@ -26,6 +28,12 @@ pub struct StageCommand {
     pub command: Vec<String>,
     /// The folder it starts in: relative paths in the command are relative to it.
     pub dir: PathBuf,
+    /// The command that builds it, run before the run (`config::stage_build`); empty: none.
+    pub build: Vec<String>,
+    /// The folder the build runs in: `dir` where the table gives one, else the folder of the
+    /// file (or the command line) that gave `build`, which may differ from the command's (a
+    /// `--set` command on a launch file's build).
+    pub build_dir: PathBuf,
 }
 
 /// The `[stages]` section, checked.
@@ -57,27 +65,22 @@ impl Stages {
             let toml::Value::Table(spec) = value else {
                 return Err(error(&key, format!("expected a table with `command`, got a {}", value.type_str())));
             };
-            if let Some(unknown) = spec.keys().find(|k| !["command", "dir"].contains(&k.as_str())) {
-                return Err(error(&format!("{key}.{unknown}"), "unknown key; allowed: command, dir".into()));
+            if let Some(unknown) = spec.keys().find(|k| !["command", "dir", "build"].contains(&k.as_str())) {
+                return Err(error(&format!("{key}.{unknown}"), "unknown key; allowed: command, dir, build".into()));
             }
             let command_key = format!("{key}.command");
-            let command: Vec<String> = match spec.get("command") {
-                Some(toml::Value::Array(items)) => {
-                    items.iter().map(|item| item.as_str().map(str::to_owned)).collect::<Option<_>>().ok_or_else(
-                        || error(&command_key, "must be a list of strings: the program, then its arguments".into()),
-                    )?
-                }
-                Some(other) => {
-                    return Err(error(
-                        &command_key,
-                        format!(
-                            "must be a list of strings (the program, then its arguments), got a {}",
-                            other.type_str()
-                        ),
-                    ));
-                }
+            let command = match spec.get("command") {
+                Some(value) => program_and_arguments(value, &command_key, &error)?,
                 None => return Err(error(&command_key, "missing: the program and its arguments, as a list".into())),
             };
+            let build_key = format!("{key}.build");
+            let build = match spec.get("build") {
+                Some(value) => program_and_arguments(value, &build_key, &error)?,
+                None => Vec::new(),
+            };
+            if build.first().is_some_and(String::is_empty) {
+                return Err(error(&build_key, "must name a program: [\"make\"]".into()));
+            }
             if command.first().is_none_or(|program| program.is_empty()) {
                 return Err(error(&command_key, "must name a program: [\"python3\", \"my_stage.py\"]".into()));
             }
@@ -91,7 +94,8 @@ impl Stages {
                 }
                 None => default_dir(&command_key),
             };
-            stages.commands.insert(role, StageCommand { command, dir });
+            let build_dir = if spec.contains_key("dir") { dir.clone() } else { default_dir(&build_key) };
+            stages.commands.insert(role, StageCommand { command, dir, build, build_dir });
         }
         Ok(stages)
     }
@@ -105,13 +109,34 @@ impl Stages {
     }
 
     /// Writes each stage's folder into `table` (the document's `[stages]`), so that the resolved
-    /// launch file in the run folder starts each stage where this one does.
+    /// launch file in the run folder starts each stage where this one does; its `build` is left
+    /// out, done before the run (a replay of the run runs the program the run ran).
     pub fn write_dirs(&self, table: &mut toml::Table) {
         for (role, stage) in &self.commands {
             if let Some(toml::Value::Table(spec)) = table.get_mut(role.name()) {
                 spec.insert("dir".into(), toml::Value::String(stage.dir.display().to_string()));
+                spec.remove("build");
             }
         }
+    }
+}
+
+/// A list of strings, the program and its arguments, at dotted `key`.
+fn program_and_arguments<E>(
+    value: &toml::Value,
+    key: &str,
+    error: impl Fn(&str, String) -> E,
+) -> Result<Vec<String>, E> {
+    match value {
+        toml::Value::Array(items) => items
+            .iter()
+            .map(|item| item.as_str().map(str::to_owned))
+            .collect::<Option<_>>()
+            .ok_or_else(|| error(key, "must be a list of strings: the program, then its arguments".into())),
+        other => Err(error(
+            key,
+            format!("must be a list of strings (the program, then its arguments), got a {}", other.type_str()),
+        )),
     }
 }
 
@@ -166,6 +191,16 @@ impl StageCommand {
         Ok(())
     }
 
+    /// Runs its `build`, if it has one, unless nothing it names changed since it last succeeded
+    /// (`config::stage_build`). Err: the build failed, in one line.
+    pub fn build(&self) -> Result<Option<stage_build::Built>, String> {
+        if self.build.is_empty() {
+            return Ok(None);
+        }
+        let program = self.command[0].contains('/').then(|| self.dir.join(&self.command[0]));
+        stage_build::build(&self.build, &self.build_dir, program.as_deref()).map(Some)
+    }
+
     /// The command as one line for messages: `python3 my_controller.py`.
     pub fn text(&self) -> String {
         self.command.join(" ")
@@ -212,7 +247,7 @@ mod tests {
             ),
             (
                 "[controller]\ncommand = [\"x\"]\nargs = 1\n",
-                "stages.controller.args: unknown key; allowed: command, dir",
+                "stages.controller.args: unknown key; allowed: command, dir, build",
             ),
             ("controller = 3\n", "stages.controller: expected a table with `command`, got a integer"),
         ];
@@ -226,6 +261,8 @@ mod tests {
         let stage = |command: &[&str]| StageCommand {
             command: command.iter().map(|s| s.to_string()).collect(),
             dir: std::env::temp_dir(),
+            build: Vec::new(),
+            build_dir: std::env::temp_dir(),
         };
         assert_eq!(
             stage(&["no-such-program-ll"]).check().unwrap_err(),

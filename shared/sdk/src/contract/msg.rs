@@ -219,7 +219,7 @@ impl LoopTrace {
     }
 }
 
-/// What the writer of a message knows of its own scheduling for this loop (`runtime::sched`):
+/// What the writer of a message knows of its own scheduling for this loop (`runtime::stage::sched`):
 /// how long its thread sat on the run queue, runnable while another task had its CPU. Each loop
 /// process sets its own on what it sends (the plant: on the state, for the tick's wake-up, and on
 /// the loop record, for the command's), so the monitor reads each role's from that role's message.
@@ -231,7 +231,7 @@ pub struct SchedStamp {
     /// the CPU for this input; the plant: before it woke for this tick or this command), ns.
     pub queued_ns: u32,
     /// Run-queue time while it computed this loop's output, ns: read only when the computation
-    /// took over `runtime::sched::COMPUTE_READ_NS`, else 0 (it then counts in the next wait).
+    /// took over `runtime::stage::sched::COMPUTE_READ_NS`, else 0 (it then counts in the next wait).
     pub compute_queued_ns: u32,
 }
 
@@ -461,7 +461,7 @@ pub fn layout_mismatch(what: &str, theirs: &str, ours: &str) -> String {
 /// The fingerprint of the message layouts: every message's size, alignment and field offsets,
 /// the message limits and LoopLab's version, hashed. iceoryx2 0.10 checks a payload's type name,
 /// size and alignment only, so two builds whose layouts differ inside the same size would
-/// exchange garbage; every port requires this value as a service attribute (`runtime::ipc`), and
+/// exchange garbage; every port requires this value as a service attribute (`runtime::transport::ipc`), and
 /// a process from another build is refused when it connects.
 pub fn layout_fingerprint() -> &'static str {
     static FINGERPRINT: std::sync::OnceLock<String> = std::sync::OnceLock::new();

@@ -1,5 +1,5 @@
 //! The run folder's format, owned here: its files, the recording's channels, the fields of their
-//! messages and the version of all of it. The monitor's sinks write it, `runtime::recording_reader`
+//! messages and the version of all of it. The monitor's sinks write it, `runtime::replay::recording_reader`
 //! reads the recording back, the launcher and `tools::run_folder` read the rest; each takes its
 //! names from here, so a name changes in one place, and a change of meaning bumps
 //! [`FORMAT_VERSION`].

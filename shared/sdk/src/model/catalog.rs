@@ -1,5 +1,5 @@
 //! The scenarios a launcher and its loop processes can run, as a value: each binary is handed
-//! its catalog (`cli::main_with`, `runtime::child::process_main_with`), so a crate outside this
+//! its catalog (`cli::main_with`, `runtime::stage::child::process_main_with`), so a crate outside this
 //! one can run its own scenarios beside the built-in ones (`scenarios::builtin()`).
 
 use std::path::Path;

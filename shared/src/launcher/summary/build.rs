@@ -22,7 +22,7 @@ use crate::launcher::summary::{
 };
 use crate::launcher::{budget, network, verdict};
 use crate::model::scenario::Scenario;
-use crate::runtime::realtime::Scheduling;
+use crate::runtime::stage::realtime::Scheduling;
 
 /// What the processes reported when they ended.
 #[derive(Debug, Clone, Default)]

@@ -26,7 +26,7 @@ use crate::launcher::network::Network;
 use crate::launcher::outcome::{Exit, StopReason};
 use crate::launcher::verdict::LimitsVerdict;
 pub use crate::model::scenario::ErrorMeasureInfo;
-use crate::runtime::realtime::Scheduling;
+use crate::runtime::stage::realtime::Scheduling;
 
 /// The layout version of `summary.json`: bump it on any incompatible change (a key removed,
 /// renamed, retyped or given another meaning). New keys are compatible.

@@ -145,7 +145,7 @@ impl Supervisor<'_> {
         if role.in_loop()
             && self.config.realtime.any()
             && let Some(pid) = self.processes[role].row().pid
-            && let Ok(scheduling) = crate::runtime::realtime::read(pid)
+            && let Ok(scheduling) = crate::runtime::stage::realtime::read(pid)
         {
             self.log.scheduling.insert((role, incarnation), scheduling);
         }

@@ -34,8 +34,8 @@ use crate::launcher::run_dir::{begin_run, new_run_id};
 use crate::launcher::sched_trace::{self, SchedTrace, TRACEFS};
 use crate::launcher::summary::{self, CpuTimes, Reports, RunLog, SharedMemoryCheck, Summary, SummaryInputs};
 use crate::model::scenario::Scenario;
-use crate::runtime::ipc;
 use crate::runtime::signals::StopFlag;
+use crate::runtime::storage::run_storage;
 
 use fault_ledger::FaultLedger;
 use live::Live;
@@ -67,7 +67,7 @@ pub fn run_with(
     run_dir: &Path,
     view: LiveView,
 ) -> Result<(Summary, Outcome)> {
-    let decided = config.with_wait_decided(crate::runtime::wait::available_cpus());
+    let decided = config.with_wait_decided(crate::runtime::transport::wait::available_cpus());
     Supervisor::run(&decided, scenario, binaries, run_dir, view)
 }
 
@@ -164,13 +164,13 @@ impl<'a> Supervisor<'a> {
             .collect();
         let run_id = new_run_id();
         // The run's private folder; the lock in it says the run is alive until we return.
-        let storage_lock = ipc::create_run_storage(&run_id)?;
+        let storage_lock = run_storage::create_run_storage(&run_id)?;
         let (cleaner, clean_requests) = crossbeam_channel::unbounded::<Role>();
         let cleaned = tx.clone();
         let clean_run_id = run_id.clone();
         let clean_thread = std::thread::spawn(move || {
             for role in clean_requests {
-                let removed = ipc::remove_dead_nodes(&clean_run_id).unwrap_or(0);
+                let removed = run_storage::remove_dead_nodes(&clean_run_id).unwrap_or(0);
                 if cleaned.send(Event::Cleaned { role, removed }).is_err() {
                     break;
                 }
@@ -224,7 +224,7 @@ impl<'a> Supervisor<'a> {
         }
         supervisor.cleaner = None;
         let _ = clean_thread.join();
-        let mut cleanup = ipc::clean_up_run(&supervisor.run_id)?;
+        let mut cleanup = run_storage::clean_up_run(&supervisor.run_id)?;
         // The other host's bridge tidied its host up last and said what it left there.
         if let Some(remote) = supervisor.reports.bridges.get(&Role::BridgeRemote).and_then(|r| r.values().last()) {
             cleanup.leftover.extend(remote.leftover.iter().map(|f| format!("{f} (on the other host)")));

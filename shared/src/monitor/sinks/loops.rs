@@ -53,7 +53,7 @@ pub mod column {
 
 /// The run-queue waits (`contract::msg::SchedStamp`) of each loop, ns: the plant's before it woke
 /// for the tick and for the command, each stage's before it got its input and while it computed
-/// (0 unless its computation took over `runtime::sched::COMPUTE_READ_NS`).
+/// (0 unless its computation took over `runtime::stage::sched::COMPUTE_READ_NS`).
 pub const QUEUED_COLUMNS: [&str; 8] = [
     "plant_tick_queued_ns",
     "sensors_queued_ns",

@@ -19,7 +19,7 @@ use crate::contract::report::MonitorReport;
 use crate::model::layout::VectorLayout;
 use crate::monitor::cause::Explanation;
 use crate::monitor::join::LoopParts;
-use crate::runtime::run_file::{self, Existing};
+use crate::runtime::storage::run_file::{self, Existing};
 
 /// What a sink is opened with.
 pub struct SinkSetup<'a> {

@@ -21,7 +21,7 @@ pub enum PlantSource {
     /// `[plant] fmu = "model.fmu"`: the FMU's path, absolute (`fmu::load`).
     Fmu(PathBuf),
     /// `[plant] python = "my_plant.py:Pendulum"`: the file (absolute) and the class. The plant
-    /// role runs as a python3 process over it (`runtime::user_plant`); no Rust process builds it.
+    /// role runs as a python3 process over it (`runtime::stage::user_plant`); no Rust process builds it.
     Python { file: PathBuf, class: String },
 }
 

@@ -1,5 +1,5 @@
 //! Where a hop's time goes: one loop message sent through the loop's own ports
-//! (`runtime::ipc`, the same services and settings) from a writer pinned to one CPU to a spinning
+//! (`runtime::transport::ipc`, the same services and settings) from a writer pinned to one CPU to a spinning
 //! reader pinned to another, paced at 1 kHz, with a clock stamp between every step:
 //!
 //! - writer: `deliver` (the call that loans, writes the message and hands it to every reader),
@@ -27,9 +27,9 @@ use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::msg::{Measurements, Message, PlantState};
 use crate::contract::role::Topic;
-use crate::runtime::ipc::{Ipc, Wake};
 use crate::runtime::signals::StopFlag;
-use crate::runtime::wait::sleep_until;
+use crate::runtime::transport::ipc::{Ipc, Wake};
+use crate::runtime::transport::wait::sleep_until;
 
 /// The steps of one hop, in order.
 pub const STEPS: [&str; 6] = ["deliver", "wake", "seen", "take", "copy", "release"];

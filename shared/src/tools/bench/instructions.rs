@@ -10,10 +10,10 @@
 //! - `in-process:N`: N loops of the pendulum in one process (`looplab run --in-process`), every
 //!   file of the run folder written;
 //! - `hop:N`: N hops of a 488 B state message through the loop's own ports
-//!   (`runtime::ipc`, the same services and settings): send, then receive in place and give the
+//!   (`runtime::transport::ipc`, the same services and settings): send, then receive in place and give the
 //!   chunk back, in one thread, so that no wait adds instructions;
 //! - `hop-monitor:N`: the same with the monitor's passive reader on the topic, its receive included;
-//! - `schedstat:N`: N reads of the thread's run-queue wait (`runtime::sched`), as every loop
+//! - `schedstat:N`: N reads of the thread's run-queue wait (`runtime::stage::sched`), as every loop
 //!   process makes once or twice per loop (user space only: the kernel's side of the `pread` is
 //!   not counted; `looplab bench` times the loop without the reads for the whole cost).
 
@@ -27,8 +27,8 @@ use crate::config::launch::{Mode, Override};
 use crate::contract::msg::{Message, PlantState};
 use crate::contract::role::Topic;
 use crate::model::catalog::Catalog;
-use crate::runtime::ipc::{Ipc, Wake};
 use crate::runtime::signals::StopFlag;
+use crate::runtime::transport::ipc::{Ipc, Wake};
 
 /// One workload: its `--count` name, what it is, its unit, and the two lengths run.
 struct Workload {
@@ -204,7 +204,7 @@ fn hops(run_id: &str, n: u64, monitor: bool) -> Result<()> {
 
 /// n reads of this thread's run-queue wait, as a loop process makes them.
 fn run_queue_reads(n: u64) -> Result<()> {
-    let mut run_queue = crate::runtime::sched::RunQueue::open();
+    let mut run_queue = crate::runtime::stage::sched::RunQueue::open();
     if !run_queue.available() {
         bail!("this kernel has no /proc/thread-self/schedstat: nothing to count");
     }
@@ -233,10 +233,10 @@ mod tests {
         workload("in-process:50", "unused", &dir.path().join("run"), &catalog).unwrap();
         assert!(dir.path().join("run/run.mcap").exists());
         let run_id = crate::launcher::new_run_id();
-        let lock = crate::runtime::ipc::create_run_storage(&run_id).unwrap();
+        let lock = crate::runtime::storage::run_storage::create_run_storage(&run_id).unwrap();
         let hopped = workload("hop:100", &run_id, dir.path(), &catalog)
             .and_then(|()| workload("hop-monitor:100", &run_id, dir.path(), &catalog));
-        let cleanup = crate::runtime::ipc::clean_up_run(&run_id).unwrap();
+        let cleanup = crate::runtime::storage::run_storage::clean_up_run(&run_id).unwrap();
         drop(lock);
         hopped.unwrap();
         assert!(cleanup.leftover.is_empty(), "{:?}", cleanup.leftover);

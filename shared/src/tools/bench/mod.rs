@@ -222,7 +222,7 @@ struct LoopConfig {
     pin: bool,
     /// A controller of the user's own in place of the built-in one.
     own: Option<OwnController>,
-    /// The loop processes read their run-queue wait (`runtime::sched`); off, the same loop
+    /// The loop processes read their run-queue wait (`runtime::stage::sched`); off, the same loop
     /// without those reads: their cost on the loop.
     schedstat: bool,
 }
@@ -380,7 +380,7 @@ fn looplab_run(
             .args(["run", "pendulum", "-q", "--out"])
             .arg(&dir)
             .args(sets.iter().flat_map(|s| ["--set", s.as_str()]))
-            .env(crate::runtime::sched::OFF_ENV, "off")
+            .env(crate::runtime::stage::sched::OFF_ENV, "off")
             .status()?;
         if !status.success() {
             bail!("the run without run-queue reads failed ({status}); its folder: {}", dir.display());
@@ -427,9 +427,9 @@ pub fn run(args: &BenchArgs, catalog: &Catalog) -> Result<()> {
     // The ping-pongs' iceoryx2 files live in a run of their own (the loop runs clean up after
     // themselves); whatever happens to the parts, they go at the end.
     let run_id = crate::launcher::new_run_id();
-    let lock = crate::runtime::ipc::create_run_storage(&run_id)?;
+    let lock = crate::runtime::storage::run_storage::create_run_storage(&run_id)?;
     let result = run_parts(args, &run_id, catalog);
-    let cleanup = crate::runtime::ipc::clean_up_run(&run_id);
+    let cleanup = crate::runtime::storage::run_storage::clean_up_run(&run_id);
     drop(lock);
     let leftover = cleanup?.leftover;
     if result.is_ok() && !leftover.is_empty() {
@@ -611,7 +611,10 @@ fn run_parts(args: &BenchArgs, run_id: &str, catalog: &Catalog) -> Result<()> {
         in_process_loops_per_s: in_process,
         wall_time_s: began.elapsed().as_secs_f64(),
     };
-    crate::runtime::run_file::write(&out.join("bench.json"), serde_json::to_string_pretty(&report)?.as_bytes())?;
+    crate::runtime::storage::run_file::write(
+        &out.join("bench.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
     let mut curves: Vec<(String, Vec<u64>)> =
         report.loops.iter().filter(|l| l.rate_hz == 1000.0).map(|l| (l.name.clone(), l.e2e.clone())).collect();
     if let Some(spin) = floor.get("spin") {

@@ -25,8 +25,9 @@ use serde::{Deserialize, Serialize};
 use crate::config::wait::{Strategy, WaitSettings};
 use crate::contract::clock::now_ns;
 use crate::contract::codec;
-use crate::runtime::ipc::{doze, retry, run_config};
-use crate::runtime::wait::{ArrivalModel, Waiter, sleep_until};
+use crate::runtime::storage::run_storage::run_config;
+use crate::runtime::transport::ipc::{doze, retry};
+use crate::runtime::transport::wait::{ArrivalModel, Waiter, sleep_until};
 
 /// Bytes at the start of every message: sequence, ping sent, echo received, echo sent.
 const STAMPS: usize = 32;

@@ -292,7 +292,10 @@ pub fn run(catalog: &Catalog, targets: &[String], quick: bool, out: &Path, stop:
             Err(e) => skipped.push(format!("{label}: {e:#}")),
         }
     }
-    crate::runtime::run_file::write(&out.join("plants.json"), serde_json::to_string_pretty(&results)?.as_bytes())?;
+    crate::runtime::storage::run_file::write(
+        &out.join("plants.json"),
+        serde_json::to_string_pretty(&results)?.as_bytes(),
+    )?;
     say_raw!("{}", render(&results, &skipped));
     Ok(results)
 }

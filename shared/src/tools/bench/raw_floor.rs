@@ -14,9 +14,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, anyhow, bail};
 
 use crate::contract::clock::now_ns;
-use crate::runtime::shared_file::{self, Open};
 use crate::runtime::signals::StopFlag;
-use crate::runtime::wait::sleep_until;
+use crate::runtime::storage::shared_file::{self, Open};
+use crate::runtime::transport::wait::sleep_until;
 
 /// One direction's cache line. Two lines apart, so that the adjacent-line prefetcher does not
 /// pull the other direction's line along.
@@ -66,7 +66,7 @@ impl Drop for Mapping {
 }
 
 fn file_of(run_id: &str) -> PathBuf {
-    crate::runtime::ipc::run_folder(run_id).join("raw-floor")
+    crate::runtime::storage::run_storage::run_folder(run_id).join("raw-floor")
 }
 
 /// Pins the calling thread to `cpu`; returns the CPUs it had, to restore.
@@ -84,7 +84,7 @@ pub(super) fn pin_to(cpu: usize) -> libc::cpu_set_t {
 
 /// The first two CPUs this thread may run on, for the two ends of a pinned ping-pong.
 pub(super) fn two_cpus() -> Option<(usize, usize)> {
-    let mut cpus = crate::runtime::wait::allowed_cpus().into_iter();
+    let mut cpus = crate::runtime::transport::wait::allowed_cpus().into_iter();
     Some((cpus.next()?, cpus.next()?))
 }
 

@@ -21,7 +21,7 @@ use crate::contract::codec;
 use crate::contract::msg::{Command as CommandMessage, Estimate, Measurements, PlantState};
 use crate::contract::role::Role;
 use crate::runtime::signals::{Interrupted, StopFlag};
-use crate::runtime::wait::sleep_until;
+use crate::runtime::transport::wait::sleep_until;
 
 const END: u64 = u64::MAX;
 

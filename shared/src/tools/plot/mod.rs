@@ -56,7 +56,7 @@ pub fn png(path: &Path, size: (u32, u32)) -> Result<DrawingArea<PngBackend<'_>, 
     register_fonts();
     // plotters opens the file itself, following links; a link where the figure goes is refused
     // here first (the folder is the user's own, so no one else can put one there in between).
-    crate::runtime::run_file::open(path, crate::runtime::run_file::Existing::Replace)?;
+    crate::runtime::storage::run_file::open(path, crate::runtime::storage::run_file::Existing::Replace)?;
     let root = PngBackend(BitMapBackend::new(path, size)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_error)?;
     Ok(root)

@@ -27,7 +27,7 @@ fn run_case(case: &PaperCase, out: &Path, catalog: &Catalog) -> anyhow::Result<R
         PaperTarget::Scenario(name) => catalog.resolve(name, &overrides),
         PaperTarget::File(file, text) => {
             let path = out.join(file);
-            crate::runtime::run_file::write(&path, text.as_bytes())?;
+            crate::runtime::storage::run_file::write(&path, text.as_bytes())?;
             catalog.resolve(&path.to_string_lossy(), &overrides)
         }
     };

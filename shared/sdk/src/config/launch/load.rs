@@ -202,9 +202,14 @@ pub fn resolve_config(
     check_stages(config)
 }
 
-/// A user's stage that cannot start is bad input, found before anything starts.
+/// A user's stage that cannot start (or whose `build` fails) is bad input, found before anything
+/// starts.
 fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
     for (role, stage) in &config.stages.commands {
+        let built = stage.build().map_err(|message| config.error(&format!("stages.{role}.build"), message))?;
+        if built == Some(crate::config::stage_build::Built::Ran) {
+            tell!("{role}: built with `{}`", stage.build.join(" "));
+        }
         stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
     }
     Ok(config)

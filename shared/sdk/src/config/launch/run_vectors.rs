@@ -1,7 +1,7 @@
 //! What a run's stages exchange, as the launcher resolved it: the state, input and estimate
 //! (names and units), each signal a sensor can measure, and the input's limits. The launcher
 //! writes them into the run's `launch.toml` (`[vectors]`), so that a stage of the user's own
-//! (`runtime::user_stage`, a Python plant) reads them from the run and serves any catalog's
+//! (`runtime::stage::user_stage`, a Python plant) reads them from the run and serves any catalog's
 //! scenario without that catalog. The table is the launcher's: one in a launch file given to
 //! `looplab run` is replaced by the resolved one.
 

@@ -65,7 +65,7 @@ pub struct McapFile {
 impl McapFile {
     /// Creates `path` (replaced if it exists) and writes the header.
     pub fn create(path: &Path, compression: Compression) -> Result<Self> {
-        let file = crate::runtime::run_file::open(path, crate::runtime::run_file::Existing::Replace)?;
+        let file = crate::runtime::storage::run_file::open(path, crate::runtime::storage::run_file::Existing::Replace)?;
         let mut out = Output::new(BufWriter::new(file));
         out.write(MAGIC);
         let mut header = Record::new(op::HEADER);

@@ -68,11 +68,11 @@ impl Channel {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Detail {
     /// Everything the monitor received: every field a stage reads, which `looplab replay` plays
-    /// back (`runtime::recording_reader`).
+    /// back (`runtime::replay::recording_reader`).
     Live,
     /// What a run folder's files keep (`looplab export`): no sensor sample times, sequence
     /// numbers or fresh and valid flags, no applied input in the messages, no lost flags or
-    /// incarnations; `runtime::recording_reader` refuses it.
+    /// incarnations; `runtime::replay::recording_reader` refuses it.
     Files,
 }
 

@@ -1,4 +1,4 @@
-//! `runtime::recording_reader::load` against what this sink writes: every field a stage reads comes
+//! `runtime::replay::recording_reader::load` against what this sink writes: every field a stage reads comes
 //! back bit for bit. Here, a layer above the reader, because the tests write with the monitor's
 //! own sink (tests/recorded.rs reads back real runs).
 
@@ -10,7 +10,7 @@ use crate::model::layout::VectorLayout;
 use crate::monitor::join::LoopParts;
 use crate::monitor::sinks::mcap::{Detail, McapRecording};
 use crate::monitor::sinks::{JoinedLoop, RunSink};
-use crate::runtime::recording_reader::{RecordedLoop, load};
+use crate::runtime::replay::recording_reader::{RecordedLoop, load};
 
 /// Floats JSON text gets wrong unless written shortest-round-trip and parsed exactly.
 const AWKWARD: [f64; 10] = [

@@ -26,11 +26,11 @@ use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState,
 use crate::contract::protocol::{ChildEvent, ProcessArgs, stage_env};
 use crate::contract::role::Role;
 use crate::model::scenario::{Controller, Estimator};
-use crate::runtime::child::{Context, keep_stdout_for_events, run_process_as};
-use crate::runtime::relay::relay;
-use crate::runtime::task::{ControllerTask, EstimatorTask, Task, corrupt_command};
+use crate::runtime::stage::child::{Context, keep_stdout_for_events, run_process_as};
+use crate::runtime::stage::relay::relay;
+use crate::runtime::stage::task::{ControllerTask, EstimatorTask, Task, corrupt_command};
 
-pub use crate::runtime::snapshot::MAX_FROZEN_BYTES;
+pub use crate::runtime::storage::snapshot::MAX_FROZEN_BYTES;
 
 /// What a user's stage is told when it starts.
 pub struct StageInfo<'a> {
@@ -125,7 +125,7 @@ pub(crate) fn run_stage(
         }
     };
     // The launcher's build against this one's, before anything connects: a stage from another
-    // build is the one refused (every port checks it too, `runtime::ipc`).
+    // build is the one refused (every port checks it too, `runtime::transport::ipc`).
     if let Ok(theirs) = std::env::var(stage_env::LAYOUT)
         && theirs != layout
     {

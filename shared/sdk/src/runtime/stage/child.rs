@@ -12,8 +12,8 @@ use iceoryx2::prelude::*;
 use crate::config::launch::LaunchConfig;
 use crate::contract::protocol::{ChildEvent, ProcessArgs};
 use crate::contract::role::Role;
-use crate::runtime::ipc::Ipc;
 use crate::runtime::signals::StopFlag;
+use crate::runtime::transport::ipc::Ipc;
 
 /// Longest a wait blocks before it looks at the stop flag again (a signal also ends it early).
 pub const WAIT_SLICE: Duration = Duration::from_millis(100);
@@ -79,7 +79,7 @@ pub fn run_process_as<T>(
         let (config, loaded) = load(&args.launch)?;
         // Before any thread starts, so that they all inherit it; the monitor stays low.
         if role.in_loop() {
-            crate::runtime::realtime::apply(&config.realtime)?;
+            crate::runtime::stage::realtime::apply(&config.realtime)?;
         }
         let ipc = Ipc::with_layout(name, &args.run_id, config.mode, layout)?;
         let context = Context {
@@ -103,8 +103,8 @@ pub fn run_process_as<T>(
         // An error (another process removing the run's files at the same moment) is tried
         // again too: it must not end the last process's clean-up.
         let cleaned = || {
-            crate::runtime::ipc::files_of_run(&args.run_id).is_empty()
-                || crate::runtime::ipc::clean_up_run(&args.run_id).is_ok_and(|c| c.leftover.is_empty())
+            crate::runtime::storage::run_storage::files_of_run(&args.run_id).is_empty()
+                || crate::runtime::storage::run_storage::clean_up_run(&args.run_id).is_ok_and(|c| c.leftover.is_empty())
         };
         while !cleaned() && std::time::Instant::now() < until {
             std::thread::sleep(std::time::Duration::from_millis(20));

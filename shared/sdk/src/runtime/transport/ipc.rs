@@ -4,7 +4,7 @@
 //! Every run has its own id. It is in every service name (`looplab/<run>/<topic>`) and in the
 //! iceoryx2 file prefix (`looplab_<run>_<secret>_`), so two runs on one machine never see each
 //! other and the launcher can check that nothing of a run is left in shared memory when it ends;
-//! the secret ([`crate::runtime::shm_secret`]) keeps another user from creating a run's files
+//! the secret ([`crate::runtime::storage::shm_secret`]) keeps another user from creating a run's files
 //! before the run does.
 //!
 //! Quality of service, identical for every process of a run:
@@ -37,10 +37,10 @@ use iceoryx2::waitset::{WaitSet, WaitSetGuard};
 use crate::config::launch::Mode;
 use crate::contract::clock::now_ns;
 use crate::contract::msg::{MONITOR_BUFFER, layout_fingerprint};
-use crate::runtime::reader_state::ReaderState;
-pub use crate::runtime::reader_state::Wake;
 use crate::runtime::signals::StopFlag;
-use crate::runtime::wait::{sleep_until, timespec};
+use crate::runtime::transport::reader_state::ReaderState;
+pub use crate::runtime::transport::reader_state::Wake;
+use crate::runtime::transport::wait::{sleep_until, timespec};
 
 /// Longest a lockstep publisher waits for a full reader before dropping the sample for it.
 pub const LOCKSTEP_BACKPRESSURE_LIMIT: Duration = Duration::from_secs(5);
@@ -455,8 +455,4 @@ pub fn doze(listener: &Listener<ipc::Service>, deadline_ns: u64) -> Result<()> {
     Ok(())
 }
 
-use crate::runtime::run_storage::node;
-pub use crate::runtime::run_storage::{
-    Abandoned, Cleanup, SHM_DIR, check_private, clean_abandoned_runs, clean_up_run, create_run_storage, file_prefix,
-    files_of_run, remove_dead_nodes, run_config, run_folder, take_run_storage,
-};
+use crate::runtime::storage::run_storage::{check_private, node, run_config, run_folder};

@@ -7,7 +7,7 @@
 //! A loop the recording has no output of a process for (it was dead, or the monitor missed it)
 //! is withheld: sent on marked lost, so the stages after it skip it as they skip a dropped
 //! loop. The replayed stage itself skips the loops its recording skipped (`[replay] skipped`,
-//! `runtime::task::StageRunner`), so that it computes what the recorded one computed.
+//! `runtime::stage::task::StageRunner`), so that it computes what the recorded one computed.
 
 use anyhow::{Result, bail};
 
@@ -17,8 +17,8 @@ use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState}
 use crate::contract::role::Role;
 use crate::model::layout::VectorLayout;
 use crate::model::scenario::{Plant, Scenario};
-use crate::runtime::recording_reader::{self, RecordedLoop};
-use crate::runtime::task::Task;
+use crate::runtime::replay::recording_reader::{self, RecordedLoop};
+use crate::runtime::stage::task::Task;
 
 /// A recording, loaded for the processes that play it back.
 pub struct Playback {

@@ -9,13 +9,13 @@ use crate::contract::clock::now_ns;
 use crate::contract::msg::{Message, Stamp};
 use crate::contract::protocol::ChildEvent;
 use crate::contract::role::Role;
-use crate::runtime::child::emit;
-use crate::runtime::child::{Context, WAIT_SLICE};
-use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
-use crate::runtime::sched::RunQueue;
-use crate::runtime::snapshot::{FrozenSnapshot, MAX_FROZEN_BYTES, Snapshot, stage_frozen};
-use crate::runtime::task::{StageRunner, Task};
-use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
+use crate::runtime::stage::child::emit;
+use crate::runtime::stage::child::{Context, WAIT_SLICE};
+use crate::runtime::stage::sched::RunQueue;
+use crate::runtime::stage::task::{StageRunner, Task};
+use crate::runtime::storage::snapshot::{FrozenSnapshot, MAX_FROZEN_BYTES, Snapshot, stage_frozen};
+use crate::runtime::transport::ipc::{TopicPublisher, TopicSubscriber};
+use crate::runtime::transport::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
 /// Runs `task` as the process of `role` until a stop is requested (or the task fails).
 pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {

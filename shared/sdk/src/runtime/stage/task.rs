@@ -2,7 +2,7 @@
 //! message: it knows nothing of iceoryx2, the clock or the mode. The [`StageRunner`] around it
 //! does what every stage does the same way: incarnations, the in-loop faults (delay, drop,
 //! corrupt) by loop index, and the counts of the stage's report. The process runner
-//! (`runtime::relay`) adds waiting, stamping and publishing; the in-process runner
+//! (`runtime::stage::relay`) adds waiting, stamping and publishing; the in-process runner
 //! (`runtime::in_process`) calls the same runners in loop order.
 
 use std::collections::VecDeque;
@@ -17,7 +17,7 @@ use crate::contract::protocol::StageReport;
 use crate::contract::role::Role;
 use crate::model::scenario::{Controller, Estimator, Scenario};
 use crate::model::sensors::SensorEmulator;
-use crate::runtime::faults::{AddedDelay, StageFaults};
+use crate::runtime::stage::faults::{AddedDelay, StageFaults};
 
 /// One stage's computation.
 pub trait Task {
@@ -25,7 +25,7 @@ pub trait Task {
     type Out: Message;
     /// Whether the task has state to freeze (the process runner then keeps a snapshot).
     const FREEZES: bool = false;
-    /// Whether it plays a recording back (`runtime::playback`): its output of each loop is the
+    /// Whether it plays a recording back (`runtime::replay::playback`): its output of each loop is the
     /// recorded one, a loop passed on marked lost included.
     const PLAYS_BACK: bool = false;
     /// Computes this loop's output from its input (the header is the runner's business). An
@@ -33,7 +33,7 @@ pub trait Task {
     fn process(&mut self, input: &Self::In, output: &mut Self::Out) -> Result<()>;
     /// State worth keeping across a restart (an estimator's calibrated bias, a controller's
     /// integrators), frozen after every loop: at most
-    /// [`MAX_FROZEN_BYTES`](crate::runtime::snapshot::MAX_FROZEN_BYTES).
+    /// [`MAX_FROZEN_BYTES`](crate::runtime::storage::snapshot::MAX_FROZEN_BYTES).
     fn freeze(&self) -> Result<Option<Vec<u8>>> {
         Ok(None)
     }
@@ -94,7 +94,7 @@ impl EstimatorTask {
         Self::with(scenario.estimator(), config)
     }
 
-    /// Runs `estimator` (a user's own, `runtime::user_stage`) in place of the scenario's.
+    /// Runs `estimator` (a user's own, `runtime::stage::user_stage`) in place of the scenario's.
     pub fn with(estimator: Box<dyn Estimator>, config: &LaunchConfig) -> Self {
         Self {
             estimator,
@@ -134,7 +134,7 @@ impl ControllerTask {
         Self::with(scenario.controller(), config, scenario.input_limits())
     }
 
-    /// Runs `controller` (a user's own, `runtime::user_stage`) in place of the scenario's, its
+    /// Runs `controller` (a user's own, `runtime::stage::user_stage`) in place of the scenario's, its
     /// output clamped to `limits`.
     pub fn with(controller: Box<dyn Controller>, config: &LaunchConfig, limits: Vec<(f64, f64)>) -> Self {
         Self { controller, estimates: config.schema.estimate.len(), limits }

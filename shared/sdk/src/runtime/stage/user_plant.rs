@@ -2,9 +2,9 @@
 //! declared system's `[plant] python = "file.py:Class"` makes the launcher start the plant role as
 //! `python3` running `looplab.run_plant` (`config::python_plant`); the module builds a
 //! [`PlantModel`] over the user's object and hands it to [`run_plant`] here, which runs the same
-//! plant process as a built-in plant's (`runtime::plant`): the declared system's plant
+//! plant process as a built-in plant's (`runtime::stage::plant`): the declared system's plant
 //! integrates the model (RK4, the input held), with the same schedule, fail-safes, snapshots,
-//! restarts and reports. The twin of `runtime::user_stage` for the plant role.
+//! restarts and reports. The twin of `runtime::stage::user_stage` for the plant role.
 
 use std::process::ExitCode;
 
@@ -17,7 +17,7 @@ use crate::contract::role::Role;
 use crate::model::declared_plant::DeclaredPlant;
 use crate::model::plant_model::{ModelSpec, PlantModel};
 use crate::model::scenario::Plant;
-use crate::runtime::user_stage::{input_limits, run_stage};
+use crate::runtime::stage::user_stage::{input_limits, run_stage};
 
 /// What a user's plant model is told when it starts.
 pub struct PlantInfo<'a> {
@@ -72,7 +72,7 @@ pub fn run_plant_holding(make: impl FnOnce(&PlantInfo) -> Result<Box<dyn PlantMo
         let plant = hold_result(hold, &mut || {
             DeclaredPlant::new(model.take().expect("built once"), outputs, inputs, plant_section.substeps)
         })?;
-        crate::runtime::plant::run_with(context, Box::new(Held { plant, hold }), input_limits(config))
+        crate::runtime::stage::plant::run_with(context, Box::new(Held { plant, hold }), input_limits(config))
     })
 }
 

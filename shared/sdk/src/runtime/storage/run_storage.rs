@@ -10,8 +10,8 @@ use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 
-use crate::runtime::shm_secret::{read_secret, write_secret};
 use crate::runtime::signals::StopFlag;
+use crate::runtime::storage::shm_secret::{read_secret, write_secret};
 
 /// The public part of a run's file names: every file of the run in `SHM_DIR` starts with it
 /// (clean-up matches it, and needs no secret), and so may a file another user made.

@@ -25,7 +25,7 @@ use linux_futex::{AsFutex, Shared, TimedWaitError};
 
 use crate::contract::clock::now_ns;
 use crate::contract::role::Topic;
-use crate::runtime::shared_file::{self, Open};
+use crate::runtime::storage::shared_file::{self, Open};
 
 /// How a writer wakes its topic's reader when the reader may be asleep.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

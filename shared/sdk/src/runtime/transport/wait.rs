@@ -10,7 +10,7 @@ use crate::config::wait::{HANDOFF_POLL_US, LockstepWait, Strategy, WaitSettings}
 use crate::contract::clock::now_ns;
 use crate::contract::protocol::WaitCounts;
 use crate::contract::role::{Role, Topic};
-use crate::runtime::reader_state::Wake;
+use crate::runtime::transport::reader_state::Wake;
 
 /// Observations kept to estimate how soon after a tick the input arrives.
 const WINDOW: usize = 64;

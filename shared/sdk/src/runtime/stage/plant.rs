@@ -28,12 +28,12 @@ use crate::contract::msg::*;
 use crate::contract::protocol::{ChildEvent, PlantReport};
 use crate::contract::role::{Role, Topic};
 use crate::model::scenario::Scenario;
-use crate::runtime::child::{Context, WAIT_SLICE, emit, line_written, wait_for_line, wait_for_lines};
-use crate::runtime::ipc::Wake;
-use crate::runtime::ipc::{TopicPublisher, TopicSubscriber};
-use crate::runtime::sched::{RunQueue, clamp};
-use crate::runtime::snapshot::{FrozenSnapshot, MAX_MODEL_BYTES, Snapshot};
-use crate::runtime::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
+use crate::runtime::stage::child::{Context, WAIT_SLICE, emit, line_written, wait_for_line, wait_for_lines};
+use crate::runtime::stage::sched::{RunQueue, clamp};
+use crate::runtime::storage::snapshot::{FrozenSnapshot, MAX_MODEL_BYTES, Snapshot};
+use crate::runtime::transport::ipc::Wake;
+use crate::runtime::transport::ipc::{TopicPublisher, TopicSubscriber};
+use crate::runtime::transport::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
 
 /// Real-time mode: after the last tick, how long the plant still waits for late commands, so
 /// that their latency is recorded.
@@ -400,7 +400,7 @@ impl PlantProcess {
     }
 }
 
-/// The plant process with `plant` in place of the scenario's (`runtime::user_plant`), the
+/// The plant process with `plant` in place of the scenario's (`runtime::stage::user_plant`), the
 /// commands it applies clamped to `limits`.
 pub fn run_with(
     context: &Context,
