@@ -188,24 +188,29 @@ fn a_python_stage_keeps_64_kib_across_a_kill_and_more_ends_it_with_one_line() {
          return bytes(looplab.MAX_FROZEN_BYTES + 1)\n\n\nlooplab.run(TooMuch)\n",
     )
     .unwrap();
-    let out = dir.join("run");
-    let stage = python_stage("controller", script.to_str().unwrap());
-    let output = launcher()
-        .args(["run", "pendulum", "--mode", "lockstep", "--duration", "1", "-q", "--set", &stage])
-        .args(["--set", "supervision.controller.restart=never", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
-    let s = load_summary(&out);
-    let why = match &s.stopped_because {
-        Some(StopReason::Failed(why)) => why.clone(),
-        other => panic!("not a failure: {other:?}"),
-    };
+    let (why, s) = failed_controller_run(&script, "1", &dir.join("run"));
     let line = "controller: error: freeze returned 65537 bytes; a snapshot keeps at most 65536";
     assert!(why.contains(line), "{why}");
     assert_nothing_left(&s);
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A lockstep run of the pendulum, `duration_s` long, with `script` as its controller and no
+/// restart, into `out`; it must fail (exit 1): why, and its summary.
+fn failed_controller_run(script: &std::path::Path, duration_s: &str, out: &std::path::Path) -> (String, Summary) {
+    let stage = python_stage("controller", script.to_str().unwrap());
+    let output = launcher()
+        .args(["run", "pendulum", "--mode", "lockstep", "--duration", duration_s, "-q", "--set", &stage])
+        .args(["--set", "supervision.controller.restart=never", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
+    let s = load_summary(out);
+    match &s.stopped_because {
+        Some(StopReason::Failed(why)) => (why.clone(), s),
+        other => panic!("not a failure: {other:?}"),
+    }
 }
 
 /// The thawed integrator's (integral, t) from the controller's log.
@@ -264,19 +269,7 @@ fn a_python_step_that_raises_ends_the_run_with_its_last_line() {
     )
     .unwrap();
     let out = dir.join("run");
-    let stage = python_stage("controller", script.to_str().unwrap());
-    let output = launcher()
-        .args(["run", "pendulum", "--mode", "lockstep", "--duration", "3", "-q", "--set", &stage])
-        .args(["--set", "supervision.controller.restart=never", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
-    let s = load_summary(&out);
-    let why = match &s.stopped_because {
-        Some(StopReason::Failed(why)) => why.clone(),
-        other => panic!("not a failure: {other:?}"),
-    };
+    let (why, s) = failed_controller_run(&script, "3", &out);
     let last = "controller: error: step failed at t = 1.000000 s: ValueError: boom";
     assert!(why.contains(&format!("controller exited with status 1: {last}")), "{why}");
     // The whole traceback is in the stage's log, the error line last.
