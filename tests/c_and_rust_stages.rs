@@ -1,5 +1,5 @@
 //! A controller stage of one's own in C (liblooplab_stage.so, services/examples/c) and in Rust
-//! (services/examples/rust-controller), run by the real launcher as the controller of the five
+//! (services/examples/controller/rust), run by the real launcher as the controller of the five
 //! processes over real shared memory: the pendulum's built-in law ported, byte-identical to the
 //! built-in controller's run in lockstep; a C step's error ends the run with its code named.
 //! The C programs are compiled here with the machine's `cc`.
@@ -42,7 +42,7 @@ pub(crate) fn compile_c(name: &str, source: &Path) -> PathBuf {
 fn c_controller() -> &'static Path {
     static EXE: OnceLock<PathBuf> = OnceLock::new();
     EXE.get_or_init(|| {
-        compile_c("pendulum_controller", &Path::new(REPO).join("services/examples/c/pendulum_controller.c"))
+        compile_c("pendulum_controller", &Path::new(REPO).join("services/examples/controller/pendulum_controller.c"))
     })
 }
 
@@ -80,7 +80,11 @@ fn assert_byte_identical_to_the_builtin(name: &str, launch: &str, program: &Path
 
 #[test]
 fn a_c_controller_gives_the_builtin_controllers_trajectory_to_the_byte() {
-    assert_byte_identical_to_the_builtin("c-controller", "services/examples/c/pendulum_c.toml", c_controller());
+    assert_byte_identical_to_the_builtin(
+        "c-controller",
+        "services/examples/controller/pendulum_c.toml",
+        c_controller(),
+    );
 }
 
 #[test]
@@ -88,7 +92,7 @@ fn a_rust_controller_crate_gives_the_builtin_controllers_trajectory_to_the_byte(
     let program = built().join("looplab-example-controller");
     assert_byte_identical_to_the_builtin(
         "rust-controller",
-        "services/examples/rust-controller/pendulum_rust.toml",
+        "services/examples/controller/rust/pendulum_rust.toml",
         &program,
     );
 }
@@ -100,7 +104,7 @@ fn a_launch_file_of_ones_own_runs_from_any_folder_into_a_relative_run_folder() {
     built();
     let here = fresh_dir("relative-out");
     std::fs::create_dir_all(&here).unwrap();
-    let launch = Path::new(REPO).join("services/examples/rust-controller/pendulum_rust.toml");
+    let launch = Path::new(REPO).join("services/examples/controller/rust/pendulum_rust.toml");
     let output = looplab()
         .current_dir(&here)
         .arg("run")
@@ -133,7 +137,7 @@ int main(void) { return looplab_run(step, 0); }
     .unwrap();
     let program = compile_c("failing_step", &source);
     let out = dir.join("run");
-    let launch = Path::new(REPO).join("services/examples/c/pendulum_c.toml");
+    let launch = Path::new(REPO).join("services/examples/controller/pendulum_c.toml");
     let output = looplab()
         .arg("run")
         .arg(&launch)
@@ -211,7 +215,7 @@ fn a_killed_c_controller_gets_its_frozen_state_back_and_the_run_matches_the_buil
         ]
     };
     let builtin = run("c-freeze-builtin", &args("pendulum").iter().map(String::as_str).collect::<Vec<_>>());
-    let launch = Path::new(REPO).join("services/examples/c/pendulum_c.toml").display().to_string();
+    let launch = Path::new(REPO).join("services/examples/controller/pendulum_c.toml").display().to_string();
     let command = controller_command(&program);
     let own_args = [args(&launch), vec!["--set".into(), command]].concat();
     let own = run("c-freeze", &own_args.iter().map(String::as_str).collect::<Vec<_>>());
@@ -250,7 +254,8 @@ fn a_stage_is_built_before_its_run_and_again_only_when_what_its_build_names_chan
     let lib = built().display().to_string();
     let dir = fresh_dir("c-build");
     std::fs::create_dir_all(&dir).unwrap();
-    let source = std::fs::read_to_string(Path::new(REPO).join("services/examples/c/pendulum_controller.c")).unwrap();
+    let source =
+        std::fs::read_to_string(Path::new(REPO).join("services/examples/controller/pendulum_controller.c")).unwrap();
     std::fs::write(dir.join("ctl.c"), &source).unwrap();
     let launch = dir.join("ctl.toml");
     std::fs::write(

@@ -137,7 +137,7 @@ fn a_controller_that_sleeps_in_its_step_is_the_cause_of_the_loops_it_made_late()
     let source = dir.join("sleepy_controller.c");
     std::fs::write(&source, SLEEPY_CONTROLLER).unwrap();
     let program = crate::c_and_rust_stages::compile_c("sleepy_controller", &source);
-    let launch = Path::new(REPO).join("services/examples/c/pendulum_c.toml").display().to_string();
+    let launch = Path::new(REPO).join("services/examples/controller/pendulum_c.toml").display().to_string();
     let command = format!("stages.controller.command=[{:?}]", program.display().to_string());
     let r = run("explain-sleepy", &[&launch, "--duration", "2.2", "--set", &command]);
     let loops = assert_misses_agree(&r);

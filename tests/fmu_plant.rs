@@ -12,7 +12,7 @@ use std::sync::OnceLock;
 use common::*;
 use looplab_shared::scenarios::declared::fmu::{Version, build_fmu, pendulum_source};
 
-const LAUNCH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/fmu/pendulum_fmu.toml");
+const LAUNCH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/fmu-plant/pendulum_fmu.toml");
 
 fn launcher() -> std::process::Command {
     python_launcher()

@@ -86,7 +86,7 @@ fn run(launcher: &Path, target: &str, out: &Path) -> PathBuf {
 fn a_python_stage_runs_on_a_scenario_an_outside_crate_added() {
     let dir = fresh_dir("outside-crate");
     let launcher = link_binaries(&dir.join("bin"));
-    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("services/examples/python");
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("services/examples/controller");
     let launch = dir.join("stiff_python.toml");
     let controller = examples.join("pendulum_controller.py");
     std::fs::write(

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use common::*;
 use looplab_shared::contract::role::Role;
 
-const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/python");
+const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples");
 
 fn launcher() -> std::process::Command {
     python_launcher()
@@ -29,12 +29,21 @@ fn log(dir: &Path, role: &str) -> String {
 }
 
 /// The example's launch file in a folder of its own with its Python files, `plant.py` in place
-/// of the example plant where given: a test's own plant beside the example's stages.
+/// of the example plant where given: a test's own plant beside the example's stages (in their
+/// folders beside it, as the launch file names them).
 fn declared_folder(name: &str, plant: Option<&str>) -> PathBuf {
-    let dir = fresh_dir(name);
-    std::fs::create_dir_all(&dir).unwrap();
-    for file in ["pendulum_plant.toml", "pendulum_plant.py", "pendulum_estimator.py", "pendulum_controller.py"] {
-        std::fs::copy(example(file), dir.join(file)).unwrap();
+    let root = fresh_dir(name);
+    let dir = root.join("python-plant");
+    for folder in ["python-plant", "estimator", "controller"] {
+        std::fs::create_dir_all(root.join(folder)).unwrap();
+    }
+    for file in [
+        "python-plant/pendulum_plant.toml",
+        "python-plant/pendulum_plant.py",
+        "estimator/pendulum_estimator.py",
+        "controller/pendulum_controller.py",
+    ] {
+        std::fs::copy(example(file), root.join(file)).unwrap();
     }
     if let Some(source) = plant {
         std::fs::write(dir.join("pendulum_plant.py"), source).unwrap();
@@ -48,7 +57,7 @@ fn the_python_pendulum_plant_gives_the_builtin_pendulum_byte_for_byte() {
     let python = run_from(
         launcher(),
         "python-plant",
-        &[&example("pendulum_plant.toml"), "--mode", "lockstep", "--duration", "3"],
+        &[&example("python-plant/pendulum_plant.toml"), "--mode", "lockstep", "--duration", "3"],
     );
     let s = python.summary();
     assert!(s.completed, "{:?}", s.stopped_because);
@@ -63,7 +72,7 @@ fn the_python_pendulum_plant_gives_the_builtin_pendulum_byte_for_byte() {
 #[test]
 fn in_process_a_python_plant_is_refused_in_one_line() {
     let output = launcher()
-        .args(["run", &example("pendulum_plant.toml"), "--in-process", "-q", "--out"])
+        .args(["run", &example("python-plant/pendulum_plant.toml"), "--in-process", "-q", "--out"])
         .arg(fresh_dir("in-process"))
         .output()
         .unwrap();
@@ -123,14 +132,14 @@ fn a_python_plant_and_a_python_controller_killed_in_real_time_restart_and_resume
         assert_eq!(p.exit, Exit::Status(0), "{:?}", s.processes);
     }
     assert_nothing_left(s);
-    std::fs::remove_dir_all(&dir).unwrap();
+    std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
 }
 
 #[test]
 fn a_python_plant_killed_in_lockstep_goes_on_from_its_snapshot_byte_for_byte() {
     // The loop is held while the plant is replaced: a plant that went on from its snapshot gives
     // the very run without the kill; one that started again from the initial state would not.
-    let common = [&example("pendulum_plant.toml")[..], "--mode", "lockstep", "--duration", "2"];
+    let common = [&example("python-plant/pendulum_plant.toml")[..], "--mode", "lockstep", "--duration", "2"];
     let nominal = run_from(launcher(), "lockstep-nominal", &common);
     let killed = run_from(launcher(), "lockstep-killed", &[&common[..], &["--fault", "kill plant at 1s"]].concat());
     let s = killed.summary();
@@ -173,7 +182,7 @@ fn a_python_plant_that_raises_ends_the_run_with_one_clear_line() {
     let last = log.lines().last().unwrap_or_default();
     assert!(last.starts_with("plant: error: ") && last.ends_with("ValueError: the model broke"), "{log}");
     assert_nothing_left(&s);
-    std::fs::remove_dir_all(&dir).unwrap();
+    std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
 }
 
 #[test]
@@ -204,6 +213,6 @@ fn a_python_plant_that_cannot_load_is_bad_input_in_one_line_and_nothing_starts()
         assert_eq!(said.trim().lines().count(), 1, "{spec}: one line: {said}");
         assert!(said.contains("plant.python") && said.contains(expected), "{spec}: {said}");
         assert!(!out.exists(), "{spec}: nothing starts, no run folder");
-        std::fs::remove_dir_all(&dir).unwrap();
+        std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
     }
 }

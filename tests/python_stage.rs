@@ -1,4 +1,4 @@
-//! Stages of the user's own in Python (issue 28): the examples in services/examples/python run
+//! Stages of the user's own in Python (issue 28): the Python examples in services/examples run
 //! by a real python3 with the `looplab` module that cargo built, as five real processes over real
 //! shared memory. Numbers come from lockstep runs; real-time runs are checked for what happened.
 
@@ -6,7 +6,7 @@ use crate::common;
 
 use common::*;
 
-const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/python");
+const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples");
 
 /// Gains other than the defaults that still hold the pendulum up.
 const OTHER_GAINS: &str = "controller.gains=[-450.0, -65.0, -1.2]";
@@ -34,7 +34,7 @@ fn log(run: &Run, role: &str) -> String {
 
 #[test]
 fn the_python_controller_port_is_byte_identical_to_the_builtin_with_default_and_other_gains() {
-    let launch = example("pendulum_python.toml");
+    let launch = example("controller/pendulum_python.toml");
     for gains in [None, Some(OTHER_GAINS)] {
         let mut args = vec!["--mode", "lockstep", "--duration", "3"];
         args.extend(gains.iter().flat_map(|g| ["--set", g]));
@@ -63,7 +63,7 @@ fn the_python_controller_port_is_byte_identical_to_the_builtin_with_default_and_
 fn the_python_bias_observer_gives_the_builtin_estimates() {
     let common = ["pendulum", "--mode", "lockstep", "--duration", "3"];
     let builtin = run_from(launcher(), "builtin-estimator", &common);
-    let stage = python_stage("estimator", &example("pendulum_estimator.py"));
+    let stage = python_stage("estimator", &example("estimator/pendulum_estimator.py"));
     let python = run_from(launcher(), "python-estimator", &[&common[..], &["--set", &stage]].concat());
     let (ours, theirs) = (python.trajectory(), builtin.trajectory());
     assert_eq!(ours.rows.len(), 3000);
@@ -92,7 +92,7 @@ fn python_sensors_reading_the_truth_give_the_builtin_ideal_sensors_run() {
     ];
     let common = [&["pendulum", "--mode", "lockstep", "--duration", "2"][..], &ideal[..]].concat();
     let builtin = run_from(launcher(), "builtin-ideal-sensors", &common);
-    let stage = python_stage("sensors", &example("ideal_sensors.py"));
+    let stage = python_stage("sensors", &example("sensors/ideal_sensors.py"));
     let python = run_from(launcher(), "python-ideal-sensors", &[&common[..], &["--set", &stage]].concat());
     assert!(python.summary().completed, "{:?}", python.summary().stopped_because);
     assert!(trajectory_bytes(&python) == trajectory_bytes(&builtin), "the trajectories differ");
@@ -104,7 +104,7 @@ fn an_integrating_python_controller_killed_in_lockstep_resumes_its_integrator() 
     // The plant holds the loop while the controller is replaced, so a restarted controller that
     // thawed its integrator continues the very run without the kill; one that started from
     // zero would command otherwise.
-    let stage = python_stage("controller", &example("integrating_controller.py"));
+    let stage = python_stage("controller", &example("controller/integrating_controller.py"));
     let common = ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", &stage];
     let nominal = run_from(launcher(), "integrating-nominal", &common);
     let killed =
@@ -222,7 +222,7 @@ fn thawed(log: &str) -> Option<(f64, f64)> {
 
 #[test]
 fn an_integrating_python_controller_in_real_time_survives_a_kill_a_stop_and_a_delay() {
-    let stage = python_stage("controller", &example("integrating_controller.py"));
+    let stage = python_stage("controller", &example("controller/integrating_controller.py"));
     let faults = ["kill controller at 2s", "stop controller at 2s for 150ms", "delay controller by 3ms at 2s for 0.5s"];
     for fault in faults {
         let r = run_from(

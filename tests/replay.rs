@@ -13,7 +13,7 @@ use std::process::Output;
 
 use common::*;
 
-const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/python");
+const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/services/examples/estimator");
 
 fn replay_with(mut launcher: std::process::Command, recording: &Path, out: &Path, args: &[&str]) -> Output {
     launcher.arg("replay").arg(recording).args(args).arg("--out").arg(out).output().expect("start looplab")

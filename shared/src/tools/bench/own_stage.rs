@@ -26,7 +26,7 @@ impl OwnController {
     pub fn command_override(self, out: &Path) -> Result<String, String> {
         let command = match self {
             OwnController::Python => {
-                let script = examples().join("python/pendulum_controller.py");
+                let script = examples().join("controller/pendulum_controller.py");
                 if !script.is_file() {
                     return Err(format!("{} is missing", script.display()));
                 }
@@ -46,7 +46,7 @@ fn compile_c(out: &Path) -> Result<PathBuf, String> {
     if !lib.join("liblooplab_stage.so").is_file() || !lib.join("looplab_stage.h").is_file() {
         return Err(format!("no liblooplab_stage.so and looplab_stage.h in {} (cargo build --release)", lib.display()));
     }
-    let source = examples().join("c/pendulum_controller.c");
+    let source = examples().join("controller/pendulum_controller.c");
     let binary = out.join("pendulum_controller_c");
     let status = std::process::Command::new("cc")
         .args(["-O2", "-ffp-contract=off", "-o"])

@@ -50,11 +50,11 @@ pub const PLANT_ROWS: &[PlantRow] = &[
     PlantRow { label: "declared linear (launch/declared.toml)", target: "launch/declared.toml", prepare: None },
     PlantRow { label: "FMU pendulum, FMI 2.0 Model Exchange", target: FMU_PENDULUM, prepare: Some(fmu_model_exchange) },
     PlantRow { label: "FMU pendulum, FMI 2.0 Co-Simulation", target: FMU_PENDULUM, prepare: Some(fmu_co_simulation) },
-    PlantRow { label: "Python pendulum", target: "services/examples/python/pendulum_plant.toml", prepare: None },
+    PlantRow { label: "Python pendulum", target: "services/examples/python-plant/pendulum_plant.toml", prepare: None },
 ];
 
 /// The FMU pendulum with the built-in estimator and controller, so the rows differ in the plant only.
-const FMU_PENDULUM: &str = "services/examples/fmu/pendulum_fmu_state_feedback.toml";
+const FMU_PENDULUM: &str = "services/examples/fmu-plant/pendulum_fmu_state_feedback.toml";
 
 fn fmu_model_exchange(out: &Path) -> Result<Vec<String>, String> {
     fmu_pendulum(out, "model-exchange")

@@ -2,7 +2,7 @@
 //! one's own: the same arithmetic in the same order, u = -(K·x) clamped to ±current_limit_a, with
 //! x the estimate minus the upright reference, which is zero. Run it with
 //! `cargo build --release -p looplab-example-controller` and
-//! `looplab run services/examples/rust-controller/pendulum_rust.toml`.
+//! `looplab run services/examples/controller/rust/pendulum_rust.toml`.
 
 use looplab_sdk::model::scenario::Controller;
 use looplab_sdk::runtime::stage::user_stage::run_controller;

@@ -1,4 +1,4 @@
-/* `looplab run services/examples/c/pendulum_c.toml` builds it (the launch file's `build`, after
+/* `looplab run services/examples/controller/pendulum_c.toml` builds it (the launch file's `build`, after
  * `cargo build --release`, which builds the library) and runs it.
  * The pendulum's built-in controller (shared/src/scenarios/pendulum/controller.rs) in C, the same
  * arithmetic in the same order: u = -(K·x) clamped to ±current_limit_a, x = the estimate minus the
