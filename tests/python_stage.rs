@@ -105,15 +105,22 @@ fn an_integrating_python_controller_killed_in_lockstep_resumes_its_integrator() 
     // thawed its integrator continues the very run without the kill; one that started from
     // zero would command otherwise.
     let stage = python_stage("controller", &example("controller/integrating_controller.py"));
-    let common = ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", &stage];
-    let nominal = run_from(launcher(), "integrating-nominal", &common);
+    let killed = killed_in_lockstep_like_the_nominal("integrating", &stage);
+    assert!(log(&killed, "controller").contains("thawed: integral"), "{}", log(&killed, "controller"));
+}
+
+/// The pendulum in lockstep for 3 s with the controller `stage`, and again with it killed at 2 s:
+/// restarted once, the run without the kill byte for byte, nothing left. Returns the killed run.
+fn killed_in_lockstep_like_the_nominal(name: &str, stage: &str) -> Run {
+    let common = ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", stage];
+    let nominal = run_from(launcher(), &format!("{name}-nominal"), &common);
     let killed =
-        run_from(launcher(), "integrating-killed", &[&common[..], &["--fault", "kill controller at 2s"]].concat());
+        run_from(launcher(), &format!("{name}-killed"), &[&common[..], &["--fault", "kill controller at 2s"]].concat());
     let s = killed.summary();
     assert_eq!(s.restarts[&Role::Controller], 1, "{:?}", s.restarts);
-    assert!(log(&killed, "controller").contains("thawed: integral"), "{}", log(&killed, "controller"));
     assert!(trajectory_bytes(&killed) == trajectory_bytes(&nominal), "the restarted controller did not resume");
     assert_nothing_left(s);
+    killed
 }
 
 /// A controller whose integral runs over a window of the last 8190 loops: its whole state (the
@@ -169,15 +176,8 @@ fn a_python_stage_keeps_64_kib_across_a_kill_and_more_ends_it_with_one_line() {
     let script = dir.join("windowed_controller.py");
     std::fs::write(&script, WINDOWED_CONTROLLER).unwrap();
     let stage = python_stage("controller", script.to_str().unwrap());
-    let common = ["pendulum", "--mode", "lockstep", "--duration", "3", "--set", &stage];
-    let nominal = run_from(launcher(), "windowed-nominal", &common);
-    let killed =
-        run_from(launcher(), "windowed-killed", &[&common[..], &["--fault", "kill controller at 2s"]].concat());
-    let s = killed.summary();
-    assert_eq!(s.restarts[&Role::Controller], 1, "{:?}", s.restarts);
+    let killed = killed_in_lockstep_like_the_nominal("windowed", &stage);
     assert!(log(&killed, "controller").contains("thawed 65536 bytes"), "{}", log(&killed, "controller"));
-    assert!(trajectory_bytes(&killed) == trajectory_bytes(&nominal), "the restarted controller lost its window");
-    assert_nothing_left(s);
 
     // One byte more than a snapshot holds ends the incarnation with the reason.
     let script = dir.join("too_much.py");

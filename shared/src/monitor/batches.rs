@@ -57,12 +57,8 @@ impl<T> BatchSender<T> {
 }
 
 impl<T> BatchReceiver<T> {
-    /// The next batch, in order; None once the sender is gone and every batch has been read.
-    pub fn recv(&self) -> Option<Vec<T>> {
-        self.full.recv().ok()
-    }
-
-    /// As [`BatchReceiver::recv`], waiting at most `timeout`: Ok(None) when none came by then.
+    /// The next batch, in order, waiting at most `timeout`: Ok(None) when none came by then,
+    /// Err once the sender is gone and every batch has been read.
     pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<Vec<T>>, HungUp> {
         match self.full.recv_timeout(timeout) {
             Ok(batch) => Ok(Some(batch)),
@@ -89,7 +85,7 @@ mod tests {
         let reader = std::thread::spawn(move || {
             let mut seen: Vec<u32> = vec![];
             let mut sizes = vec![];
-            while let Some(batch) = rx.recv() {
+            while let Ok(Some(batch)) = rx.recv_timeout(Duration::MAX) {
                 sizes.push(batch.len());
                 seen.extend(&batch);
                 rx.give_back(batch);

@@ -53,17 +53,9 @@ impl RecordingThread {
                 crate::runtime::transport::wait::run_in_background();
             }
             let mut last_checkpoint = Instant::now();
-            loop {
-                let batch = match options.checkpoint_every {
-                    Some(period) => match received.recv_timeout(period) {
-                        Ok(batch) => batch,
-                        Err(_) => break,
-                    },
-                    None => match received.recv() {
-                        Some(batch) => Some(batch),
-                        None => break,
-                    },
-                };
+            // Without checkpoints it waits for batches alone (a wait that long never ends).
+            let wait = options.checkpoint_every.unwrap_or(Duration::MAX);
+            while let Ok(batch) = received.recv_timeout(wait) {
                 if let Some(mut batch) = batch {
                     batch.drain(..).try_for_each(|sample| recording.take(sample))?;
                     received.give_back(batch);
