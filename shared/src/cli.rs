@@ -8,12 +8,13 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::{Args, CommandFactory, Parser, Subcommand};
 
+use crate::config::gate::Gate;
 use crate::config::launch::{self, Override};
 use crate::launcher::{self, EXIT_BAD_INPUT, EXIT_INTERRUPTED, report};
 use crate::model::catalog::Catalog;
 use crate::runtime::storage::run_storage;
 use crate::scenarios;
-use crate::tools::{ToolError, bench, compare, diff, export, perfetto, plot, replay, sweep};
+use crate::tools::{self, ToolError, bench, compare, diff, export, perfetto, plot, replay, sweep};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -40,9 +41,10 @@ enum Command {
     Run(RunArgs),
     /// List the scenarios and their launch files
     List,
-    /// Print a scenario's launch file: every key, its default and what it means
+    /// Print a scenario's launch file: every key, its default and what it means; or a launch
+    /// file of your own resolved over its scenario's defaults: every key with its value
     Show {
-        /// The scenario (see `looplab list`)
+        /// The scenario (see `looplab list`), or the path of a launch file
         scenario: String,
     },
     /// Run a scenario repeatedly in lockstep while one key varies; report the metrics per value
@@ -73,7 +75,8 @@ looplab run --set wait.strategy=adaptive --out runs/adaptive\n  looplab compare 
     /// Compare two runs of one scenario field by field, loop by loop: state, measurements,
     /// estimate, command, applied input and metrics, with the largest difference, the RMS and the
     /// first loop over tolerance; latency as distributions (p50, p99, max ratios). Draws B − A over
-    /// time and writes diff.json. Exit 0 within tolerance, 1 beyond, 2 bad input
+    /// time and writes diff.json. Exit 0 within tolerance, 3 a field beyond (or a control gate of --fail-on on
+    /// RUN_B), 4 the latency beyond its ratio (or a timing gate), 5 both, 2 bad input
     #[command(after_help = "Examples:\n  looplab diff runs/golden runs/latest\n  \
 looplab diff runs/golden runs/latest --tolerance est=1e-9 --tolerance cmd.current_A=1e-6 --rtol 1e-9\n  \
 looplab diff runs/golden runs/latest --tolerance latency=2 --no-figure\n\
@@ -205,6 +208,8 @@ struct DiffCli {
     /// Draw no figure (diff.json still goes to RUN_B/diff.json)
     #[arg(long)]
     no_figure: bool,
+    #[command(flatten)]
+    gates: launcher::gate::GateArgs,
 }
 
 #[derive(Debug, Args)]
@@ -290,9 +295,9 @@ struct LaunchArgs {
     after_help = "Keys: `looplab show <scenario>` prints the scenario's launch file, every key with its default \
 and meaning; --set takes any of them.\n\
 Run folder: summary.json, trajectory.csv, loops.csv, latency.hlog, run.mcap, launch.toml (resolved), logs/.\n\
-Exit codes: 0 completed (or stopped with q in the dashboard), 1 the run failed (a process died, or files were left in shared memory; \
-with --fail-on-limits also a control outcome of limits exceeded or lost), \
-2 bad input, 130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
+Exit codes: 0 completed (or stopped with q in the dashboard), 1 the run failed (a process died, or files were left in shared memory), \
+2 bad input, 3 a control gate of --fail-on or [gate] failed, 4 a timing gate, 5 both, \
+130 interrupted (Ctrl-C or SIGTERM; the report is still written)."
 )]
 struct RunArgs {
     /// A scenario name (see `looplab list`) or the path of a launch file (.toml). A launch file
@@ -324,10 +329,20 @@ struct RunArgs {
     /// After the run, draw its figures into the run folder, as `looplab plot` does
     #[arg(long)]
     plot: bool,
-    /// Exit 1 when the control outcome is `limits exceeded` or `lost` (the scenario's [limits],
-    /// judged over the whole run: the report's `control:` line, summary.json's `limits`), for CI
+    /// The same as --fail-on limits: exit 3 when the control outcome is `limits exceeded` or
+    /// `lost` (the report's `control:` line, summary.json's `limits`)
     #[arg(long)]
     fail_on_limits: bool,
+    #[command(flatten)]
+    gates: launcher::gate::GateArgs,
+}
+
+/// Judges `gates` on a finished run and says each one that failed or could not be judged, one
+/// line each. Ok: the gates' exit code, if one failed; Err: a gate names what the run lacks (exit 2).
+fn judge_gates(gates: &[Gate], summary: &launcher::Summary) -> Result<Option<u8>, ExitCode> {
+    let judged = launcher::gate::judge(gates, summary).map_err(|e| bad_input(format!("--fail-on {e}")))?;
+    judged.lines().for_each(|line| tell!("{line}"));
+    Ok(judged.exit_code())
 }
 
 impl Default for RunArgs {
@@ -342,6 +357,7 @@ impl Default for RunArgs {
             in_process: false,
             plot: false,
             fail_on_limits: false,
+            gates: launcher::gate::GateArgs::default(),
         }
     }
 }
@@ -366,7 +382,11 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
                 say_raw!("{}", entry.text);
                 ExitCode::SUCCESS
             }
-            None => bad_input(format!("unknown scenario \"{scenario}\"; allowed: {}", catalog.names())),
+            None if std::path::Path::new(&scenario).is_file() => show_file(&scenario, catalog),
+            None => bad_input(format!(
+                "unknown scenario \"{scenario}\"; allowed: {}, or the path of a launch file",
+                catalog.names()
+            )),
         },
         Some(Command::Run(args)) => run(args, catalog),
         Some(Command::Clean) => clean(),
@@ -424,7 +444,8 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         Some(Command::Replay(args)) => match replay::replay(&args, catalog) {
             Ok(done) => {
                 say_raw!("{}", replay::render(&done));
-                ExitCode::SUCCESS
+                done.gates.lines().for_each(|line| tell!("{line}"));
+                done.gates.exit_code().map_or(ExitCode::SUCCESS, ExitCode::from)
             }
             Err(ToolError::BadInput(why)) => bad_input(why),
             Err(e) => {
@@ -436,6 +457,23 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
         Some(Command::BenchEcho(args)) => report_failure(bench::pingpong::echo_main(&args)),
         Some(Command::BenchUdsStage(args)) => report_failure(bench::uds_loop::stage_main(&args)),
         None => run(RunArgs::default(), catalog),
+    }
+}
+
+/// `looplab show FILE`: the launch file resolved over its scenario's defaults, every key with
+/// the value a run would use.
+fn show_file(path: &str, catalog: &Catalog) -> ExitCode {
+    match catalog.resolve(path, &[]) {
+        Ok((config, _)) => {
+            let about = if config.is_declared() {
+                "as a declared system (LoopLab's launch/declared.toml explains every key)".to_owned()
+            } else {
+                format!("over the {0} scenario's defaults (`looplab show {0}` explains every key)", config.scenario)
+            };
+            say_raw!("# {path}, resolved {about}\n{}", toml::to_string(&config.document).unwrap_or_default());
+            ExitCode::SUCCESS
+        }
+        Err(e) => bad_input(e),
     }
 }
 
@@ -463,7 +501,7 @@ fn probe(args: &ProbeCli) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-/// `looplab diff`: the table and the verdict; exit 0 within tolerance, 1 beyond, 2 bad input.
+/// `looplab diff`: the table and the verdict; its exit code (`RunDiff::exit_code`), 2 bad input.
 fn run_diff(args: DiffCli) -> ExitCode {
     let tolerances = match args.tolerances.iter().map(|t| diff::parse_tolerance(t)).collect() {
         Ok(t) => t,
@@ -471,7 +509,11 @@ fn run_diff(args: DiffCli) -> ExitCode {
     };
     let figure = (!args.no_figure).then(|| args.figure.clone().unwrap_or_else(|| args.b.join("diff.png")));
     let json = figure.as_ref().map_or_else(|| args.b.join("diff.json"), |f| f.with_extension("json"));
-    let options = diff::DiffOptions { tolerances, rtol: args.rtol, figure, json: Some(json) };
+    let gates = match args.gates.gates() {
+        Ok(gates) => gates,
+        Err(e) => return bad_input(e),
+    };
+    let options = diff::DiffOptions { tolerances, rtol: args.rtol, figure, json: Some(json), gates };
     match diff::diff_runs(&args.a, &args.b, &options) {
         Ok(result) => {
             say_raw!("{}", result.render());
@@ -481,7 +523,8 @@ fn run_diff(args: DiffCli) -> ExitCode {
             if let Some(json) = &result.json {
                 say!("diff.json: {}", json.display());
             }
-            if result.within_tolerance() { ExitCode::SUCCESS } else { ExitCode::FAILURE }
+            result.gates.lines().for_each(|line| tell!("{line}"));
+            ExitCode::from(result.exit_code())
         }
         Err(ToolError::BadInput(why)) => bad_input(why),
         Err(ToolError::Failed(e)) => report_failure(Err(e)),
@@ -625,12 +668,21 @@ fn overrides(mode: Option<&str>, launch: &LaunchArgs) -> Result<Vec<Override>, l
 fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
     // One process runs only lockstep: --in-process implies it unless --mode says otherwise.
     let mode = args.mode.as_deref().or(args.in_process.then_some("lockstep"));
-    let overrides = overrides(mode, &args.launch);
-    let resolved = overrides.and_then(|o| catalog.resolve(&args.target, &o));
-    let (config, scenario) = match resolved {
+    let overrides = match overrides(mode, &args.launch) {
+        Ok(o) => o,
+        Err(e) => return bad_input(e),
+    };
+    let (config, scenario) = match catalog.resolve(&args.target, &overrides) {
         Ok(r) => r,
         Err(e) => return bad_input(e),
     };
+    let mut gates = match args.gates.gates() {
+        Ok(gates) => config.gates.iter().cloned().chain(gates).collect::<Vec<_>>(),
+        Err(e) => return bad_input(e),
+    };
+    if args.fail_on_limits {
+        gates.push(Gate::parse("limits").expect("`limits` is a gate"));
+    }
     if args.in_process
         && let Some(why) = crate::runtime::in_process::refusal(&config)
     {
@@ -670,18 +722,31 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
         None => launcher::in_process::run_in_process(&config, scenario.as_ref(), &run_dir),
     };
     match ran {
-        Ok((summary, outcome)) => {
-            say_raw!("{}", report::render(&summary));
-            let (mut code, mut error) = launcher::exit_code(&outcome, &summary);
-            // A run that failed otherwise keeps its code and its error.
-            if code == launcher::EXIT_OK
-                && args.fail_on_limits
-                && let Some(why) = launcher::verdict::limits_failure(&summary.limits)
-            {
-                (code, error) = (launcher::EXIT_FAILED, Some(why));
+        Ok((mut summary, outcome)) => {
+            if outcome == launcher::Outcome::Completed {
+                let twin = (args.target.as_str(), overrides.as_slice());
+                let judged =
+                    tools::twin::judge_against_twin(catalog, twin, &config, scenario.as_ref(), &run_dir, &mut summary)
+                        .and_then(|()| launcher::summary::write(&summary, &run_dir).map_err(ToolError::Failed));
+                if let Err(e) = judged {
+                    tell!("error: the fault-free twin: {e}");
+                    return ExitCode::FAILURE;
+                }
             }
+            say_raw!("{}", report::render(&summary));
+            let (mut code, error) = launcher::exit_code(&outcome, &summary);
             if let Some(error) = error {
                 tell!("error: {error}");
+            }
+            let gated = match judge_gates(&gates, &summary) {
+                Ok(gated) => gated,
+                Err(bad) => return bad,
+            };
+            // A run that failed otherwise keeps its code.
+            if code == launcher::EXIT_OK
+                && let Some(gated) = gated
+            {
+                code = gated;
             }
             let plotted = if args.plot { figures(plot::run::plot_run(&run_dir, catalog)) } else { ExitCode::SUCCESS };
             // A run that failed keeps its code; a failed plot fails a run that completed.

@@ -1,5 +1,5 @@
 //! The control outcome: every run judged against its scenario's `[limits]`, in the report,
-//! summary.json's `limits`, and `--fail-on-limits` (five processes, lockstep).
+//! summary.json's `limits`, and `--fail-on-limits`, the same as `--fail-on limits` (five processes, lockstep).
 
 use crate::common;
 
@@ -31,7 +31,7 @@ fn a_fallen_pendulum_is_lost_and_fails_the_run_with_fail_on_limits() {
     );
     let stdout = String::from_utf8_lossy(&output.stdout);
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(1), "{stdout}\n{stderr}");
+    assert_eq!(output.status.code(), Some(3), "a control gate failed: {stdout}\n{stderr}");
     assert!(s.completed, "the loop itself ran to the end");
     assert_nothing_left(&s);
     let limits = &s.limits;
@@ -44,7 +44,7 @@ fn a_fallen_pendulum_is_lost_and_fails_the_run_with_fail_on_limits() {
     // The report says it near the top, and the error line why the run failed.
     let control = stdout.lines().position(|l| l.starts_with("  control: LOST at t = ")).expect(&stdout);
     assert!(control < 4, "{stdout}");
-    assert!(stderr.contains("error: --fail-on-limits: LOST at t = "), "{stderr}");
+    assert!(stderr.contains("control gate failed: limits (LOST at t = "), "{stderr}");
     // summary.json's key, as JSON spells it.
     assert_eq!(read_summary(&dir)["limits"]["verdict"], "lost");
     std::fs::remove_dir_all(&dir).unwrap();

@@ -14,6 +14,7 @@ use std::sync::OnceLock;
 use anyhow::{Result, bail};
 use looplab_sdk::contract::protocol::{ProcessArgs, stage_env};
 use looplab_sdk::contract::role::Role;
+use looplab_sdk::model::reference::{Signal, declared_references};
 use looplab_sdk::runtime::stage::user_stage::{self, MAX_FROZEN_BYTES, Step, config_number, stage_names};
 
 /// The most bytes a `looplab_freeze` may write (a snapshot's room for a stage's state: 64 KiB).
@@ -124,6 +125,9 @@ struct Launch {
     document: toml::Table,
     inputs: Vec<CString>,
     outputs: Vec<CString>,
+    /// A declared system's references, and what each tracks.
+    references: Vec<Signal>,
+    reference_names: Vec<CString>,
 }
 
 fn launch() -> Option<&'static Launch> {
@@ -153,8 +157,21 @@ fn load_launch() -> Option<Launch> {
         Ok(role) if Role::STAGES.contains(&role) => stage_names(role, &config),
         _ => (vec![], vec![]),
     };
+    let references = match declared_references(&config) {
+        Ok(references) => references,
+        Err(e) => {
+            eprintln!("{role_name}: error: {e}");
+            return None;
+        }
+    };
     let c_strings = |names: Vec<String>| names.into_iter().filter_map(|n| CString::new(n).ok()).collect();
-    Some(Launch { document: config.document, inputs: c_strings(inputs), outputs: c_strings(outputs) })
+    Some(Launch {
+        document: config.document,
+        inputs: c_strings(inputs),
+        outputs: c_strings(outputs),
+        reference_names: c_strings(references.iter().map(|r| r.track.clone()).collect()),
+        references: references.into_iter().map(|r| r.signal).collect(),
+    })
 }
 
 /// Reads the number at dotted `key` of the run's resolved launch file (`"controller.gains.1"`:
@@ -180,6 +197,30 @@ pub unsafe extern "C" fn looplab_config_f64(key: *const c_char, value: *mut f64)
         }
         None => 1,
     }
+}
+
+/// Writes each of a declared system's references (`[reference]`) at simulation time `t` (s)
+/// into `out` (room for `n`), in the order of `looplab_reference_name`, and returns how many the
+/// run has (0 outside a run or without a reference); the first `n` of them are written.
+///
+/// # Safety
+/// `out` points to `n` doubles (NULL with `n` = 0 asks for the count).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn looplab_reference(t: f64, out: *mut f64, n: usize) -> usize {
+    let Some(launch) = launch() else { return 0 };
+    if !out.is_null() {
+        for (i, signal) in launch.references.iter().take(n).enumerate() {
+            // SAFETY: the caller passes room for n doubles.
+            unsafe { *out.add(i) = signal.at(t) };
+        }
+    }
+    launch.references.len()
+}
+
+/// What reference `i` tracks (`"state.position"`), NULL past the end; as `looplab_input_name`.
+#[unsafe(no_mangle)]
+pub extern "C" fn looplab_reference_name(i: usize) -> *const c_char {
+    name_at(launch().map(|l| &l.reference_names), i)
 }
 
 /// How many numbers the step's input has (0 outside a run).

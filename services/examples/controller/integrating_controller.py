@@ -6,13 +6,16 @@ import sys
 
 import looplab
 
-INTEGRAL_GAIN = -20.0  # k_i, A per rad·s: the sign of K's angle gain, slow beside the loop
+# k_i, A per rad·s: the sign of K's angle gain, slow beside the loop; the launch file's
+# [parameters] ki (or --set parameters.ki=-10) changes it.
+INTEGRAL_GAIN = -20.0
 
 
 class IntegratingController:
     def __init__(self, stage):
         self.k1, self.k2, self.k3 = stage.config["controller"]["gains"]
         self.limit = stage.config["model"]["current_limit_a"]
+        self.ki = stage.config.get("parameters", {}).get("ki", INTEGRAL_GAIN)
         self.integral = 0.0  # z, rad·s
         self.t_last = None  # the time of the last step, s
 
@@ -20,7 +23,7 @@ class IntegratingController:
         if self.t_last is not None:
             self.integral += x[0] * (t - self.t_last)
         self.t_last = t
-        current = -(self.k1 * x[0] + self.k2 * x[1] + self.k3 * x[2] + INTEGRAL_GAIN * self.integral)
+        current = -(self.k1 * x[0] + self.k2 * x[1] + self.k3 * x[2] + self.ki * self.integral)
         u[0] = min(max(current, -self.limit), self.limit)
 
     def freeze(self):

@@ -5,9 +5,11 @@
 //!
 //! class Controller:
 //!     def __init__(self, stage):     # stage.config, .role, .input_names, .output_names, .incarnation
-//!         self.k = stage.config["controller"]["gains"]
+//!         self.k = stage.config["parameters"]["gains"]   # the launch file's [parameters]
+//!         self.stage = stage
 //!     def step(self, t, x, u):       # x: this loop's input, u: its output (float64 memoryviews)
-//!         u[0] = -(self.k[0] * x[0] + self.k[1] * x[1] + self.k[2] * x[2])
+//!         r = self.stage.reference(t)[0]   # [reference], one value per entry (.reference_names)
+//!         u[0] = -(self.k[0] * (x[0] - r) + self.k[1] * x[1])
 //!
 //! looplab.run(Controller)
 //! ```
@@ -34,28 +36,45 @@ mod step;
 
 use std::process::ExitCode;
 
+use looplab_sdk::model::reference::Signal;
 use looplab_sdk::runtime::stage::user_plant::run_plant_holding;
 use looplab_sdk::runtime::stage::user_stage::{StageInfo, run_step};
 use pyo3::exceptions::PySystemExit;
 use pyo3::prelude::*;
 
 /// What the user's class is given when the stage starts.
-#[pyclass(frozen, get_all, module = "looplab")]
+#[pyclass(frozen, module = "looplab")]
 struct Stage {
-    /// The run's resolved launch file, as a dict.
+    /// The run's resolved launch file, as a dict (`config["parameters"]`: the launch file's free
+    /// `[parameters]` table).
+    #[pyo3(get)]
     config: Py<PyAny>,
     /// "controller", "estimator" or "sensors".
+    #[pyo3(get)]
     role: String,
     /// The names of `x`'s numbers, in order.
+    #[pyo3(get)]
     input_names: Vec<String>,
     /// The names of `u`'s numbers, in order.
+    #[pyo3(get)]
     output_names: Vec<String>,
     /// 0 for the first start in the run, then one more per restart.
+    #[pyo3(get)]
     incarnation: u32,
+    /// What each of a declared system's references tracks ("state.position"), in order.
+    #[pyo3(get)]
+    reference_names: Vec<String>,
+    references: Vec<Signal>,
 }
 
 #[pymethods]
 impl Stage {
+    /// Each reference at simulation time `t` (s), in the order of `reference_names`: the
+    /// launch file's `[reference]`, as the metrics and limits judge against it.
+    fn reference(&self, t: f64) -> Vec<f64> {
+        self.references.iter().map(|r| r.at(t)).collect()
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Stage(role={:?}, incarnation={}, input_names={:?}, output_names={:?})",
@@ -72,6 +91,8 @@ impl Stage {
             input_names: info.input_names.clone(),
             output_names: info.output_names.clone(),
             incarnation: info.incarnation,
+            reference_names: info.references.iter().map(|r| r.track.clone()).collect(),
+            references: info.references.iter().map(|r| r.signal.clone()).collect(),
         })
     }
 }

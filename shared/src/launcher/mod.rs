@@ -6,6 +6,7 @@
 pub mod budget;
 pub mod child;
 pub mod dashboard;
+pub mod gate;
 pub mod inject;
 pub mod network;
 pub mod outcome;

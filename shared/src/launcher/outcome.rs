@@ -12,6 +12,12 @@ pub const EXIT_OK: u8 = 0;
 pub const EXIT_FAILED: u8 = 1;
 /// Bad input: a launch file, an option, a missing binary; nothing was started.
 pub const EXIT_BAD_INPUT: u8 = 2;
+/// The run completed and a control gate failed (`--fail-on`, `[gate]`: the limits, a metric).
+pub const EXIT_CONTROL_GATE: u8 = 3;
+/// The run completed and a timing gate failed (deadline misses, latency, jitter, restart time).
+pub const EXIT_TIMING_GATE: u8 = 4;
+/// The run completed and gates of both kinds failed.
+pub const EXIT_BOTH_GATES: u8 = 5;
 /// A stop request (Ctrl-C, SIGTERM) ended it.
 pub const EXIT_INTERRUPTED: u8 = 130;
 

@@ -453,6 +453,20 @@ fn render_network(out: &mut String, s: &Summary) {
 /// A kill or stop injected later than this after its time is named as late.
 const LATE_INJECTION_MS: f64 = 50.0;
 
+/// A fault against its fault-free twin, in words.
+fn twin_line(twin: &crate::launcher::summary::AgainstTwin) -> String {
+    match twin.departed_at_s {
+        None => "no effect: the plant's state is that run's, bit for bit".into(),
+        Some(at) => format!(
+            "departed from it at t = {at} s; worst error above it {:.4}; {}",
+            twin.worst_extra_error,
+            twin.recovery_s.map_or("not back within the recovery band of it by the end".into(), |r| format!(
+                "back within the recovery band of it {r:.3} s after the fault"
+            ))
+        ),
+    }
+}
+
 fn render_faults(out: &mut String, s: &Summary) {
     if s.faults.is_empty() {
         return;
@@ -477,12 +491,18 @@ fn render_faults(out: &mut String, s: &Summary) {
                 format!("{} ticks", e.outage_ticks),
                 e.worst_error_during.map_or("-".into(), |v| format!("{v:.4}")),
                 e.worst_error_after.map_or("-".into(), |v| format!("{v:.4}")),
-                match e.recovery_s {
+                // Against the fault-free twin where there is one: the run's own error is not the fault's.
+                match (e.recovery_s, &f.against_twin) {
                     _ if e.never_back => format!("never: {} lost", f.process),
-                    Some(v) => format!("{v:.3} s"),
-                    None => "never".into(),
+                    (_, Some(twin)) => twin.recovery_s.map_or("never".into(), |v| format!("{v:.3} s")),
+                    (Some(v), None) => format!("{v:.3} s"),
+                    (None, None) => "never".into(),
                 },
-                if e.within_limits { "kept" } else { "EXCEEDED" },
+                match &f.against_twin {
+                    Some(twin) if twin.departed_at_s.is_none() => "no effect",
+                    _ if e.within_limits => "kept",
+                    _ => "EXCEEDED",
+                },
             ),
             None => ("-".into(), "-".into(), "-".into(), "-".into(), "no record"),
         };
@@ -505,6 +525,11 @@ fn render_faults(out: &mut String, s: &Summary) {
             "  note: no loop after `{}` was recorded (the monitor was restarting, or the run had ended): its effect is unknown",
             f.fault
         );
+    }
+    for f in &s.faults {
+        if let Some(twin) = &f.against_twin {
+            let _ = writeln!(out, "  against the same run without faults: `{}`: {}", f.fault, twin_line(twin));
+        }
     }
     crate::launcher::report_phases::render_never_back(out, s);
     // Real time: a kill or stop the launcher sent later than planned (it was stopped or starved).
@@ -589,6 +614,7 @@ mod tests {
                     within_limits: true,
                     ..Default::default()
                 }),
+                against_twin: None,
             }],
             ..summary()
         }

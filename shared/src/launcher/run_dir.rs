@@ -13,7 +13,7 @@ use crate::runtime::storage::run_file;
 /// and returns its path and the wall-clock start (UTC, RFC 3339) for the summary.
 pub fn begin_run(run_dir: &Path, config: &LaunchConfig, scenario: &dyn Scenario) -> Result<(PathBuf, String)> {
     let launch_file = run_dir.join(files::LAUNCH);
-    write_atomically(&launch_file, &run_vectors::run_toml(config, &scenario.input_limits()))?;
+    write_atomically(&launch_file, &run_vectors::run_toml(config, &scenario.input_limits(), run_dir))?;
     Ok((launch_file, chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true)))
 }
 

@@ -1,7 +1,7 @@
 //! The run's control outcome: what the monitor saw of the scenario's error
 //! ([`LimitsWatch`]) judged against its `[limits]` ([`ErrorMeasureInfo`]) into one verdict,
 //! `within limits`, `limits exceeded at t = … s (key)` or `lost`, for summary.json's `limits`,
-//! the report's line and `looplab run --fail-on-limits`.
+//! the report's line and `--fail-on limits` (`launcher::gate`).
 //!
 //! Lost means the run cannot be counted on to come back: the error passed the scenario's point
 //! of no return (the pendulum past the horizontal), or it was still beyond the limit when the
@@ -32,7 +32,7 @@ pub enum Verdict {
 }
 
 impl Verdict {
-    /// A failure for `--fail-on-limits`.
+    /// A failure for `--fail-on limits`.
     pub fn failed(self) -> bool {
         matches!(self, Verdict::LimitsExceeded | Verdict::Lost)
     }
@@ -55,8 +55,11 @@ pub struct LimitsVerdict {
     /// Lost: from when, and why in words.
     pub lost_at_s: Option<f64>,
     pub lost_because: Option<String>,
-    /// Loops judged (those whose true state the monitor recorded).
+    /// Loops judged (those whose true state the monitor recorded, from `judged_from_s` on).
     pub loops_judged: u64,
+    /// The first simulation time judged, s (`[limits] judge_from_s`; 0: every loop).
+    #[serde(default)]
+    pub judged_from_s: f64,
 }
 
 /// `watch` judged against `measure`.
@@ -80,6 +83,8 @@ pub fn judge(watch: &LimitsWatch, measure: &ErrorMeasureInfo) -> LimitsVerdict {
         _ if watch.loops == 0 => Verdict::NotJudged,
         (Some(_), _) => Verdict::Lost,
         (None, Some(_)) => Verdict::LimitsExceeded,
+        // One loop within the limit says nothing of the loop over time.
+        (None, None) if watch.loops == 1 => Verdict::NotJudged,
         (None, None) => Verdict::WithinLimits,
     };
     let (lost_at_s, lost_because) = lost.map_or((None, None), |(t, why)| (Some(t), Some(why)));
@@ -94,6 +99,7 @@ pub fn judge(watch: &LimitsWatch, measure: &ErrorMeasureInfo) -> LimitsVerdict {
         lost_at_s,
         lost_because,
         loops_judged: watch.loops,
+        judged_from_s: measure.judged_from_s,
     }
 }
 
@@ -109,16 +115,25 @@ impl LimitsVerdict {
             (Some(e), Some(t)) => format!("worst {} at t = {} s", number(e), number(t)),
             _ => "no finite error".into(),
         };
-        let exceeded =
-            |t: f64| format!("limits exceeded at t = {} s ({} = {})", number(t), self.limit_key, number(self.limit));
+        let from = if self.judged_from_s > 0.0 {
+            format!(" from t = {} s", number(self.judged_from_s))
+        } else {
+            String::new()
+        };
+        let exceeded = |t: f64| {
+            format!("limits exceeded at t = {} s ({} = {}{from})", number(t), self.limit_key, number(self.limit))
+        };
         match self.verdict {
+            Verdict::NotJudged if self.loops_judged == 1 => {
+                "not judged (1 loop): one loop within the limit says nothing of the loop over time".into()
+            }
             Verdict::NotJudged => "not judged: the monitor recorded no state of the plant".into(),
             // A declared system without [limits] has no limit to stay within (the largest f64).
             Verdict::WithinLimits if self.limit >= f64::MAX => {
                 format!("no limit set (the launch file has no [limits]); {}: {worst}", self.measure)
             }
             Verdict::WithinLimits => format!(
-                "within limits: {} stayed within {} ({}); {worst}",
+                "within limits{from}: {} stayed within {} ({}); {worst}",
                 self.measure,
                 number(self.limit),
                 self.limit_key
@@ -141,11 +156,6 @@ impl LimitsVerdict {
     }
 }
 
-/// `--fail-on-limits`: the error line for a run whose verdict is a failure.
-pub fn limits_failure(verdict: &LimitsVerdict) -> Option<String> {
-    verdict.verdict.failed().then(|| format!("--fail-on-limits: {}", verdict.line()))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -158,7 +168,17 @@ mod tests {
             limit_key: "limits.fall_angle_rad".into(),
             lost_beyond: Some(std::f64::consts::FRAC_PI_2),
             lost_means: Some("fallen past the horizontal".into()),
+            judged_from_s: 0.0,
         }
+    }
+
+    /// One loop within the limit says nothing; one beyond it does.
+    #[test]
+    fn a_run_of_one_loop_is_not_judged_unless_that_loop_failed() {
+        let one = judge(&watched(&[0.0]), &pendulum());
+        assert_eq!((one.verdict, one.loops_judged), (Verdict::NotJudged, 1));
+        assert_eq!(one.line(), "not judged (1 loop): one loop within the limit says nothing of the loop over time");
+        assert_eq!(judge(&watched(&[0.4]), &pendulum()).verdict, Verdict::Lost);
     }
 
     /// Errors at 1 ms loops.
@@ -181,7 +201,6 @@ mod tests {
             "limits exceeded at t = 0.002 s (limits.fall_angle_rad = 0.3); worst 0.4 at t = 0.003 s; back within it by the end"
         );
         assert!(v.verdict.failed());
-        assert!(limits_failure(&v).unwrap().starts_with("--fail-on-limits: limits exceeded at t = 0.002 s"));
     }
 
     #[test]
@@ -192,7 +211,7 @@ mod tests {
             v.line(),
             "within limits: |theta| rad stayed within 0.3 (limits.fall_angle_rad); worst 0.3 at t = 0.001 s"
         );
-        assert_eq!(limits_failure(&v), None);
+        assert!(!v.verdict.failed());
         assert_eq!(judge(&LimitsWatch::default(), &pendulum()).verdict, Verdict::NotJudged);
         // A declared system without [limits]: no limit, and the line says so rather than "within inf".
         let unlimited = ErrorMeasureInfo { limit: f64::MAX, recovery_band: f64::MAX, lost_beyond: None, ..pendulum() };

@@ -305,6 +305,7 @@ mod tests {
             limit: 1.0,
             limit_key: "limits.error",
             lost_beyond: None,
+            judged_from_s: 0.0,
         }
     }
 

@@ -418,8 +418,11 @@ impl Recording {
             if self.report.diverged_at.is_none() && state.x[..self.layout.state.len()].iter().any(|v| !v.is_finite()) {
                 self.report.diverged_at = Some(k);
             }
-            let error = (self.measure.of_state)(t, &state.x[..self.layout.state.len()]);
-            self.report.limits.observe(t, error, self.measure.limit, self.measure.lost_beyond.map(|(value, _)| value));
+            if t >= self.measure.judged_from_s {
+                let error = (self.measure.of_state)(t, &state.x[..self.layout.state.len()]);
+                let lost_beyond = self.measure.lost_beyond.map(|(value, _)| value);
+                self.report.limits.observe(t, error, self.measure.limit, lost_beyond);
+            }
         }
         self.stats.observe(t, parts);
         if let Some(live) = &mut self.live {

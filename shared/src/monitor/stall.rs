@@ -115,10 +115,19 @@ impl StallWatch {
                 }
                 continue;
             }
-            let since = *self.waiting[i].get_or_insert(since.unwrap_or(now));
-            if !self.stalled[i] && now.saturating_sub(since) >= self.timeout_ns {
+            // Dated by the data where it tells: the oldest input still unanswered moves on as
+            // answers come, so a stage whose answers all come late (a delay fault, a transport
+            // delay) but come is not stalled, and one that answers again has resumed.
+            let since = match since {
+                Some(since) => *self.waiting[i].insert(since),
+                None => *self.waiting[i].get_or_insert(now),
+            };
+            let over = now.saturating_sub(since) >= self.timeout_ns;
+            if over && !self.stalled[i] {
                 self.stalled[i] = true;
                 events.push(ChildEvent::Stall { process: role.name().to_owned(), since_ns: since, detected_ns: now });
+            } else if !over && std::mem::take(&mut self.stalled[i]) {
+                events.push(ChildEvent::Resumed { process: role.name().to_owned(), at_ns: now });
             }
         }
         events
@@ -170,6 +179,24 @@ mod tests {
         watch.saw(Topic::Estimate, 1, 0);
         now.set(1201 * MS);
         assert_eq!(watch.check(), [ChildEvent::Resumed { process: "estimator".into(), at_ns: 1201 * MS }]);
+    }
+
+    /// A controller whose every command comes 30 ms late (a delay fault, pipelined) always has
+    /// an input unanswered, but never one for 50 ms: it is not stalled.
+    #[test]
+    fn a_stage_answering_every_input_late_is_not_stalled() {
+        let (mut watch, now) = watch(None);
+        whole_loop(&mut watch, 0);
+        for k in 1..100 {
+            now.set((1000 + k) * MS);
+            for topic in [Topic::State, Topic::Measurements, Topic::Estimate] {
+                watch.saw(topic, k, (1000 + k) * MS);
+            }
+            if k > 30 {
+                watch.saw(Topic::Command, k - 30, (1000 + k - 30) * MS);
+            }
+            assert_eq!(watch.check(), [], "loop {k}");
+        }
     }
 
     /// A monitor held up by a busy machine sees the estimate of loop 1 only 40 ms after it was

@@ -13,6 +13,7 @@ pub mod plot;
 pub mod replay;
 pub mod run_folder;
 pub mod sweep;
+pub mod twin;
 
 /// Why a tool (export, plot, compare) did not do its job.
 #[derive(Debug)]

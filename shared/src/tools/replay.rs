@@ -62,6 +62,9 @@ pub struct ReplayArgs {
     /// The run folder to write (default: runs/<time>-replay-<scenario>)
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Judged on the replay's run, with the recording's [gate] fail_on
+    #[command(flatten)]
+    pub gates: crate::launcher::gate::GateArgs,
 }
 
 /// What a replay did, as `replay.json` keeps it.
@@ -98,6 +101,9 @@ pub struct ReplayReport {
     /// Closed loop: the plant's state against the recording's.
     pub state: Option<OutputComparison>,
     pub outcome: String,
+    /// `--fail-on` and the recording's `[gate]`, judged on the replay's run.
+    #[serde(skip)]
+    pub gates: crate::launcher::gate::Judged,
 }
 
 /// The replayed stage's outputs against the recorded ones, over the loops both computed.
@@ -113,6 +119,11 @@ pub struct OutputComparison {
     pub largest: Vec<(String, f64)>,
 }
 
+/// What to give when a program or model the recording ran is not where its launch.toml says
+/// (relative to the run folder).
+const MOVED_HINT: &str = "give its folder with --set stages.ROLE.dir=FOLDER (a Python or FMU plant's: --set \
+                          plant.folder=FOLDER), or run another with --stage ROLE=PROGRAM ARGS";
+
 /// Runs the replay `args` asks for and writes its run folder; returns what it did.
 pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, ToolError> {
     let bad = |message: String| ToolError::BadInput(message);
@@ -125,8 +136,11 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         return Err(bad(format!("{}: not a run folder (it has no launch.toml)", recording.display())));
     }
     let (role, program) = parse_stage(&args.stage).map_err(|e| bad(format!("--stage {}: {e}", args.stage)))?;
+    let gates = args.gates.gates().map_err(bad)?;
     let target = launch_file.display().to_string();
-    let (recorded_config, recorded_scenario) = catalog.resolve(&target, &[]).map_err(|e| bad(e.to_string()))?;
+    // As recorded, unchecked: a program the recording ran may not be where it was (a moved
+    // golden run), and is needed only where the replay runs it.
+    let (recorded_config, recorded_scenario) = catalog.load_resolved(&launch_file).map_err(|e| bad(e.to_string()))?;
     let layout = VectorLayout::new(&recorded_config, recorded_scenario.as_ref());
     let loops =
         recording_reader::load(&recording, &layout, recorded_config.loops()).map_err(|e| bad(format!("{e:#}")))?;
@@ -159,7 +173,10 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
     let resolve = |spec: &ReplaySpec| {
         let mut overrides = overrides.clone();
         overrides.push(set(KEY, toml::Value::try_from(spec).expect("a replay converts to TOML")));
-        catalog.resolve(&target, &overrides).map_err(|e| bad(e.to_string()))
+        catalog.resolve(&target, &overrides).map_err(|e| {
+            let moved = e.key.as_deref().is_some_and(|key| key.starts_with("stages.") || key.starts_with("plant."));
+            bad(if moved { format!("{e} (a moved recording: {MOVED_HINT})") } else { e.to_string() })
+        })
     };
     let (config, scenario) = resolve(&spec)?;
     if VectorLayout::new(&config, scenario.as_ref()) != layout {
@@ -236,6 +253,8 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         thawed_older.push(last);
     }
     let Attempt { summary, outcome, seconds, replayed, outputs, skipped } = ran;
+    let gates: Vec<_> = config.gates.iter().cloned().chain(gates).collect();
+    let gates = crate::launcher::gate::judge(&gates, &summary).map_err(|e| bad(format!("--fail-on {e}")))?;
     let report = ReplayReport {
         recording,
         run_dir: run_dir.clone(),
@@ -261,6 +280,7 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
             Outcome::Completed => "completed".into(),
             other => format!("{other:?}"),
         },
+        gates,
     };
     let json = serde_json::to_string_pretty(&report).expect("a report is JSON");
     std::fs::write(run_dir.join(files::REPLAY), json + "\n")

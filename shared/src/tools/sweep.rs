@@ -1,4 +1,5 @@
-//! `looplab sweep`: runs a scenario again and again in lockstep mode while one launch-file key
+//! `looplab sweep`: runs a scenario again and again in lockstep mode (or real time, where the
+//! user sets it, with `--processes`; a `delay` means the same in both) while one launch-file key
 //! varies, and reports the scenario's metrics and what the swept fault did at each value. For a
 //! controller delay it finds the smallest delay at which the loop goes unstable and prints it
 //! next to the delay margin the scenario's linearised model predicts. Each value runs in this
@@ -90,6 +91,8 @@ pub enum Verdict {
 pub struct SweepReport {
     pub scenario: String,
     pub param: String,
+    /// The runs' mode: lockstep unless `--set mode=realtime` (with `--processes`) asks otherwise.
+    pub mode: String,
     pub points: Vec<SweepPoint>,
     /// The smallest swept value whose loop went unstable.
     pub first_unstable: Option<f64>,
@@ -210,7 +213,13 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         return bad(format!("--out {}: the folder exists and is not empty; give a new or empty folder", out.display()));
     }
 
-    tell!("sweeping {} over {} values, {} at a time, in lockstep mode", args.param, values.len(), args.jobs);
+    tell!(
+        "sweeping {} over {} values, {} at a time, in {} mode",
+        args.param,
+        values.len(),
+        args.jobs,
+        configs[0].1.mode.name()
+    );
     let stop = match StopFlag::install() {
         Ok(stop) => stop,
         Err(e) => {
@@ -279,6 +288,7 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
     let report = SweepReport {
         scenario: config.scenario.clone(),
         param: args.param.clone(),
+        mode: config.mode.name().to_owned(),
         points,
         first_unstable,
         first_unstable_ticks: delay.map(|d| d.0),
@@ -404,7 +414,7 @@ fn metric_width(name: &str) -> usize {
 
 fn render(r: &SweepReport, metrics: &[String]) -> String {
     let mut out = String::new();
-    let _ = writeln!(out, "\nLoopLab sweep · {} · {} (lockstep)", r.scenario, r.param);
+    let _ = writeln!(out, "\nLoopLab sweep · {} · {} ({})", r.scenario, r.param, r.mode);
     let _ = write!(
         out,
         "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  control",
@@ -469,11 +479,20 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
             t.radius_at_margin,
             t.ticks
         );
-        let _ = writeln!(
-            out,
-            "            continuous estimate: phase margin {:.1}° at {:.1} rad/s = {:.1} ticks; with the lags sampling adds, {:.1} ticks",
-            t.phase_margin_deg, t.crossover_rad_s, t.continuous_ticks, t.lagged_ticks
-        );
+        if t.continuous_ticks.is_finite() {
+            let _ = writeln!(
+                out,
+                "            continuous estimate: phase margin {:.1}° at {:.1} rad/s = {:.1} ticks; with the lags sampling adds, {:.1} ticks",
+                t.phase_margin_deg, t.crossover_rad_s, t.continuous_ticks, t.lagged_ticks
+            );
+        } else {
+            // A declared linear loop's margin comes from its sampled loop gain itself.
+            let _ = writeln!(
+                out,
+                "            the sampled loop's phase margin {:.1}° at {:.1} rad/s = {:.2} ticks",
+                t.phase_margin_deg, t.crossover_rad_s, t.lagged_ticks
+            );
+        }
         if let Some(v) = r.first_unstable {
             let diff = v - f64::from(t.ticks);
             let verdict = if diff.abs() <= 1.0 { "agree within one tick" } else { "DISAGREE by more than one tick" };
@@ -520,6 +539,7 @@ mod tests {
         let report = SweepReport {
             scenario: "pendulum".into(),
             param: "seed".into(),
+            mode: "lockstep".into(),
             points: vec![point],
             first_unstable: None,
             first_unstable_ticks: None,
@@ -564,6 +584,7 @@ mod tests {
         let report = SweepReport {
             scenario: "pendulum".into(),
             param: "faults.0.delay_ticks".into(),
+            mode: "lockstep".into(),
             points: vec![point(30.0, Verdict::Stable), point(31.0, Verdict::Unstable)],
             first_unstable: Some(31.0),
             first_unstable_ticks: Some(31.0),

@@ -3,6 +3,7 @@
 
 pub mod error;
 pub mod faults;
+pub mod gate;
 pub mod hosts;
 pub mod launch;
 pub mod python_plant;

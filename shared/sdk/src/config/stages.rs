@@ -3,7 +3,8 @@
 //! ```toml
 //! [stages.controller]
 //! command = ["python3", "my_controller.py"]   # the program and its arguments
-//! # dir = "/home/me/loop"                     # where it starts (default: the launch file's folder)
+//! # dir = "../loop"                           # where it starts, relative to the launch file's
+//!                                             # folder (default: that folder)
 //! # build = ["cc", "-O2", "c.c", "-o", "c"]   # run first, in `dir`, when what it names changed
 //! ```
 //!
@@ -13,7 +14,7 @@
 //! library, or the Rust library), so it is stamped, supervised and faulted as a built-in stage is.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
 
 use crate::config::stage_build;
 use crate::contract::role::Role;
@@ -85,7 +86,8 @@ impl Stages {
                 return Err(error(&command_key, "must name a program: [\"python3\", \"my_stage.py\"]".into()));
             }
             let dir = match spec.get("dir") {
-                Some(toml::Value::String(dir)) => PathBuf::from(dir),
+                // Relative: to the file that gives it (a run's launch.toml: to the run folder).
+                Some(toml::Value::String(dir)) => joined(&default_dir(&format!("{key}.dir")), Path::new(dir)),
                 Some(other) => {
                     return Err(error(
                         &format!("{key}.dir"),
@@ -119,6 +121,35 @@ impl Stages {
             }
         }
     }
+}
+
+/// `path` with each `..` taking off the folder before it and each `.` left out, as written (no
+/// link followed): what a folder relative to another reads as.
+pub fn joined(base: &Path, relative: &Path) -> PathBuf {
+    let mut path = PathBuf::new();
+    for part in base.join(relative).components() {
+        match part {
+            Component::CurDir => {}
+            Component::ParentDir => match path.components().next_back() {
+                Some(Component::Normal(_)) => {
+                    path.pop();
+                }
+                // Above the root is the root.
+                Some(Component::RootDir) => {}
+                _ => path.push(".."),
+            },
+            other => path.push(other),
+        }
+    }
+    path
+}
+
+#[cfg(test)]
+#[test]
+fn a_joined_path_takes_off_a_folder_for_each_parent_and_leaves_out_each_current() {
+    assert_eq!(joined(Path::new("/a/b"), Path::new("./c/../d")), Path::new("/a/b/d"));
+    assert_eq!(joined(Path::new("/a/b"), Path::new("../../../x")), Path::new("/x"));
+    assert_eq!(joined(Path::new("/a"), Path::new("/x/./y")), Path::new("/x/y"));
 }
 
 /// A list of strings, the program and its arguments, at dotted `key`.

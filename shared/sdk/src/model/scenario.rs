@@ -155,9 +155,11 @@ impl ScenarioParts for Configured {
 pub struct TheoreticalMargin {
     /// Exact, from the spectral radius of the linearised sampled loop.
     pub ticks: u32,
-    /// Continuous-time estimate: phase margin over crossover frequency, in ticks.
+    /// Continuous-time estimate: phase margin over crossover frequency, in ticks (NaN for a
+    /// declared linear loop, whose margin comes from its sampled loop gain).
     pub continuous_ticks: f64,
-    /// The same with the delays that sampling adds on each path (command hold, sensor holds).
+    /// The same with the delays that sampling adds on each path (command hold, sensor holds); a
+    /// declared linear loop's: the sampled loop gain's phase margin over its crossover, exact.
     pub lagged_ticks: f64,
     pub crossover_rad_s: f64,
     pub phase_margin_deg: f64,
@@ -184,6 +186,9 @@ pub struct ErrorMeasure {
     /// An error at or beyond which the system cannot come back, and what that means in words.
     /// None: the scenario has no such point (the run is lost only if it ends beyond the limit).
     pub lost_beyond: Option<(f64, &'static str)>,
+    /// The verdict judges loops from this simulation time on, s (a step's transient before it
+    /// is not a limit's concern); 0: every loop.
+    pub judged_from_s: f64,
 }
 
 impl ErrorMeasure {
@@ -213,6 +218,7 @@ impl ErrorMeasure {
             limit,
             limit_key: "limits",
             lost_beyond: None,
+            judged_from_s: 0.0,
         }
     }
 
@@ -236,6 +242,7 @@ impl ErrorMeasure {
             limit_key: self.limit_key.into(),
             lost_beyond: self.lost_beyond.map(|(value, _)| value),
             lost_means: self.lost_beyond.map(|(_, meaning)| meaning.into()),
+            judged_from_s: self.judged_from_s,
         }
     }
 }
@@ -255,6 +262,9 @@ pub struct ErrorMeasureInfo {
     /// What passing it means, in words.
     #[serde(default)]
     pub lost_means: Option<String>,
+    /// The verdict judged loops from this simulation time on, s (`[limits] judge_from_s`).
+    #[serde(default)]
+    pub judged_from_s: f64,
 }
 
 /// `[limits]` of a vehicle's launch file: how fault reports judge its flight by the distance

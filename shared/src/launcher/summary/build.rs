@@ -253,6 +253,7 @@ fn fault_reports(config: &LaunchConfig, log: &RunLog, monitor: &MonitorReport) -
                 resumed_after_ms: after(seen.resumed_ns),
                 continued_at_run_end: seen.continued_at_run_end,
                 effect: monitor.faults.get(i).cloned(),
+                against_twin: None,
             }
         })
         .collect()

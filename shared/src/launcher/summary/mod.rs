@@ -234,6 +234,24 @@ pub struct FaultReport {
     pub continued_at_run_end: bool,
     /// None when the monitor has no record of the fault's loops.
     pub effect: Option<FaultEffect>,
+    /// Lockstep: the fault's effect against the same run without the run's faults (None where
+    /// it was not computed: real time, a replay, a stage that runs only as its own process).
+    #[serde(default)]
+    pub against_twin: Option<AgainstTwin>,
+}
+
+/// A lockstep run's fault against its fault-free twin: the same launch file without its faults,
+/// run in LoopLab's own process (`tools::twin`), its state compared loop by loop.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
+pub struct AgainstTwin {
+    /// The first loop from the injection on whose plant state is not the twin's (None: the
+    /// state is the twin's bit for bit to the end: the fault had no effect on the plant).
+    pub departed_at_s: Option<f64>,
+    /// The largest error (`error_measure`) above the twin's at the same loop, from the injection on.
+    pub worst_extra_error: f64,
+    /// From the end of the fault until the error is back within the recovery band of the twin's
+    /// for good (0 without a departure; None: not by the end of the run).
+    pub recovery_s: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]

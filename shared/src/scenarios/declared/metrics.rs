@@ -10,6 +10,8 @@
 //! error_limit = 0.5      # the error beyond which the limits are exceeded
 //! recovery_band = 0.05   # the error within which a fault counts as recovered from
 //! lost_beyond = 2.0      # optional: the point of no return (the run is lost)
+//! judge_from_s = 1.0     # optional: the verdict judges loops from this time on (after a step
+//!                        # at t = 0 settles); fault reports judge every loop
 //! ```
 //!
 //! The error at one loop is the largest over the judged components of |component − r(t)| for
@@ -74,6 +76,8 @@ struct LimitsSection {
     recovery_band: f64,
     #[serde(default)]
     lost_beyond: Option<f64>,
+    #[serde(default)]
+    judge_from_s: f64,
 }
 
 /// Where a metric's value comes from in a [`Row`].
@@ -204,6 +208,7 @@ impl DeclaredMeasures {
             limit,
             limit_key: "limits.error_limit",
             lost_beyond: None,
+            judged_from_s: self.limits.as_ref().map_or(0.0, |l| l.judge_from_s),
         };
         match self.limits.as_ref().and_then(|l| l.lost_beyond) {
             Some(value) => measure.lost_beyond(value, "past limits.lost_beyond, the point of no return"),
@@ -222,6 +227,12 @@ fn load_limits(c: &LaunchConfig) -> Result<Option<LimitsSection>, LaunchError> {
     let limits: LimitsSection = c.section("limits")?;
     positive(c, "limits.error_limit", limits.error_limit)?;
     positive(c, "limits.recovery_band", limits.recovery_band)?;
+    if !(limits.judge_from_s >= 0.0 && limits.judge_from_s < c.duration_s) {
+        return Err(c.error(
+            "limits.judge_from_s",
+            format!("is {}; give a time from 0 to the run's duration ({} s), s", limits.judge_from_s, c.duration_s),
+        ));
+    }
     if limits.recovery_band > limits.error_limit {
         return Err(c.error(
             "limits.recovery_band",

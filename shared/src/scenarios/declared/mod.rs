@@ -16,6 +16,7 @@ pub mod controller;
 pub mod estimator;
 pub mod fmu;
 pub mod linear;
+pub mod margin;
 pub mod metrics;
 #[cfg(test)]
 mod plant_tests;
@@ -30,7 +31,9 @@ use self::system::{PlantSource, System};
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::model::declared_plant::{DeclaredPlant, FailedPlant};
 use crate::model::plant_model::PlantModel;
-use crate::model::scenario::{Controller, ErrorMeasure, Estimator, Metrics, Plant, Scenario, ScenarioParts};
+use crate::model::scenario::{
+    Controller, ErrorMeasure, Estimator, Metrics, Plant, Scenario, ScenarioParts, TheoreticalMargin,
+};
 use crate::model::vectors::Vectors;
 
 /// The scenario a declared system's configuration describes (`Catalog::with_declared`).
@@ -107,7 +110,11 @@ impl ScenarioParts for Declared {
 
     fn controller(&self) -> Box<dyn Controller> {
         match &self.system.gains {
-            Some(gains) => Box::new(StateFeedback { gains: gains.clone(), limits: self.system.input_limits.clone() }),
+            Some(gains) => Box::new(StateFeedback {
+                gains: gains.clone(),
+                limits: self.system.input_limits.clone(),
+                setpoints: self.system.setpoints.clone(),
+            }),
             None => Box::new(NoController),
         }
     }
@@ -118,5 +125,9 @@ impl ScenarioParts for Declared {
 
     fn error_measure(&self) -> ErrorMeasure {
         self.measures.error_measure()
+    }
+
+    fn delay_margin(&self, config: &LaunchConfig) -> Option<TheoreticalMargin> {
+        margin::delay_margin(&self.system, config)
     }
 }

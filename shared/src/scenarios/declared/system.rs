@@ -10,6 +10,7 @@ use crate::config::launch::declared::{LinearSection, PlantSection, SystemSection
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::contract::role::Role;
 use crate::model::plant_model::ModelSpec;
+use crate::model::reference::{NamedReference, Signal, declared_references};
 use crate::model::scenario::check_substeps;
 use crate::scenarios::declared::fmu::FmiKind;
 
@@ -25,7 +26,7 @@ pub enum PlantSource {
     Python { file: PathBuf, class: String },
 }
 
-/// `[controller]`: the built-in state feedback u = −K x̂, clamped to the input's limits, for a
+/// `[controller]`: the built-in state feedback u = −K (x̂ − r), clamped to the input's limits, for a
 /// first run without a controller of the user's own (`[stages.controller]`).
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -46,6 +47,8 @@ pub struct System {
     pub input_limits: Vec<(f64, f64)>,
     /// The built-in controller's K (rows: inputs); None: `[stages.controller]` runs instead.
     pub gains: Option<Vec<Vec<f64>>>,
+    /// Per estimate component, the reference it should follow (None: zero).
+    pub setpoints: Vec<Option<Signal>>,
     /// For the pass-through estimator: each estimate component's (sensor, component) reading;
     /// None where `[stages.estimator]` runs instead.
     pub pass_through: Option<Vec<(usize, usize)>>,
@@ -174,6 +177,16 @@ impl System {
             Some(picks)
         };
         let input_limits = vectors.input.iter().map(|u| (u.min, u.max)).collect();
+        // The built-in controller's setpoint: each estimate component's reference, where one
+        // tracks the state or output component of its name.
+        let references = declared_references(c)?;
+        let setpoints = estimate
+            .iter()
+            .map(|e| {
+                let tracks = |r: &&NamedReference| r.track.split_once('.').is_some_and(|(_, name)| name == e.name);
+                references.iter().find(tracks).map(|r| r.signal.clone())
+            })
+            .collect();
         Ok(System {
             vectors,
             source,
@@ -181,6 +194,7 @@ impl System {
             substeps: plant.substeps,
             input_limits,
             gains,
+            setpoints,
             pass_through,
             folder,
             fmu_interface,

@@ -12,8 +12,10 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use serde::Serialize;
 
+use crate::config::gate::GateKind;
 use crate::contract::report::Stats;
 use crate::contract::run_format::files;
+use crate::launcher::gate::{self, Judged};
 use crate::launcher::summary::Summary;
 use crate::tools::ToolError;
 use crate::tools::compare::{metric_text, ratio_label};
@@ -40,6 +42,8 @@ pub struct DiffOptions {
     pub figure: Option<PathBuf>,
     /// Where diff.json goes (None: not written).
     pub json: Option<PathBuf>,
+    /// `--fail-on`: judged on RUN_B's summary.
+    pub gates: Vec<crate::config::gate::Gate>,
 }
 
 /// The groups of fields, in trajectory.csv's order, then the metrics.
@@ -311,12 +315,23 @@ pub struct RunDiff {
     at: Vec<LoopAt>,
     #[serde(skip)]
     faults: Vec<FaultMark>,
+    /// `--fail-on`, judged on RUN_B.
+    #[serde(skip)]
+    pub gates: Judged,
 }
 
 impl RunDiff {
     /// Whether every field is within its tolerance (exit code 0).
     pub fn within_tolerance(&self) -> bool {
         self.fields.iter().all(|f| f.over == 0) && self.latency.iter().all(|l| l.over().next().is_none())
+    }
+
+    /// The exit code: a field over tolerance or a control gate failed: 3; latency over its
+    /// ratio or a timing gate: 4; both: 5; else 0.
+    pub fn exit_code(&self) -> u8 {
+        let control = self.fields.iter().any(|f| f.over > 0) || self.gates.failed(GateKind::Control);
+        let timing = self.latency.iter().any(|l| l.over().next().is_some()) || self.gates.failed(GateKind::Timing);
+        gate::exit_code(control, timing).unwrap_or(crate::launcher::EXIT_OK)
     }
 
     /// The fields with a loop where the runs are not the same.
@@ -513,7 +528,9 @@ pub fn diff_runs(a: &Path, b: &Path, options: &DiffOptions) -> Result<RunDiff, T
     hops.dedup();
     latency.extend(hops.into_iter().map(|h| LatencyRatio::of(h, la.hops.get(h), lb.hops.get(h), latency_tolerance)));
 
+    let gates = gate::judge(&options.gates, sb).map_err(|e| ToolError::BadInput(format!("--fail-on {e}")))?;
     let diff = RunDiff {
+        gates,
         a: a.to_path_buf(),
         b: b.to_path_buf(),
         scenario: sa.scenario.clone(),

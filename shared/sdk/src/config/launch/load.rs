@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::error::LaunchError;
 use crate::config::faults::{FaultSpec, Supervision};
+use crate::config::gate::Gate;
 use crate::config::hosts::Hosts;
 use crate::config::launch::checks::{
     check_common, check_fault, check_finite, check_realtime, check_sensors, check_supervision, check_wait,
@@ -106,6 +107,19 @@ struct CommonKeys {
     stages: toml::Table,
     #[serde(default)]
     replay: Option<ReplaySpec>,
+    /// A free table for stages of the user's own (their `config["parameters"]`).
+    #[serde(default)]
+    parameters: toml::Table,
+    #[serde(default)]
+    gate: GateSection,
+}
+
+/// `[gate]`: what fails the run (`config::gate`).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GateSection {
+    #[serde(default)]
+    fail_on: Vec<String>,
 }
 
 /// The names of the scenarios of `catalog`, for error messages.
@@ -227,14 +241,14 @@ pub fn check_python_plant(config: &LaunchConfig) -> Result<(), LaunchError> {
 /// Reads a resolved launch file written by the launcher (what each loop process does).
 pub fn load_resolved_config(path: &Path, catalog: &[ScenarioSchema]) -> Result<LaunchConfig, LaunchError> {
     let (document, origin) = read_resolved(path)?;
-    from_document(document, &origin, &[], catalog, None, false)
+    from_document(document, &origin, &[], catalog, path.parent(), false)
 }
 
 /// Reads a run's `launch.toml` as a stage of the user's own does: with no catalog, the vectors
 /// the launcher resolved (`[vectors]`) in place of the scenario's entry, and the input's limits.
 pub fn load_run_config(path: &Path) -> Result<LaunchConfig, LaunchError> {
     let (document, origin) = read_resolved(path)?;
-    from_document(document, &origin, &[], &[], None, true)
+    from_document(document, &origin, &[], &[], path.parent(), true)
 }
 
 fn read_resolved(path: &Path) -> Result<(toml::Table, String), LaunchError> {
@@ -335,12 +349,18 @@ fn from_document(
     }
     // A declared plant's model path is relative to the launch file's folder; the loop processes
     // read the resolved file from the run folder, so the folder is written into it (as a
-    // stage's `dir`).
+    // stage's `dir`), absolute (a relative `folder` is relative to the file that gives it).
     if schema.name == declared::DECLARED
         && let Some(toml::Value::Table(plant)) = document.get_mut("plant")
-        && !plant.contains_key("folder")
     {
-        let folder = launch_folder.clone().unwrap_or_else(|| current.clone());
+        let base = match &launch_folder {
+            Some(folder) if origins.of("plant.folder") == origins.file => folder.clone(),
+            _ => current.clone(),
+        };
+        let folder = match plant.get("folder") {
+            Some(toml::Value::String(folder)) => crate::config::stages::joined(&base, Path::new(folder)),
+            _ => base,
+        };
         plant.insert("folder".into(), toml::Value::String(folder.display().to_string()));
     }
     // A built-in scenario's [plant] is its own; only a declared system's may name a Python class,
@@ -371,7 +391,11 @@ fn from_document(
             ));
         }
     }
+    let gates = (common.gate.fail_on.iter().enumerate())
+        .map(|(i, text)| Gate::parse(text).map_err(|message| origins.error(&format!("gate.fail_on.{i}"), message)))
+        .collect::<Result<_, _>>()?;
     let config = LaunchConfig {
+        gates,
         scenario: if schema.name == declared::DECLARED { declared::DECLARED.to_owned() } else { common.scenario },
         mode: common.mode,
         rate_hz: common.rate_hz,
@@ -446,6 +470,8 @@ mod tests {
             "hosts",
             "stages",
             "replay",
+            "parameters",
+            "gate",
         ];
         assert_eq!(common_keys(), keys);
     }

@@ -13,6 +13,7 @@ mod checks;
 pub mod declared;
 mod load;
 mod overrides;
+pub mod run_paths;
 pub mod run_vectors;
 mod types;
 

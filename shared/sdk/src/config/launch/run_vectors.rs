@@ -45,9 +45,10 @@ fn leaked(named: Vec<Named>) -> &'static [Component] {
     leak_components(named.into_iter().map(|n| (n.name, n.unit)))
 }
 
-/// The run's `launch.toml`, which its processes load: `config`'s document and the run's vectors
-/// (`[vectors]`: `config`'s schema and `input_limits`).
-pub fn run_toml(config: &LaunchConfig, input_limits: &[(f64, f64)]) -> String {
+/// The run's `launch.toml`, which its processes load: `config`'s document, its folders relative
+/// to `run_dir` (`run_paths`), and the run's vectors (`[vectors]`: `config`'s schema and
+/// `input_limits`).
+pub fn run_toml(config: &LaunchConfig, input_limits: &[(f64, f64)], run_dir: &std::path::Path) -> String {
     let schema = &config.schema;
     let table = VectorsTable {
         scenario: schema.name.to_owned(),
@@ -58,6 +59,7 @@ pub fn run_toml(config: &LaunchConfig, input_limits: &[(f64, f64)]) -> String {
         signals: schema.signals.iter().map(|s| (s.name.to_owned(), named(s.components))).collect(),
     };
     let mut document = config.document.clone();
+    crate::config::launch::run_paths::make_relative(&mut document, run_dir);
     let value = toml::Value::try_from(table).expect("names and finite numbers always serialise");
     document.insert(KEY.to_owned(), value);
     toml::to_string(&document).expect("a TOML table always serialises")

@@ -137,6 +137,8 @@ pub struct LaunchConfig {
     pub stages: Stages,
     /// A replay of a recorded run into one stage (`looplab replay`).
     pub replay: Option<ReplaySpec>,
+    /// `[gate] fail_on`: what fails the run (`config::gate`).
+    pub gates: Vec<crate::config::gate::Gate>,
     /// The whole resolved document, as written to the run folder.
     pub document: toml::Table,
     /// The scenario it was checked against.

@@ -2,6 +2,8 @@
 //! loop trace and publish. The sensors, estimator and controller processes are this loop around
 //! their task.
 
+use std::collections::VecDeque;
+
 use anyhow::Result;
 
 use crate::config::launch::Mode;
@@ -16,6 +18,17 @@ use crate::runtime::stage::task::{StageRunner, Task};
 use crate::runtime::storage::snapshot::{FrozenSnapshot, MAX_FROZEN_BYTES, Snapshot, stage_frozen};
 use crate::runtime::transport::ipc::{TopicPublisher, TopicSubscriber};
 use crate::runtime::transport::wait::{ArrivalModel, Waiter, reader_blocks, writer_wakes};
+
+/// Sends the held-back outputs whose time has come, in order.
+fn release_due<O: Message>(delayed: &mut VecDeque<(u64, O)>, publisher: &TopicPublisher<O>) -> Result<()> {
+    while let Some((at, _)) = delayed.front()
+        && *at <= now_ns()
+    {
+        let (_, out) = delayed.pop_front().expect("a front");
+        publisher.send(&out)?;
+    }
+    Ok(())
+}
 
 /// Runs `task` as the process of `role` until a stop is requested (or the task fails).
 pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEvent> {
@@ -51,9 +64,15 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
     let mut waiter = Waiter::new(wait_settings, role, realtime, period_ns);
     let mut arrivals = ArrivalModel::new(period_ns);
     let mut run_queue = RunQueue::open();
+    // Real time: outputs a delay fault holds back, each with when it goes out, in order (a
+    // transport delay: the stage goes on computing the next loops meanwhile).
+    let mut delayed: VecDeque<(u64, T::Out)> = VecDeque::new();
     while !context.stop.requested() {
-        let due = last_k.and_then(|k| arrivals.due(k + 1));
-        let slice_end = now_ns() + WAIT_SLICE.as_nanos() as u64;
+        release_due(&mut delayed, &publisher)?;
+        // With outputs held back, wake for the first of them too.
+        let next_release = delayed.front().map(|(at, _)| *at);
+        let due = if next_release.is_some() { None } else { last_k.and_then(|k| arrivals.due(k + 1)) };
+        let slice_end = (now_ns() + WAIT_SLICE.as_nanos() as u64).min(next_release.unwrap_or(u64::MAX));
         if replay.is_none() {
             waiter.wait(
                 due,
@@ -86,16 +105,19 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
             if !realtime {
                 keep(&mut kept, &runner.task, header.k)?;
             }
-            if let Some(hold) = handled.hold {
-                std::thread::sleep(hold);
-            }
             if let Some(mut out) = handled.output {
                 // A long computation's own read, before the publish stamp: it is part of the stage.
                 let sched = run_queue.stamp(waited, received, now_ns());
                 let out_header = out.header_mut();
                 out_header.trace.stamp(role, received, now_ns());
                 out_header.sched = sched;
-                publisher.send(&out)?;
+                // A held-back output goes out after its delay, and every later one after it (in
+                // order, as a link delivers them); the time held shows in the next hop.
+                match handled.hold {
+                    None if delayed.is_empty() => publisher.send(&out)?,
+                    hold => delayed.push_back((now_ns() + hold.map_or(0, |d| d.as_nanos() as u64), out)),
+                }
+                release_due(&mut delayed, &publisher)?;
                 last_k = Some(header.k);
             }
             if let Some(journal) = in_flight.as_mut() {
@@ -107,6 +129,10 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
                 keep(&mut kept, &runner.task, header.k)?;
             }
         }
+    }
+    // What a delay still held when the run stopped goes out: the loop may wait for it.
+    for (_, out) in delayed.drain(..) {
+        publisher.send(&out)?;
     }
     let mut report = runner.report;
     (report.waited, report.dropped) = publisher.backpressure();

@@ -174,7 +174,8 @@ pub fn corrupt_command(out: &mut Command, limits: &[(f64, f64)], value: CorruptV
 
 /// What became of one input.
 pub struct Handled<Out> {
-    /// Real time: a delay fault asks to hold the output this long before it goes out.
+    /// Real time: a delay fault holds the output back this long before it goes out, while the
+    /// stage goes on with the next loops (a transport delay, pipelined as lockstep's).
     pub hold: Option<Duration>,
     /// The output to publish, header set (stamps aside); None if a drop fault took it.
     pub output: Option<Out>,

@@ -25,6 +25,7 @@ use crate::config::schema::Component;
 use crate::contract::msg::{Command, Estimate, Measurements, Message, PlantState, layout_fingerprint, layout_mismatch};
 use crate::contract::protocol::{ChildEvent, ProcessArgs, stage_env};
 use crate::contract::role::Role;
+use crate::model::reference::{NamedReference, declared_references};
 use crate::model::scenario::{Controller, Estimator};
 use crate::runtime::stage::child::{Context, keep_stdout_for_events, run_process_as};
 use crate::runtime::stage::relay::relay;
@@ -44,6 +45,9 @@ pub struct StageInfo<'a> {
     pub input_names: Vec<String>,
     /// The names of the step's output numbers, in order.
     pub output_names: Vec<String>,
+    /// A declared system's references (`[reference]`), in order: what each names
+    /// (`state.position`) and its signal; [`StageInfo::reference`] evaluates them.
+    pub references: Vec<NamedReference>,
 }
 
 /// A user's computation of one stage, in any language.
@@ -72,7 +76,7 @@ pub fn run_step(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Step>>) -> ExitC
 pub fn run_step_as_build(layout: &str, make: impl FnOnce(&StageInfo) -> Result<Box<dyn Step>>) -> ExitCode {
     run_stage(&Role::STAGES, layout, |context, role| {
         let layout = StageNumbers::new(&context.config);
-        let info = layout.info(role, context);
+        let info = layout.info(role, context)?;
         let step = make(&info).context("the stage's constructor failed")?;
         match role {
             Role::Sensors => relay(context, role, UserTask::sensors(step, layout)),
@@ -86,7 +90,7 @@ pub fn run_step_as_build(layout: &str, make: impl FnOnce(&StageInfo) -> Result<B
 /// scenario's own [`Controller`] trait.
 pub fn run_controller(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Controller>>) -> ExitCode {
     run_stage(&[Role::Controller], layout_fingerprint(), |context, role| {
-        let info = StageNumbers::new(&context.config).info(role, context);
+        let info = StageNumbers::new(&context.config).info(role, context)?;
         let controller = make(&info).context("the controller's constructor failed")?;
         relay(context, role, ControllerTask::with(controller, &context.config, input_limits(&context.config)))
     })
@@ -95,7 +99,7 @@ pub fn run_controller(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Controller
 /// Runs `make`'s estimator as the estimator stage, as [`run_controller`] does a controller.
 pub fn run_estimator(make: impl FnOnce(&StageInfo) -> Result<Box<dyn Estimator>>) -> ExitCode {
     run_stage(&[Role::Estimator], layout_fingerprint(), |context, role| {
-        let info = StageNumbers::new(&context.config).info(role, context);
+        let info = StageNumbers::new(&context.config).info(role, context)?;
         let estimator = make(&info).context("the estimator's constructor failed")?;
         relay(context, role, EstimatorTask::with(estimator, &context.config))
     })
@@ -187,6 +191,11 @@ pub fn config_number(document: &toml::Table, key: &str) -> Option<f64> {
 }
 
 impl StageInfo<'_> {
+    /// Each reference at simulation time `t`, in the order of [`StageInfo::references`].
+    pub fn reference(&self, t: f64) -> Vec<f64> {
+        self.references.iter().map(|r| r.signal.at(t)).collect()
+    }
+
     /// The number at dotted `key` of the run's launch file ([`config_number`]), or an error
     /// naming the key.
     pub fn number(&self, key: &str) -> Result<f64> {
@@ -221,10 +230,11 @@ impl StageNumbers {
         }
     }
 
-    fn info<'a>(&self, role: Role, context: &'a Context) -> StageInfo<'a> {
+    fn info<'a>(&self, role: Role, context: &'a Context) -> Result<StageInfo<'a>> {
         let config = &context.config;
         let (input_names, output_names) = stage_names(role, config);
-        StageInfo { role, config, incarnation: context.incarnation, input_names, output_names }
+        let references = declared_references(config)?;
+        Ok(StageInfo { role, config, incarnation: context.incarnation, input_names, output_names, references })
     }
 
     fn readings_len(&self) -> usize {
