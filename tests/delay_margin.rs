@@ -9,7 +9,7 @@ fn sweep(file: &std::path::Path, name: &str, extra: &[&str]) -> (f64, u64) {
     let out = fresh_dir(name);
     let args = [
         &["sweep", file.to_str().unwrap(), "--fault", "delay controller by 0 ticks at 1s", "--param"][..],
-        &["faults.0.delay_ticks", "--from", "7", "--to", "11", "--out", out.to_str().unwrap()],
+        &["faults.0.delay_ticks", "--from", "7", "--to", "11", "--duration", "4", "--out", out.to_str().unwrap()],
         extra,
     ]
     .concat();
@@ -25,15 +25,11 @@ fn sweep(file: &std::path::Path, name: &str, extra: &[&str]) -> (f64, u64) {
 
 #[test]
 fn a_declared_linear_loop_has_a_delay_margin_that_lockstep_and_real_time_measure_alike() {
+    // The motor of golden_ci.rs under the built-in state feedback, for 4 s.
     let dir = fresh_dir("motor-margin");
-    std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("motor.toml");
-    // The motor of golden_ci.rs under the built-in state feedback V = −(2 (θ − r) + 0.1 ω), 4 s.
-    let motor = format!("{}\n[controller]\ngains = [[2.0, 0.1]]\n", crate::golden_ci::MOTOR)
-        .replace("duration_s = 2.0", "duration_s = 4.0");
-    std::fs::write(&file, motor).unwrap();
+    let file = crate::golden_ci::motor_under_state_feedback(&dir);
     // The report's budget line has it.
-    let run = run_in_process("motor-margin-run", &[file.to_str().unwrap()]);
+    let run = run_in_process("motor-margin-run", &[file.to_str().unwrap(), "--duration", "4"]);
     assert!(run.stdout().contains("delay margin 90.000 (9 ticks, theory: "), "{}", run.stdout());
 
     let (lockstep, theory) = sweep(&file, "motor-lockstep", &[]);

@@ -10,7 +10,7 @@ use crate::common::*;
 
 /// θ̇ = ω, ω̇ = −ω/τ + (K/τ)·V with τ = 0.1 s, K = 10 rad/s/V; the reference steps to 1 rad at
 /// 0.5 s, and the limits judge the angle from 1 s on, once the step has settled.
-pub const MOTOR: &str = r#"
+const MOTOR: &str = r#"
 mode = "lockstep"
 rate_hz = 100.0
 duration_s = 2.0
@@ -73,6 +73,14 @@ step_pause_s = 0.0
 [gate]
 fail_on = ["limits"]
 "#;
+
+/// The motor under the built-in state feedback V = −(2 (θ − r) + 0.1 ω), as `dir/motor.toml`.
+pub fn motor_under_state_feedback(dir: &Path) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let file = dir.join("motor.toml");
+    std::fs::write(&file, format!("{MOTOR}\n[controller]\ngains = [[2.0, 0.1]]\n")).unwrap();
+    file
+}
 
 /// `looplab <args>` in `dir` with the Python module importable.
 fn looplab_in(dir: &Path, args: &[&str]) -> Output {
@@ -185,9 +193,7 @@ fn a_moved_golden_run_replays_and_diffs_clean_and_each_gate_fails_with_its_own_e
 #[test]
 fn a_step_reference_is_followed_and_judged_after_it_settles() {
     let root = fresh_dir("step-settles");
-    std::fs::create_dir_all(&root).unwrap();
-    let file = root.join("motor.toml");
-    std::fs::write(&file, format!("{MOTOR}\n[controller]\ngains = [[2.0, 0.1]]\n")).unwrap();
+    let file = motor_under_state_feedback(&root);
     let settled = run_in_process("step-settled", &[file.to_str().unwrap(), "--fail-on", "limits"]);
     assert!(settled.metric("state.angle.final") > 0.9999 && settled.metric("state.angle.final") < 1.0001);
     assert!(settled.metric("tracking.state.angle.final").abs() < 1e-4);
@@ -225,9 +231,7 @@ fn a_step_reference_is_followed_and_judged_after_it_settles() {
 #[test]
 fn a_kill_with_no_effect_on_the_plant_reports_no_degradation() {
     let root = fresh_dir("kill-no-effect");
-    std::fs::create_dir_all(&root).unwrap();
-    let file = root.join("motor.toml");
-    std::fs::write(&file, format!("{MOTOR}\n[controller]\ngains = [[2.0, 0.1]]\n")).unwrap();
+    let file = motor_under_state_feedback(&root);
     let killed = run("kill-no-effect-run", &[file.to_str().unwrap(), "--fault", "kill controller at 0.4s"]);
     let fault = &killed.summary().faults[0];
     assert!(fault.restarted_after_ms.is_some(), "{fault:?}");

@@ -48,11 +48,11 @@ pub fn judge_against_twin(
     let twin_dir = run_dir.join("twin");
     std::fs::create_dir_all(twin_dir.join(files::LOGS)).map_err(|e| ToolError::Failed(e.into()))?;
     crate::launcher::in_process::run_in_process(&twin_config, twin_scenario.as_ref(), &twin_dir)?;
+    let layout = VectorLayout::new(config, scenario);
+    let state_columns = &layout.trajectory_columns()[2..2 + layout.state.len()];
     let states = |dir: &Path| -> Result<Vec<Vec<f64>>, ToolError> {
         let table = RunFolder::open(dir, &[files::TRAJECTORY])?.table(files::TRAJECTORY)?;
-        let layout = VectorLayout::new(config, scenario);
-        let columns = &layout.trajectory_columns()[2..2 + layout.state.len()];
-        columns.iter().map(|name| table.floats(name)).collect()
+        state_columns.iter().map(|name| table.floats(name)).collect()
     };
     let (run, twin) = (states(run_dir)?, states(&twin_dir)?);
     let _ = std::fs::remove_dir_all(&twin_dir);
