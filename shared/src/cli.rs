@@ -48,7 +48,9 @@ enum Command {
         scenario: String,
     },
     /// Run a scenario repeatedly in lockstep while one key varies; report the metrics per value
-    /// and, for a controller delay, the measured delay margin against theory
+    /// and, for a controller delay, the measured delay margin against theory. A fault is judged
+    /// against the same run without it. Exit 1 a run failed, 3 a control gate of --fail-on or
+    /// [gate] failed on some value, 4 a timing gate, 5 both, 2 bad input
     Sweep(SweepCli),
     /// Print a finished run's report again, from its summary.json
     Report {
@@ -249,6 +251,8 @@ struct SweepCli {
     /// in this process (same trajectories, many times slower); needed for kill and stop faults
     #[arg(long)]
     processes: bool,
+    #[command(flatten)]
+    gates: launcher::gate::GateArgs,
 }
 
 /// The options `run` and `sweep` share: each becomes a launch-file override.
@@ -605,6 +609,10 @@ fn sweep(args: SweepCli, catalog: &Catalog) -> ExitCode {
         Ok(o) => o,
         Err(e) => return bad_input(e),
     };
+    let gates = match args.gates.gates() {
+        Ok(gates) => gates,
+        Err(e) => return bad_input(e),
+    };
     sweep::run(
         sweep::SweepArgs {
             target: args.target,
@@ -617,6 +625,7 @@ fn sweep(args: SweepCli, catalog: &Catalog) -> ExitCode {
             jobs: args.jobs,
             processes: args.processes,
             metrics: args.metrics,
+            gates,
         },
         catalog,
     )

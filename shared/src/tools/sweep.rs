@@ -5,6 +5,11 @@
 //! next to the delay margin the scenario's linearised model predicts. Each value runs in this
 //! process (`launcher::in_process`, byte-identical to the five processes in lockstep) unless
 //! `--processes` asks for the five-process pipeline.
+//!
+//! In lockstep a fault is judged against the same run without it (the fault-free baseline, run
+//! once for a swept fault key, else once per value), so that a reference step inside the judged
+//! window is not taken for the fault's effect; in real time, against zero error, with a warning
+//! where a declared reference moves inside the window.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -15,7 +20,8 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::config::faults::FaultKind;
-use crate::config::launch::{LaunchConfig, Override};
+use crate::config::gate::{Gate, GateKind};
+use crate::config::launch::{LaunchConfig, Mode, Override};
 use crate::contract::role::Role;
 use crate::launcher::budget::theoretical_margin;
 use crate::launcher::in_process::run_in_process;
@@ -26,10 +32,11 @@ use crate::model::catalog::Catalog;
 use crate::model::scenario::{Scenario, TheoreticalMargin};
 use crate::runtime::in_process::refusal;
 use crate::runtime::signals::StopFlag;
+use crate::tools::{ToolError, twin};
 
 /// The error's peak in the last second over its peak in the first second of the fault above
 /// which the loop counts as unstable: the disturbance the fault caused grew instead of dying
-/// out. This judges the loop's linear stability where the fault's disturbance stands above the
+/// out. In lockstep the error is the departure from the fault-free baseline. This judges the loop's linear stability where the fault's disturbance stands above the
 /// sensors' noise and quantisation: sweep a delay margin with them off, as the theory assumes
 /// (with them on, the noise floor and the actuator limit blur the verdict near the margin).
 pub const UNSTABLE_GROWTH: f64 = 1.0;
@@ -48,6 +55,8 @@ pub struct SweepArgs {
     pub processes: bool,
     /// Metrics to print beside each value.
     pub metrics: Vec<String>,
+    /// `--fail-on`, judged on every value's run with the launch file's `[gate]`.
+    pub gates: Vec<Gate>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -64,6 +73,11 @@ pub struct SweepPoint {
     pub control: ControlVerdict,
     pub metrics: BTreeMap<String, f64>,
     pub run_dir: String,
+    /// The line of each gate this value's run failed.
+    pub failed_gates: Vec<String>,
+    /// Which kinds of gate failed (control, timing), for the exit code.
+    #[serde(skip)]
+    pub failed_kinds: (bool, bool),
 }
 
 /// What one value did to the loop.
@@ -79,7 +93,8 @@ pub enum Verdict {
     #[serde(rename = "no fault")]
     #[strum(serialize = "no fault")]
     NoFault,
-    /// No fault, but the run went beyond the scenario's limit (and came back).
+    /// The loop held, but the run went beyond the scenario's limit: without a fault, or (judged
+    /// against the fault-free baseline) with the fault where the run without it stayed within.
     #[serde(rename = "exceeded")]
     #[strum(serialize = "exceeded")]
     Exceeded,
@@ -104,6 +119,10 @@ pub struct SweepReport {
     /// The theory's margin in ms.
     pub theory_ms: Option<f64>,
     pub theory_unknown: Option<String>,
+    /// What the fault's growth is measured against: "the fault-free baseline" or "zero error".
+    pub judged_against: Option<String>,
+    /// Warnings about the verdicts (a reference that moves inside a window judged against zero).
+    pub warnings: Vec<String>,
 }
 
 /// A swept value as a delay in (ticks, ms), for a key that is one: `…delay_ticks`, `…delay_s`.
@@ -175,13 +194,23 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         ));
     }
     let values = values(args.from, args.to, args.step);
-    let resolve = |value: f64| -> Result<(f64, LaunchConfig, Box<dyn Scenario>), String> {
+    // The launch file for one value; `fault_free`: the same without its faults (the baseline).
+    let resolve_as = |value: f64, fault_free: bool| -> Result<(f64, LaunchConfig, Box<dyn Scenario>), String> {
         let mut overrides = vec![Override::parse("mode=lockstep").expect("valid")];
         overrides.extend(args.overrides.iter().cloned());
         overrides.push(Override::parse(&format!("{}={}", args.param, value_text(value))).map_err(|e| e.to_string())?);
+        if fault_free {
+            overrides.push(Override {
+                key: "faults".into(),
+                text: "faults=[] (the fault-free baseline)".into(),
+                value: toml::Value::Array(vec![]),
+                append: false,
+            });
+        }
         let (config, scenario) = catalog.resolve(&args.target, &overrides).map_err(|e| e.to_string())?;
         Ok((value, config, scenario))
     };
+    let resolve = |value: f64| resolve_as(value, false);
     // Check every value's launch file before running any.
     let mut configs: Vec<(f64, LaunchConfig, Box<dyn Scenario>)> = vec![];
     for &value in &values {
@@ -227,7 +256,38 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let results = run_all(&configs, binaries.as_ref(), &out, &args.param, args.jobs.max(1), &stop);
+    // In lockstep the swept fault is judged against the same run without it: one baseline for
+    // a swept fault key (every value's is the same), else one per value.
+    let by_baseline = fault_index.is_some() && configs[0].1.mode == Mode::Lockstep;
+    let one_baseline = swept_fault(&args.param).is_some();
+    let mut baselines = Baselines::default();
+    if by_baseline {
+        let wanted: &[f64] = if one_baseline { &values[..1] } else { &values };
+        let mut runs = vec![];
+        for &value in wanted {
+            match resolve_as(value, true) {
+                Ok(c) => runs.push(c),
+                Err(e) => return bad(e),
+            }
+        }
+        tell!("running the fault-free baseline{} first", if one_baseline { "" } else { " of each value" });
+        let names = |value: f64| baseline_name(&args.param, value, one_baseline);
+        let results = run_all(&runs, binaries.as_ref(), &out, &names, args.jobs.max(1), &stop);
+        if let Err(code) = baselines.add(&runs, results, &stop) {
+            return code;
+        }
+    }
+    let key = |value: f64| if one_baseline { values[0] } else { value };
+    let judge = |baselines: &Baselines, value: f64, config: &LaunchConfig, scenario: &dyn Scenario, done: (Summary, Outcome)| {
+        let (summary, outcome) = done;
+        let judged = match baselines.get(key(value)) {
+            Some(base) if by_baseline => against_baseline(config, scenario, &summary, base, fault_index),
+            _ => Ok(against_zero(&summary, fault_index)),
+        };
+        judged.map_err(|e| format!("{e}")).and_then(|judged| point(value, &summary, &outcome, fault_index, judged, &args.gates, config))
+    };
+    let names = |value: f64| format!("{}={}", args.param, value_text(value));
+    let results = run_all(&configs, binaries.as_ref(), &out, &names, args.jobs.max(1), &stop);
     if stop.requested() {
         let done = results.iter().filter(|r| r.is_some()).count();
         tell!(
@@ -238,9 +298,12 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         return ExitCode::from(EXIT_INTERRUPTED);
     }
     let mut points = vec![];
-    for ((value, _, _), result) in configs.iter().zip(results) {
+    for ((value, config, scenario), result) in configs.iter().zip(results) {
         match result.expect("without a stop request every value runs") {
-            Ok((summary, outcome)) => points.push(point(*value, &summary, &outcome, fault_index)),
+            Ok(done) => match judge(&baselines, *value, config, scenario.as_ref(), done) {
+                Ok(p) => points.push(p),
+                Err(e) => return bad(e),
+            },
             Err(e) => {
                 tell!("error: the run for {} = {} failed: {e:#}", args.param, value_text(*value));
                 return ExitCode::FAILURE;
@@ -253,7 +316,7 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
     while let Some(i) = points.iter().position(|p| p.verdict.is_unstable()) {
         let Some(mid) = i
             .checked_sub(1)
-            .filter(|&j| points[j].verdict == Verdict::Stable)
+            .filter(|&j| matches!(points[j].verdict, Verdict::Stable | Verdict::Exceeded))
             .and_then(|j| between(points[j].value, points[i].value, args.step, whole))
         else {
             break;
@@ -263,9 +326,23 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
             Err(e) => return bad(e),
         };
         tell!("bisecting: {} = {}", args.param, value_text(mid));
-        let result = run_all(std::slice::from_ref(&config), binaries.as_ref(), &out, &args.param, 1, &stop);
+        if by_baseline && !one_baseline {
+            let base = match resolve_as(mid, true) {
+                Ok(c) => c,
+                Err(e) => return bad(e),
+            };
+            let names = |value: f64| baseline_name(&args.param, value, false);
+            let result = run_all(std::slice::from_ref(&base), binaries.as_ref(), &out, &names, 1, &stop);
+            if let Err(code) = baselines.add(std::slice::from_ref(&base), result, &stop) {
+                return code;
+            }
+        }
+        let result = run_all(std::slice::from_ref(&config), binaries.as_ref(), &out, &names, 1, &stop);
         match result.into_iter().next().flatten() {
-            Some(Ok((summary, outcome))) => points.insert(i, point(mid, &summary, &outcome, fault_index)),
+            Some(Ok(done)) => match judge(&baselines, mid, &config.1, config.2.as_ref(), done) {
+                Ok(p) => points.insert(i, p),
+                Err(e) => return bad(e),
+            },
             Some(Err(e)) => {
                 tell!("error: the run for {} = {} failed: {e:#}", args.param, value_text(mid));
                 return ExitCode::FAILURE;
@@ -285,6 +362,11 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         Some(Err(why)) => (None, Some(why)),
         None => (None, None),
     };
+    let judged_against = fault_index.map(|_| if by_baseline { "the fault-free baseline" } else { "zero error" }.to_owned());
+    let mut warnings = vec![];
+    if !by_baseline && let Some(window) = fault_index.and_then(|i| judged_window(config, i)) {
+        warnings.extend(reference_moves(config, window));
+    }
     let report = SweepReport {
         scenario: config.scenario.clone(),
         param: args.param.clone(),
@@ -296,8 +378,13 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         theory_ms: theory.as_ref().map(|t| f64::from(t.ticks) * 1e3 / config.rate_hz),
         theory,
         theory_unknown,
+        judged_against,
+        warnings,
     };
     say_raw!("{}", render(&report, &args.metrics));
+    for warning in &report.warnings {
+        tell!("warning: {warning}");
+    }
     for name in &args.metrics {
         if report.points.iter().all(|p| !p.metrics.contains_key(name)) {
             let known: Vec<&str> = report.points[0].metrics.keys().map(String::as_str).collect();
@@ -312,7 +399,166 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         tell!("error: {e:#}");
         return ExitCode::FAILURE;
     }
-    if report.points.iter().any(|p| p.verdict == Verdict::Failed) { ExitCode::FAILURE } else { ExitCode::SUCCESS }
+    if report.points.iter().any(|p| p.verdict == Verdict::Failed) {
+        return ExitCode::FAILURE;
+    }
+    let control = report.points.iter().any(|p| p.failed_kinds.0);
+    let timing = report.points.iter().any(|p| p.failed_kinds.1);
+    crate::launcher::gate::exit_code(control, timing).map_or(ExitCode::SUCCESS, ExitCode::from)
+}
+
+/// A baseline's run folder: one for the sweep, or one per value.
+fn baseline_name(param: &str, value: f64, one: bool) -> String {
+    if one { "baseline".to_owned() } else { format!("baseline {param}={}", value_text(value)) }
+}
+
+/// The fault-free baselines' errors loop by loop, by swept value.
+#[derive(Default)]
+struct Baselines(BTreeMap<u64, Vec<f64>>);
+
+impl Baselines {
+    fn get(&self, value: f64) -> Option<&[f64]> {
+        self.0.get(&value.to_bits()).map(Vec::as_slice)
+    }
+
+    /// Keeps the errors of the baselines `runs` ran as; Err: the exit code of a baseline that
+    /// failed or was interrupted.
+    fn add(
+        &mut self,
+        runs: &[(f64, LaunchConfig, Box<dyn Scenario>)],
+        results: Vec<Option<Result<(Summary, Outcome)>>>,
+        stop: &StopFlag,
+    ) -> Result<(), ExitCode> {
+        for ((value, config, scenario), result) in runs.iter().zip(results) {
+            let failed = |why: String| {
+                tell!("error: the fault-free baseline for {} failed: {why}", value_text(*value));
+                ExitCode::FAILURE
+            };
+            let (summary, outcome) = match result {
+                None => return Err(ExitCode::from(EXIT_INTERRUPTED)),
+                Some(Err(e)) => return Err(failed(format!("{e:#}"))),
+                Some(Ok(done)) => done,
+            };
+            if stop.requested() || outcome == Outcome::Interrupted {
+                return Err(ExitCode::from(EXIT_INTERRUPTED));
+            }
+            if !summary.completed || outcome != Outcome::Completed {
+                return Err(failed(format!("it did not complete ({})", summary.run_dir)));
+            }
+            let states = twin::plant_states(Path::new(&summary.run_dir), config, scenario.as_ref())
+                .map_err(|e| failed(e.to_string()))?;
+            self.0.insert(value.to_bits(), twin::errors(config, scenario.as_ref(), &states));
+        }
+        Ok(())
+    }
+}
+
+/// The loops a fault's growth is judged over: from its start to the next fault's start (or the
+/// run's end), as the monitor's fault effect takes them (`monitor::fault_effect`).
+fn judged_window(config: &LaunchConfig, fault: usize) -> Option<(usize, usize)> {
+    let loops = (config.duration_s * config.rate_hz).round() as usize;
+    let from = config.faults.get(fault)?.ticks(config.rate_hz).0 as usize;
+    let end = config.faults.iter().map(|f| f.ticks(config.rate_hz).0 as usize).filter(|&s| s > from).min();
+    Some((from.min(loops), end.unwrap_or(loops).min(loops)))
+}
+
+/// The peak of `values` over the window's first second and over its last second.
+fn peaks(values: impl Fn(usize) -> f64, (from, end): (usize, usize), second: usize) -> (f64, f64) {
+    let peak = |range: std::ops::Range<usize>| range.map(&values).fold(0.0, f64::max);
+    (peak(from..(from + second).min(end)), peak(end.saturating_sub(second).max(from)..end))
+}
+
+/// What the swept fault did to the loop.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct FaultJudged {
+    /// The disturbance's peak in the fault's last second over its first.
+    growth: Option<f64>,
+    /// The disturbance's largest value in the fault's window.
+    worst: Option<f64>,
+    /// Whether the loop stayed within the scenario's limits where the fault had its effect.
+    within_limits: Option<bool>,
+    /// Judged against zero error, a run beyond the limits counts as unstable (the error cannot
+    /// tell the fault's effect from the rest); against the baseline only growth does.
+    beyond_is_unstable: bool,
+    /// The run was lost: past a point of no return (against zero error: beyond the limits at
+    /// its end, too).
+    lost: bool,
+}
+
+/// The swept fault judged in the monitor's terms, the error measured against zero: the error's
+/// peak in the fault's last second over its first, and the fault effect's limits.
+fn against_zero(summary: &Summary, fault: Option<usize>) -> FaultJudged {
+    let lost = summary.limits.verdict == ControlVerdict::Lost;
+    let Some(effect) = fault.and_then(|i| summary.faults.get(i)).and_then(|f| f.effect.as_ref()) else {
+        return FaultJudged { lost, beyond_is_unstable: true, ..Default::default() };
+    };
+    let growth = match (effect.error_peak_first_s, effect.error_peak_last_s) {
+        (Some(first), Some(last)) if first > 0.0 => Some(last / first),
+        _ => None,
+    };
+    FaultJudged {
+        growth,
+        worst: [effect.worst_error_during, effect.worst_error_after].into_iter().flatten().reduce(f64::max),
+        within_limits: Some(effect.within_limits),
+        beyond_is_unstable: true,
+        lost,
+    }
+}
+
+/// The swept fault judged against the fault-free baseline: the growth of |error − the
+/// baseline's error| from the fault's first second to its last (None: the fault changed nothing
+/// in its first second), and whether the run went beyond the limits in the window at a loop
+/// where the baseline did not.
+fn against_baseline(
+    config: &LaunchConfig,
+    scenario: &dyn Scenario,
+    summary: &Summary,
+    base: &[f64],
+    fault: Option<usize>,
+) -> Result<FaultJudged, ToolError> {
+    let measure = scenario.error_measure();
+    let lost = summary.limits.verdict == ControlVerdict::Lost && measure.lost_beyond.is_some();
+    let Some(window) = fault.and_then(|i| judged_window(config, i)) else {
+        return Ok(FaultJudged { lost, ..Default::default() });
+    };
+    let states = twin::plant_states(Path::new(&summary.run_dir), config, scenario)?;
+    let run = twin::errors(config, scenario, &states);
+    if run.len() != base.len() {
+        return Err(ToolError::Failed(anyhow::anyhow!(
+            "{} ran {} loops and its fault-free baseline {}",
+            summary.run_dir,
+            run.len(),
+            base.len()
+        )));
+    }
+    let departure = |k: usize| if k < run.len() { (run[k] - base[k]).abs() } else { 0.0 };
+    // NaN (a run that blew up) is the largest departure there is.
+    let departure = |k: usize| if departure(k).is_nan() { f64::INFINITY } else { departure(k) };
+    let (first, last) = peaks(departure, window, config.rate_hz.round() as usize);
+    let growth = if last.is_infinite() { Some(f64::INFINITY) } else { (first > 0.0).then(|| last / first) };
+    let beyond_alone = (window.0..window.1).any(|k| measure.beyond(run[k]) && !measure.beyond(base[k]));
+    Ok(FaultJudged {
+        growth,
+        worst: Some((window.0..window.1).map(departure).fold(0.0, f64::max)),
+        within_limits: Some(!beyond_alone),
+        beyond_is_unstable: false,
+        lost,
+    })
+}
+
+/// A warning where a declared reference moves inside the window judged against zero error: the
+/// tracking error there is the reference's, not the fault's.
+fn reference_moves(config: &LaunchConfig, (from, end): (usize, usize)) -> Option<String> {
+    let references = crate::model::reference::declared_references(config).ok()?;
+    let at = |k: usize| k as f64 / config.rate_hz;
+    let moving = references.iter().find(|r| (from..end).any(|k| r.signal.at(at(k)) != r.signal.at(at(from))))?;
+    Some(format!(
+        "the reference of {} moves between t = {} s and {} s, inside the window the fault is judged over against zero error; \
+         its tracking error counts as the fault's (in lockstep the sweep judges against the fault-free baseline instead)",
+        moving.track,
+        at(from),
+        at(end)
+    ))
 }
 
 /// Runs every value, `jobs` at a time (each job a thread running one value at a time, as five
@@ -322,7 +568,7 @@ fn run_all(
     configs: &[(f64, LaunchConfig, Box<dyn Scenario>)],
     binaries: Option<&Binaries>,
     out: &Path,
-    param: &str,
+    name: &(dyn Fn(f64) -> String + Sync),
     jobs: usize,
     stop: &StopFlag,
 ) -> Vec<Option<Result<(Summary, Outcome)>>> {
@@ -339,7 +585,7 @@ fn run_all(
                     if stop.requested() {
                         break;
                     }
-                    let dir = out.join(format!("{param}={}", value_text(*value)));
+                    let dir = out.join(name(*value));
                     let result =
                         crate::launcher::create_run_dir(Some(&dir), &config.scenario).and_then(|dir| match binaries {
                             Some(binaries) => run_once(config, scenario.as_ref(), binaries, &dir, true),
@@ -349,7 +595,7 @@ fn run_all(
                         break;
                     }
                     if let Ok((summary, _)) = &result {
-                        progress.suspend(|| tell!("  {param} = {}: {} loops", value_text(*value), summary.loops));
+                        progress.suspend(|| tell!("  {}: {} loops", name(*value), summary.loops));
                     }
                     progress.inc(1);
                     *results[i].lock().expect("not poisoned") = Some(result);
@@ -370,41 +616,49 @@ pub fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
-fn point(value: f64, summary: &Summary, outcome: &Outcome, fault: Option<usize>) -> SweepPoint {
+/// One value's point: its verdict from what the swept fault did, and `gates` judged on its
+/// run (Err: a gate names what the run does not have).
+fn point(
+    value: f64,
+    summary: &Summary,
+    outcome: &Outcome,
+    fault: Option<usize>,
+    judged: FaultJudged,
+    gates: &[Gate],
+    config: &LaunchConfig,
+) -> Result<SweepPoint, String> {
     let effect = fault.and_then(|i| summary.faults.get(i)).and_then(|f| f.effect.clone());
-    let growth = effect.as_ref().and_then(|e| match (e.error_peak_first_s, e.error_peak_last_s) {
-        (Some(first), Some(last)) if first > 0.0 => Some(last / first),
-        _ => None,
-    });
-    let within_limits = effect.as_ref().map(|e| e.within_limits);
+    let gates: Vec<Gate> = config.gates.iter().chain(gates).cloned().collect();
+    let gated = crate::launcher::gate::judge(&gates, summary).map_err(|e| format!("--fail-on {e}"))?;
     let control = summary.limits.verdict;
+    let FaultJudged { growth, worst, within_limits, beyond_is_unstable, lost } = judged;
     let verdict = if !summary.completed || *outcome != Outcome::Completed {
         Verdict::Failed
-    } else if within_limits == Some(false) || growth.is_some_and(|g| g > UNSTABLE_GROWTH) {
+    } else if (beyond_is_unstable && within_limits == Some(false)) || growth.is_some_and(|g| g > UNSTABLE_GROWTH) {
         Verdict::Unstable
-    } else if control == ControlVerdict::Lost {
+    } else if lost {
         Verdict::Lost
-    } else if effect.is_none() && control == ControlVerdict::LimitsExceeded {
+    } else if (effect.is_none() && control.failed()) || within_limits == Some(false) {
         Verdict::Exceeded
     } else if effect.is_none() {
         Verdict::NoFault
     } else {
         Verdict::Stable
     };
-    SweepPoint {
+    Ok(SweepPoint {
         value,
         completed: summary.completed,
         stopped_because: summary.stopped_because.clone(),
         verdict,
         growth,
-        worst_error: effect
-            .as_ref()
-            .and_then(|e| [e.worst_error_during, e.worst_error_after].into_iter().flatten().reduce(f64::max)),
+        worst_error: worst,
         within_limits,
         control,
         metrics: summary.metrics.clone(),
         run_dir: summary.run_dir.clone(),
-    }
+        failed_gates: gated.lines().cloned().collect(),
+        failed_kinds: (gated.failed(GateKind::Control), gated.failed(GateKind::Timing)),
+    })
 }
 
 /// A metric's column: at least as wide as its name.
@@ -415,10 +669,12 @@ fn metric_width(name: &str) -> usize {
 fn render(r: &SweepReport, metrics: &[String]) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "\nLoopLab sweep · {} · {} ({})", r.scenario, r.param, r.mode);
+    let against_zero = r.judged_against.as_deref() == Some("zero error");
+    let worst = if against_zero { "worst error" } else { "departure" };
     let _ = write!(
         out,
-        "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  control",
-        "value", "verdict", "growth", "worst error", "within limits"
+        "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  {:<15}  gates",
+        "value", "verdict", "growth", worst, "within limits", "control"
     );
     for name in metrics {
         let _ = write!(out, "  {name:>width$}", width = metric_width(name));
@@ -428,13 +684,14 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
         let mut line = String::new();
         let _ = write!(
             line,
-            "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  {:<15}",
+            "  {:>10}  {:<9}{:>12}{:>14}  {:<13}  {:<15}  {:<5}",
             value_text(p.value),
             p.verdict,
             p.growth.map_or("-".into(), |g| format!("{g:.3}")),
             p.worst_error.map_or("-".into(), |e| format!("{e:.5}")),
             p.within_limits.map_or("-", |w| if w { "yes" } else { "NO" }),
-            p.control.to_string()
+            p.control.to_string(),
+            if p.failed_kinds == (false, false) { "pass" } else { "FAIL" }
         );
         for name in metrics {
             let value = p.metrics.get(name).map_or("-".into(), |v| format!("{v:.5}"));
@@ -443,6 +700,11 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
         let _ = writeln!(out, "{}", line.trim_end());
     }
     let _ = writeln!(out, "  control: the whole run against the scenario's limits (summary.json's `limits`)");
+    for p in r.points.iter().filter(|p| !p.failed_gates.is_empty()) {
+        for line in &p.failed_gates {
+            let _ = writeln!(out, "  {} = {}: {line}", r.param, value_text(p.value));
+        }
+    }
     if r.points.iter().all(|p| p.within_limits.is_none()) {
         let what = if metrics.is_empty() {
             "each run's summary.json has its metrics (--metric NAME shows one here)"
@@ -452,10 +714,19 @@ fn render(r: &SweepReport, metrics: &[String]) -> String {
         let _ = writeln!(out, "\n  no fault to judge the loop by: {what}");
         return out;
     }
-    let _ = writeln!(
-        out,
-        "  growth: the error's peak in the fault's last second over its first; above {UNSTABLE_GROWTH} the loop is unstable"
-    );
+    if against_zero {
+        let _ = writeln!(
+            out,
+            "  growth: the error's peak in the fault's last second over its first; above {UNSTABLE_GROWTH} the loop is unstable"
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "  departure: |error − the error of the same run without the fault|, its largest in the fault's window\n  \
+             growth: the departure's peak in the fault's last second over its first; above {UNSTABLE_GROWTH} the loop is unstable\n  \
+             within limits: NO where the fault took the run beyond the limits and the run without it stayed within"
+        );
+    }
     match r.first_unstable {
         Some(v) => {
             let delay = match (r.first_unstable_ticks, r.first_unstable_ms) {
@@ -535,6 +806,8 @@ mod tests {
             control: ControlVerdict::WithinLimits,
             metrics: [("theta_max_abs_rad".to_string(), 0.25)].into(),
             run_dir: "r".into(),
+            failed_gates: vec![],
+            failed_kinds: (false, false),
         };
         let report = SweepReport {
             scenario: "pendulum".into(),
@@ -547,6 +820,8 @@ mod tests {
             theory: None,
             theory_unknown: None,
             theory_ms: None,
+            judged_against: None,
+            warnings: vec![],
         };
         let bare = render(&report, &[]);
         assert!(bare.ends_with("no fault to judge the loop by: each run's summary.json has its metrics (--metric NAME shows one here)\n"), "{bare}");
@@ -580,6 +855,8 @@ mod tests {
             control: ControlVerdict::WithinLimits,
             metrics: BTreeMap::new(),
             run_dir: "r".into(),
+            failed_gates: vec![],
+            failed_kinds: (false, false),
         };
         let report = SweepReport {
             scenario: "pendulum".into(),
@@ -592,10 +869,30 @@ mod tests {
             theory: None,
             theory_ms: None,
             theory_unknown: Some("not the stock law: the controller is a stage of your own".into()),
+            judged_against: Some("the fault-free baseline".into()),
+            warnings: vec![],
         };
         let text = render(&report, &[]);
         assert!(text.contains("theory:   margin unknown (not the stock law"), "{text}");
         assert!(!text.contains("agree"), "{text}");
+    }
+
+    /// Judged against zero error, a reference step inside the fault's window is warned of; one
+    /// before it is not.
+    #[test]
+    fn a_reference_that_moves_inside_the_judged_window_is_warned_of() {
+        let file = concat!(env!("CARGO_MANIFEST_DIR"), "/../launch/declared.toml");
+        let warning = |fault: &str| {
+            let overrides = [
+                Override::parse("reference.table=[[0.0, 0.0], [2.0, 0.1]]").unwrap(),
+                Override::fault(fault).unwrap(),
+            ];
+            let (config, _) = crate::scenarios::resolve(file, &overrides).unwrap();
+            reference_moves(&config, judged_window(&config, 0).unwrap())
+        };
+        let inside = warning("delay controller by 3 ticks at 1s").expect("the step at 2 s is inside [1 s, 5 s)");
+        assert!(inside.starts_with("the reference of state.position moves between t = 1 s and 5 s"), "{inside}");
+        assert_eq!(warning("delay controller by 3 ticks at 3s"), None);
     }
 
     #[test]

@@ -48,13 +48,7 @@ pub fn judge_against_twin(
     let twin_dir = run_dir.join("twin");
     std::fs::create_dir_all(twin_dir.join(files::LOGS)).map_err(|e| ToolError::Failed(e.into()))?;
     crate::launcher::in_process::run_in_process(&twin_config, twin_scenario.as_ref(), &twin_dir)?;
-    let layout = VectorLayout::new(config, scenario);
-    let state_columns = &layout.trajectory_columns()[2..2 + layout.state.len()];
-    let states = |dir: &Path| -> Result<Vec<Vec<f64>>, ToolError> {
-        let table = RunFolder::open(dir, &[files::TRAJECTORY])?.table(files::TRAJECTORY)?;
-        state_columns.iter().map(|name| table.floats(name)).collect()
-    };
-    let (run, twin) = (states(run_dir)?, states(&twin_dir)?);
+    let (run, twin) = (plant_states(run_dir, config, scenario)?, plant_states(&twin_dir, config, scenario)?);
     let _ = std::fs::remove_dir_all(&twin_dir);
     let loops = run.first().map_or(0, Vec::len);
     if twin.first().map_or(0, Vec::len) != loops {
@@ -63,13 +57,7 @@ pub fn judge_against_twin(
             .push("the faults are judged against zero error: the fault-free twin ran another number of loops".into());
         return Ok(());
     }
-    let errors = |states: &[Vec<f64>]| {
-        let measure = scenario.error_measure();
-        (0..loops)
-            .map(|k| (measure.of_state)(k as f64 / config.rate_hz, &states.iter().map(|c| c[k]).collect::<Vec<_>>()))
-            .collect::<Vec<f64>>()
-    };
-    let (run_error, twin_error) = (errors(&run), errors(&twin));
+    let (run_error, twin_error) = (errors(config, scenario, &run), errors(config, scenario, &twin));
     let band = scenario.error_measure().recovery_band;
     let same = |k: usize| {
         run.iter().zip(&twin).all(|(a, b)| a[k].to_bits() == b[k].to_bits() || (a[k].is_nan() && b[k].is_nan()))
@@ -96,4 +84,20 @@ pub fn judge_against_twin(
         });
     }
     Ok(())
+}
+
+/// The plant's state in a run folder's trajectory.csv: one column per state, one value per loop.
+pub fn plant_states(dir: &Path, config: &LaunchConfig, scenario: &dyn Scenario) -> Result<Vec<Vec<f64>>, ToolError> {
+    let layout = VectorLayout::new(config, scenario);
+    let table = RunFolder::open(dir, &[files::TRAJECTORY])?.table(files::TRAJECTORY)?;
+    layout.trajectory_columns()[2..2 + layout.state.len()].iter().map(|name| table.floats(name)).collect()
+}
+
+/// The scenario's error measure at every loop of `states` (as [`plant_states`] reads them).
+pub fn errors(config: &LaunchConfig, scenario: &dyn Scenario, states: &[Vec<f64>]) -> Vec<f64> {
+    let measure = scenario.error_measure();
+    let loops = states.first().map_or(0, Vec::len);
+    (0..loops)
+        .map(|k| (measure.of_state)(k as f64 / config.rate_hz, &states.iter().map(|c| c[k]).collect::<Vec<_>>()))
+        .collect()
 }
