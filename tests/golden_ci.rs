@@ -108,6 +108,12 @@ fn a_moved_golden_run_replays_and_diffs_clean_and_each_gate_fails_with_its_own_e
     assert_eq!(recorded.status.code(), Some(0), "{}", said(&recorded));
     let golden = load_summary(&repo.join("golden/run"));
     assert!(golden.limits.line().starts_with("within limits from t = 1 s: "), "{}", golden.limits.line());
+    // The step response of the motor at rest, from 0 to 1 rad: its overshoot is the angle's
+    // largest value past 1, its steady-state error 1 less the final angle.
+    let m = &golden.metrics;
+    assert!((m["step.state.angle.overshoot_pct"] - 100.0 * (m["state.angle.max_abs"] - 1.0)).abs() < 1e-9, "{m:?}");
+    assert_eq!(m["step.state.angle.steady_state_error"], 1.0 - m["state.angle.final"], "{m:?}");
+    assert!(m["step.state.angle.rise_time_s"] > 0.0 && m["step.state.angle.settling_time_s"] < 1.0, "{m:?}");
     // The run folder names the controller's folder from itself: it moves with the repository.
     let launch = std::fs::read_to_string(repo.join("golden/run/launch.toml")).unwrap();
     assert!(launch.contains("dir = \"../../controllers\""), "{launch}");

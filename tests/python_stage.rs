@@ -256,18 +256,17 @@ fn an_integrating_python_controller_in_real_time_survives_a_kill_a_stop_and_a_de
     }
 }
 
+/// A controller whose step raises from t = 1 s on.
+const RAISING: &str = "import looplab\n\n\nclass Raising:\n    def __init__(self, stage):\n        pass\n\n    \
+                       def step(self, t, x, u):\n        if t >= 1.0:\n            raise ValueError(\"boom\")\n\n\n\
+                       looplab.run(Raising)\n";
+
 #[test]
 fn a_python_step_that_raises_ends_the_run_with_its_last_line() {
     let dir = fresh_dir("raising");
     std::fs::create_dir_all(&dir).unwrap();
     let script = dir.join("raising_controller.py");
-    std::fs::write(
-        &script,
-        "import looplab\n\n\nclass Raising:\n    def __init__(self, stage):\n        pass\n\n    \
-         def step(self, t, x, u):\n        if t >= 1.0:\n            raise ValueError(\"boom\")\n\n\n\
-         looplab.run(Raising)\n",
-    )
-    .unwrap();
+    std::fs::write(&script, RAISING).unwrap();
     let out = dir.join("run");
     let (why, s) = failed_controller_run(&script, "3", &out);
     let last = "controller: error: step failed at t = 1.000000 s: ValueError: boom";
@@ -276,6 +275,36 @@ fn a_python_step_that_raises_ends_the_run_with_its_last_line() {
     let log = std::fs::read_to_string(out.join("logs/controller.log")).unwrap();
     assert!(log.contains("Traceback (most recent call last):") && log.contains("raise ValueError(\"boom\")"), "{log}");
     assert_eq!(log.lines().last(), Some(last), "{log}");
+    assert_nothing_left(&s);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A step that raises at the same point on every start is a crash loop: after three starts it is
+/// not restarted again (not ten times with a growing backoff), and the run says why.
+#[test]
+fn a_python_step_that_fails_on_every_start_is_a_crash_loop_and_not_restarted_again() {
+    let dir = fresh_dir("crash-loop");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("raising_controller.py");
+    std::fs::write(&script, RAISING).unwrap();
+    let out = dir.join("run");
+    let stage = python_stage("controller", script.to_str().unwrap());
+    let output = launcher()
+        .args(["run", "pendulum", "--mode", "lockstep", "--duration", "3", "-q", "--set", &stage, "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
+    let s = load_summary(&out);
+    assert_eq!(s.restarts[&Role::Controller], 2, "{:?}", s.restarts);
+    let why = match &s.stopped_because {
+        Some(StopReason::Failed(why)) => why.clone(),
+        other => panic!("not a failure: {other:?}"),
+    };
+    assert!(
+        why.contains("ValueError: boom; not restarted: a crash loop, the same error on each of its last 3 starts"),
+        "{why}"
+    );
     assert_nothing_left(&s);
     std::fs::remove_dir_all(&dir).unwrap();
 }

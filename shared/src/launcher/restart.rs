@@ -9,6 +9,10 @@ use crate::contract::role::Role;
 /// The backoff doubles with each quick restart up to this.
 pub const MAX_BACKOFF: Duration = Duration::from_secs(1);
 
+/// Quick deaths in a row with the same last words after which a process is not restarted: a
+/// crash loop (a deterministic error in its first steps), which another restart would repeat.
+pub const CRASH_LOOP_DEATHS: u32 = 3;
+
 /// What the supervisor knows of a process whose output just ended.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Death {
@@ -22,6 +26,9 @@ pub struct Death {
     pub ran_s: Option<f64>,
     /// It stopped because its disk is full (`contract::protocol::EXIT_DISK_FULL`).
     pub disk_full: bool,
+    /// Its deaths in a row, this one included, that came before it ran healthy and ended with
+    /// the same last line on stderr, numbers aside (0: it said nothing, or something new).
+    pub same_failure_in_a_row: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,6 +41,8 @@ pub enum Decision {
     TooMany { max_restarts: u32 },
     /// Its disk is full: a restart would only fill it again.
     DiskFull,
+    /// It failed the same way on its last `deaths` starts, each before it ran healthy.
+    CrashLoop { deaths: u32 },
 }
 
 impl Decision {
@@ -46,6 +55,10 @@ impl Decision {
                 Some(format!("not restarted: it reached supervision max_restarts = {max_restarts}"))
             }
             Decision::DiskFull => Some("not restarted: its disk is full".into()),
+            Decision::CrashLoop { deaths } => Some(format!(
+                "not restarted: a crash loop, the same error on each of its last {deaths} starts before it ran \
+                 healthy (supervision.backoff_reset_s); another restart would repeat it"
+            )),
         }
     }
 }
@@ -63,6 +76,9 @@ pub fn decide(policy: &Policy, backoff_reset_s: f64, death: Death) -> Decision {
     }
     if death.disk_full {
         return Decision::DiskFull;
+    }
+    if death.same_failure_in_a_row >= CRASH_LOOP_DEATHS {
+        return Decision::CrashLoop { deaths: death.same_failure_in_a_row };
     }
     if death.restarts >= policy.max_restarts {
         return Decision::TooMany { max_restarts: policy.max_restarts };
@@ -104,7 +120,7 @@ mod tests {
         Policy { restart: Restart::OnFailure, on_death: OnDeath::End, max_restarts: 10, backoff_s: 0.01 };
 
     fn killed(restarts: u32, quick_restarts: u32, ran_s: Option<f64>) -> Death {
-        Death { clean: false, restarts, quick_restarts, ran_s, disk_full: false }
+        Death { clean: false, restarts, quick_restarts, ran_s, disk_full: false, same_failure_in_a_row: 0 }
     }
 
     fn ms(ms: u64) -> Duration {
@@ -123,6 +139,16 @@ mod tests {
                 other => panic!("restart {restarts}: {other:?}"),
             })
             .collect()
+    }
+
+    /// The third quick death in a row with the same words is a crash loop, whatever the
+    /// restarts left; fewer are restarted.
+    #[test]
+    fn the_same_failure_three_times_in_a_row_is_not_restarted() {
+        let death = |same| Death { same_failure_in_a_row: same, ..killed(2, 2, Some(0.01)) };
+        assert!(matches!(decide(&ON_FAILURE, 1.0, death(2)), Decision::Restart { .. }));
+        assert_eq!(decide(&ON_FAILURE, 1.0, death(3)), Decision::CrashLoop { deaths: 3 });
+        assert!(Decision::CrashLoop { deaths: 3 }.refusal().unwrap().starts_with("not restarted: a crash loop"));
     }
 
     #[test]

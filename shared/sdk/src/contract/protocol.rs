@@ -200,6 +200,10 @@ pub struct PlantReport {
     /// Adaptive waits: caught the command or tick by polling, or blocked after the cap.
     #[serde(default)]
     pub wait: WaitCounts,
+    /// What the actuator applied over the last period it ran: after a stage was lost, what the
+    /// fail-safe (`on_stale`) held.
+    #[serde(default)]
+    pub last_applied: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]

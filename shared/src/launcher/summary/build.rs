@@ -17,10 +17,11 @@ use crate::launcher::outcome::{Outcome, StopReason};
 use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
 use crate::launcher::summary::{
-    FaultReport, Jitter, Latency, LostStage, Machine, MonitorCounts, ProcessInfo, RestartSteps, SCHEMA_VERSION,
+    FailSafe, FaultReport, Jitter, Latency, LostStage, Machine, MonitorCounts, ProcessInfo, RestartSteps, SCHEMA_VERSION,
     SharedMemoryCheck, SlowLoops, Summary, TimelineEntry,
 };
 use crate::launcher::{budget, network, verdict};
+use crate::model::layout::VectorLayout;
 use crate::model::scenario::Scenario;
 use crate::runtime::stage::realtime::Scheduling;
 
@@ -118,6 +119,18 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
             && log.lost.is_empty(),
         stopped_because: StopReason::of(outcome, plant.stopped_early),
         lost_stages: log.lost.clone(),
+        fail_safe: (!log.lost.is_empty() && !plant.last_applied.is_empty()).then(|| FailSafe {
+            on_stale: serde_json::to_value(config.supervision.on_stale)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_owned))
+                .unwrap_or_default(),
+            applied: VectorLayout::new(config, scenario)
+                .input
+                .iter()
+                .zip(&plant.last_applied)
+                .map(|(c, v)| (c.name.to_owned(), *v, c.unit.to_owned()))
+                .collect(),
+        }),
         deadline_misses: counters.deadline_misses + counters.skipped_ticks,
         late_or_no_command: counters.deadline_misses,
         misses_by_cause: monitor.miss_causes.clone(),

@@ -74,6 +74,9 @@ pub struct Summary {
     /// without them (`supervision.on_death = "continue"`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lost_stages: Vec<LostStage>,
+    /// With a stage lost: what the plant's fail-safe applied to the end, by input component.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fail_safe: Option<FailSafe>,
     /// Real time: loop periods whose command did not reach the plant by the deadline: late,
     /// never (a loop without a command), or a tick the plant never woke for (`skipped_ticks`).
     /// Lockstep has no deadline: always 0 there.
@@ -434,6 +437,16 @@ pub struct RestartSteps {
     pub backoff_ms: f64,
     pub spawned_after_ms: Option<f64>,
     pub ready_after_ms: Option<f64>,
+}
+
+/// What the plant applied once a stage was lost and no command came: `supervision.on_stale`'s
+/// choice, and the input it applied in the run's last period, with units.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
+pub struct FailSafe {
+    /// "hold" (the last command) or "zero".
+    pub on_stale: String,
+    /// Each input component: name, value, unit.
+    pub applied: Vec<(String, f64, String)>,
 }
 
 /// A stage that died, was not restarted, and whose run went on to its planned end without it

@@ -34,6 +34,7 @@ pub(crate) fn summary() -> Summary {
         completed: true,
         stopped_because: None,
         lost_stages: vec![],
+        fail_safe: None,
         deadline_misses: 0,
         late_or_no_command: 0,
         misses_by_cause: BTreeMap::new(),

@@ -20,7 +20,7 @@ impl Supervisor<'_> {
     /// process is restarted, or the run fails. Returns the outcome if the run is over.
     pub(super) fn ended(&mut self, role: Role) -> Option<Outcome> {
         let ns = now_ns();
-        let death = self.processes[role].died(ns);
+        let mut death = self.processes[role].died(ns);
         if role == Role::Plant {
             // A pause belongs to the plant that asked; its successor asks again at the same tick.
             self.paused = false;
@@ -31,7 +31,10 @@ impl Supervisor<'_> {
         {
             return Some(plant_finished(report, self.config.supervision.lockstep_stall_s));
         }
-        let exit = format!("{}{}", self.processes[role].exit_text(), self.last_words(role));
+        let last_words = self.last_words(role);
+        let exit = format!("{}{last_words}", self.processes[role].exit_text());
+        let healthy = death.ran_s.is_some_and(|s| s >= self.config.supervision.backoff_reset_s);
+        death.same_failure_in_a_row = self.processes[role].same_failure_in_a_row(&last_words, healthy);
         self.faults.detect(role, DetectedBy::ProcessExited, ns);
         // Free what the dead process held in shared memory before its successor opens it, on the
         // clean-up thread.

@@ -37,6 +37,8 @@ pub(super) struct Process {
     /// A stage gone with `on_death = "continue"`: the run goes on without it, and its death is
     /// the summary's `lost_stages`, not an unclean end.
     pub(super) lost: bool,
+    /// The last words of its quick deaths in a row, numbers aside, and how many ended with them.
+    same_failure: Option<(String, u32)>,
 }
 
 /// A restart under way: it starts once the dead process's resources are removed and the backoff
@@ -60,6 +62,7 @@ impl Process {
             stopped: false,
             gone: false,
             lost: false,
+            same_failure: None,
         }
     }
 
@@ -149,7 +152,25 @@ impl Process {
             quick_restarts: self.quick_restarts,
             ran_s,
             disk_full,
+            same_failure_in_a_row: 0,
         }
+    }
+
+    /// Its death that ended with `last_words` (empty: none), before it ran healthy or not:
+    /// how many quick deaths in a row ended the same way, numbers aside (a step that fails at
+    /// another time each start is the same failure).
+    pub(super) fn same_failure_in_a_row(&mut self, last_words: &str, healthy: bool) -> u32 {
+        if last_words.is_empty() || healthy {
+            self.same_failure = None;
+            return 0;
+        }
+        let words: String = last_words.chars().map(|c| if c.is_ascii_digit() { '0' } else { c }).collect();
+        let count = match &self.same_failure {
+            Some((same, n)) if *same == words => n + 1,
+            _ => 1,
+        };
+        self.same_failure = Some((words, count));
+        count
     }
 
     /// It is to start again once its clean-up is done and `backoff` after `now_ns` has passed.
@@ -270,6 +291,19 @@ mod tests {
         decision
     }
 
+    /// The same last line on quick deaths in a row counts up, numbers aside; a healthy run, a
+    /// silent death or other words start again.
+    #[test]
+    fn the_same_failure_in_a_row_is_counted_numbers_aside() {
+        let mut p = Process::new(Role::Controller, ON_FAILURE);
+        assert_eq!(p.same_failure_in_a_row(": error: step failed at t = 1.01 s", false), 1);
+        assert_eq!(p.same_failure_in_a_row(": error: step failed at t = 1.27 s", false), 2);
+        assert_eq!(p.same_failure_in_a_row(": error: another", false), 1);
+        assert_eq!(p.same_failure_in_a_row(": error: another", true), 0);
+        assert_eq!(p.same_failure_in_a_row(": error: another", false), 1);
+        assert_eq!(p.same_failure_in_a_row("", false), 0);
+    }
+
     #[test]
     fn a_restart_is_due_once_cleaned_and_past_its_backoff() {
         let mut p = ended(Role::Estimator, Exit::Running);
@@ -309,7 +343,7 @@ mod tests {
         p.became_ready(at(0));
         p.stopped = true;
         let death = p.died(at(2500));
-        assert_eq!(death, Death { clean: true, restarts: 0, quick_restarts: 0, ran_s: Some(2.5), disk_full: false });
+        assert_eq!(death, Death { clean: true, restarts: 0, quick_restarts: 0, ran_s: Some(2.5), disk_full: false, same_failure_in_a_row: 0 });
         assert!(!p.ready && !p.stopped);
         assert_eq!(p.row().state, ProcessState::Exited);
         assert_eq!(p.exit_text(), "plant exited with status 0");

@@ -1,8 +1,10 @@
 //! What LoopLab says about a declared system's control without knowing the system: per state,
 //! output and input component its final value, max |x| and RMS (`state.theta.rms`,
 //! `input.current.max_abs`; an input's values are what the actuator applied); per
-//! `[[reference]]` the tracking error e = component − r(t) (`tracking.output.y.rms`); and the
-//! error that fault reports and the `[limits]` verdict judge:
+//! `[[reference]]` the tracking error e = component − r(t) (`tracking.output.y.rms`) and, where
+//! the reference steps, the step response (`step.output.y.rise_time_s`, `overshoot_pct`,
+//! `settling_time_s`, `steady_state_error`: `step_response`); and the error that fault reports
+//! and the `[limits]` verdict judge:
 //!
 //! ```toml
 //! [limits]
@@ -30,6 +32,7 @@ use std::sync::{Arc, Mutex};
 use serde::{Deserialize, Serialize};
 
 use super::reference::{self, Part, Signal, Tracked};
+use super::step_response::StepResponse;
 use crate::config::launch::declared::SystemSection;
 use crate::config::launch::{LaunchConfig, LaunchError};
 use crate::config::validate::positive;
@@ -192,9 +195,19 @@ impl DeclaredMeasures {
             tracked: self.tracked.clone(),
             stats: vec![Stats::default(); self.observed.len()],
             tracking: vec![Stats::default(); self.tracked.len()],
+            steps: self.step_responses(),
             last_t: None,
             no_limits: self.limits.is_none(),
         })
+    }
+
+    /// Each reference that steps: "step.<path>", the component's index, its first step.
+    fn step_responses(&self) -> Vec<(String, usize, StepResponse)> {
+        let steps = self.tracked.iter().filter_map(|(prefix, index, signal)| {
+            let path = prefix.strip_prefix("tracking.").expect("tracking.<path>");
+            StepResponse::of(signal).map(|step| (format!("step.{path}"), *index, step))
+        });
+        steps.collect()
     }
 
     /// How fault reports and the verdict judge the system: `[limits]`.
@@ -288,13 +301,15 @@ struct DeclaredMetrics {
     tracked: Vec<(String, usize, Signal)>,
     stats: Vec<Stats>,
     tracking: Vec<Stats>,
+    /// Each reference that steps: "step.<path>", the component's index, its response.
+    steps: Vec<(String, usize, StepResponse)>,
     last_t: Option<f64>,
     /// The file has no `[limits]` (a note).
     no_limits: bool,
 }
 
 impl Metrics for DeclaredMetrics {
-    frozen_fields!(stats, tracking, last_t);
+    frozen_fields!(stats, tracking, steps, last_t);
 
     fn observe(&mut self, row: &Row) {
         let at = |values: &[f64], i: usize| values.get(i).copied().unwrap_or(f64::NAN);
@@ -307,6 +322,9 @@ impl Metrics for DeclaredMetrics {
         for ((_, index, signal), stats) in self.tracked.iter().zip(&mut self.tracking) {
             stats.observe(at(row.state, *index) - signal.at(row.t));
         }
+        for (_, index, step) in &mut self.steps {
+            step.observe(row.t, at(row.state, *index));
+        }
         self.last_t = Some(row.t);
     }
 
@@ -317,6 +335,9 @@ impl Metrics for DeclaredMetrics {
         }
         for ((prefix, _, _), stats) in self.tracked.iter().zip(&self.tracking) {
             stats.write(prefix, &mut m);
+        }
+        for (prefix, _, step) in &self.steps {
+            step.write(prefix, &mut m);
         }
         m
     }
@@ -331,7 +352,8 @@ impl Metrics for DeclaredMetrics {
             )),
             _ => None,
         });
-        no_limits.into_iter().chain(table_ends).collect()
+        let steps = self.steps.iter().flat_map(|(prefix, _, step)| step.notes(prefix));
+        no_limits.into_iter().chain(table_ends).chain(steps).collect()
     }
 }
 
@@ -344,6 +366,7 @@ pub fn generic(names: Declared) -> Box<dyn Metrics> {
         tracked: Vec::new(),
         stats,
         tracking: Vec::new(),
+        steps: Vec::new(),
         last_t: None,
         no_limits: false,
     })

@@ -22,6 +22,7 @@ pub mod metrics;
 mod plant_tests;
 pub mod reference;
 pub mod sensors;
+pub mod step_response;
 pub mod system;
 
 use self::controller::{NoController, StateFeedback};

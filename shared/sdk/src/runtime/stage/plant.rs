@@ -267,6 +267,7 @@ impl PlantCore {
         self.report.stopped_early = self.k < loops;
         self.report.counters = self.counters;
         self.report.loops = self.report.published + self.counters.skipped_ticks;
+        self.report.last_applied = self.applied[..self.limits.len()].to_vec();
     }
 
     pub fn snapshot(&self) -> SnapshotData {
