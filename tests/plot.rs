@@ -259,3 +259,33 @@ fn every_paper_figure_is_drawn() {
         }
     });
 }
+
+/// A declared system's figures: outputs.png draws each state component, the angle against its
+/// reference (a step, in the reference's colour), over the window `--from`/`--to` give; a
+/// window outside the run is bad input in one line.
+#[test]
+fn a_declared_system_draws_its_state_against_the_reference_over_a_window() {
+    let dir = fresh_dir("plot-declared");
+    let file = crate::golden_ci::motor_under_state_feedback(&dir);
+    let out = dir.join("run");
+    let ran = looplab().arg("run").arg(&file).args(["--in-process", "-q", "--out"]).arg(&out).output().unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let plotted = looplab().arg("plot").arg(&out).args(["--from", "0.3", "--to", "1.5"]).output().unwrap();
+    assert!(plotted.status.success(), "{}", String::from_utf8_lossy(&plotted.stderr));
+    let figure = out.join("outputs.png");
+    assert!(String::from_utf8_lossy(&plotted.stdout).contains(&format!("wrote {}", figure.display())));
+    assert_figure(&figure, 2, false);
+    assert_figure(&out.join("sensors.png"), 2, false);
+    // The reference's dashes across the window: far more than the legend's sample.
+    assert!(pixels_of(&figure, Colour::Series(1)) > 300, "no reference drawn");
+    let outside = looplab().arg("plot").arg(&out).args(["--from", "3"]).output().unwrap();
+    assert_eq!(outside.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&outside.stderr),
+        format!(
+            "error: {}: --from 3 s to the end: the window must start within the run (0 to 2 s) and end after it starts\n",
+            out.display()
+        )
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -151,6 +151,12 @@ against the stochastic b)."
         /// runs/<time>-paper-<scenario>)
         #[arg(long, value_name = "DIR", requires = "paper")]
         out: Option<PathBuf>,
+        /// The figures over time start at this simulation time, s (default: 0)
+        #[arg(long, value_name = "SECONDS", conflicts_with = "paper")]
+        from: Option<f64>,
+        /// The figures over time end at this simulation time, s (default: the run's end)
+        #[arg(long, value_name = "SECONDS", conflicts_with = "paper")]
+        to: Option<f64>,
     },
     /// Run one stage on the inputs recorded in a run folder, loop by loop in lockstep, as processes
     /// over shared memory (or --in-process), and write a new run folder with its outputs beside the
@@ -430,7 +436,10 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
             }
             ExitCode::SUCCESS
         }
-        Some(Command::Plot { run_dir: Some(run_dir), .. }) => figures(plot::run::plot_run(&run_dir, catalog)),
+        Some(Command::Plot { run_dir: Some(run_dir), from, to, .. }) => {
+            let window = (from.is_some() || to.is_some()).then(|| from.unwrap_or(0.0)..to.unwrap_or(f64::INFINITY));
+            figures(plot::run::plot_run(&run_dir, catalog, window))
+        }
         Some(Command::Plot { paper: Some(scenario), out, .. }) => {
             figures(plot::paper::paper_figures(catalog, &scenario, out.as_deref()))
         }
@@ -444,7 +453,7 @@ pub fn main_with(catalog: &Catalog) -> ExitCode {
             Err(ToolError::BadInput(why)) => bad_input(why),
             Err(ToolError::Failed(e)) => report_failure(Err(e)),
         },
-        Some(Command::Diff(args)) => run_diff(args),
+        Some(Command::Diff(args)) => run_diff(args, catalog),
         Some(Command::Replay(args)) => match replay::replay(&args, catalog) {
             Ok(done) => {
                 say_raw!("{}", replay::render(&done));
@@ -506,7 +515,7 @@ fn probe(args: &ProbeCli) -> ExitCode {
 }
 
 /// `looplab diff`: the table and the verdict; its exit code (`RunDiff::exit_code`), 2 bad input.
-fn run_diff(args: DiffCli) -> ExitCode {
+fn run_diff(args: DiffCli, catalog: &Catalog) -> ExitCode {
     let tolerances = match args.tolerances.iter().map(|t| diff::parse_tolerance(t)).collect() {
         Ok(t) => t,
         Err(e) => return bad_input(e),
@@ -518,7 +527,7 @@ fn run_diff(args: DiffCli) -> ExitCode {
         Err(e) => return bad_input(e),
     };
     let options = diff::DiffOptions { tolerances, rtol: args.rtol, figure, json: Some(json), gates };
-    match diff::diff_runs(&args.a, &args.b, &options) {
+    match diff::diff_runs(&args.a, &args.b, &options, catalog) {
         Ok(result) => {
             say_raw!("{}", result.render());
             if let Some(figure) = &result.figure {
@@ -757,7 +766,7 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
             {
                 code = gated;
             }
-            let plotted = if args.plot { figures(plot::run::plot_run(&run_dir, catalog)) } else { ExitCode::SUCCESS };
+            let plotted = if args.plot { figures(plot::run::plot_run(&run_dir, catalog, None)) } else { ExitCode::SUCCESS };
             // A run that failed keeps its code; a failed plot fails a run that completed.
             if code == launcher::EXIT_OK { plotted } else { ExitCode::from(code) }
         }

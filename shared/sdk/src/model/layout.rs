@@ -57,19 +57,26 @@ impl VectorLayout {
     /// estimate (`est.`), the command (`cmd.`) and the input the actuator applied (`applied.`),
     /// each with its unit.
     pub fn trajectory_columns(&self) -> Vec<String> {
-        let mut columns = vec!["k".to_string(), column_name("t", "s")];
-        columns.extend(self.state.iter().map(|c| column_name(c.name, c.unit)));
+        self.trajectory_columns_with_units().into_iter().map(|(name, _)| name).collect()
+    }
+
+    /// [`VectorLayout::trajectory_columns`], each with its component's unit as written ("rad/s";
+    /// "" for k).
+    pub fn trajectory_columns_with_units(&self) -> Vec<(String, &'static str)> {
+        let column = |name: &str, unit: &'static str| (column_name(name, unit), unit);
+        let mut columns = vec![("k".to_string(), ""), column("t", "s")];
+        columns.extend(self.state.iter().map(|c| column(c.name, c.unit)));
         for (sensor, components) in &self.sensors {
             match &components[..] {
-                [c] => columns.push(column_name(&format!("meas.{sensor}"), c.unit)),
+                [c] => columns.push(column(&format!("meas.{sensor}"), c.unit)),
                 components => {
-                    columns.extend(components.iter().map(|c| column_name(&format!("meas.{sensor}.{}", c.name), c.unit)))
+                    columns.extend(components.iter().map(|c| column(&format!("meas.{sensor}.{}", c.name), c.unit)))
                 }
             }
         }
-        columns.extend(self.estimate.iter().map(|c| column_name(&format!("est.{}", c.name), c.unit)));
-        columns.extend(self.input.iter().map(|c| column_name(&format!("cmd.{}", c.name), c.unit)));
-        columns.extend(self.input.iter().map(|c| column_name(&format!("applied.{}", c.name), c.unit)));
+        columns.extend(self.estimate.iter().map(|c| column(&format!("est.{}", c.name), c.unit)));
+        columns.extend(self.input.iter().map(|c| column(&format!("cmd.{}", c.name), c.unit)));
+        columns.extend(self.input.iter().map(|c| column(&format!("applied.{}", c.name), c.unit)));
         columns
     }
 }

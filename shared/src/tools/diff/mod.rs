@@ -17,6 +17,8 @@ use crate::contract::report::Stats;
 use crate::contract::run_format::files;
 use crate::launcher::gate::{self, Judged};
 use crate::launcher::summary::Summary;
+use crate::model::catalog::Catalog;
+use crate::model::layout::VectorLayout;
 use crate::tools::ToolError;
 use crate::tools::compare::{metric_text, ratio_label};
 use crate::tools::plot::figure::{Colour, Curve, Draw as _, FaultMark, Figure, Line, Panel};
@@ -135,6 +137,12 @@ pub struct FieldDiff {
     /// B − A per loop, NaN where there is no finite difference (the figure's curve).
     #[serde(skip)]
     pub delta: Vec<f64>,
+    /// The tolerance at each loop, ABS + R·|A| (NaN where A has no value): the figure's band.
+    #[serde(skip)]
+    pub band: Vec<f64>,
+    /// The field's unit, where the run's launch file says it ("rad/s"; None for a metric).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
 }
 
 impl FieldDiff {
@@ -205,9 +213,12 @@ pub fn compare_field(
         first_over: None,
         values: None,
         delta: Vec::with_capacity(at.len()),
+        band: Vec::with_capacity(at.len()),
+        unit: None,
     };
     let (mut squares, mut finite) = (0.0, 0u64);
     for ((at, a), b) in at.iter().zip(a).zip(b) {
+        field.band.push(a.map_or(f64::NAN, |a| tolerance + rtol * a.abs()));
         let cell = compare_cells(*a, *b, tolerance, rtol);
         let (delta, over) = match cell {
             CellDiff::BothEmpty => (f64::NAN, false),
@@ -342,6 +353,8 @@ impl RunDiff {
 
 /// The legend's name of the differences' curves.
 pub const DELTA_LABEL: &str = "B − A (gaps: no finite difference)";
+/// The legend's name of the tolerance band's curves.
+pub const BAND_LABEL: &str = "tolerance ±(ABS + R·|A|)";
 
 /// `FIELD=ABS` as `--tolerance` takes it.
 pub fn parse_tolerance(text: &str) -> Result<(String, f64), ToolError> {
@@ -477,7 +490,7 @@ fn checked_figure(path: &Path) -> Result<(), ToolError> {
 /// Compares the runs in folders `a` and `b`. Runs that cannot be compared (other scenarios,
 /// rates or lengths) are `ToolError::BadInput`, one line that says which. Writes the figure and
 /// diff.json where `options` says.
-pub fn diff_runs(a: &Path, b: &Path, options: &DiffOptions) -> Result<RunDiff, ToolError> {
+pub fn diff_runs(a: &Path, b: &Path, options: &DiffOptions, catalog: &Catalog) -> Result<RunDiff, ToolError> {
     if !options.rtol.is_finite() || options.rtol < 0.0 {
         return Err(ToolError::BadInput(format!("--rtol {}: a finite number, 0 or more", options.rtol)));
     }
@@ -496,6 +509,14 @@ pub fn diff_runs(a: &Path, b: &Path, options: &DiffOptions) -> Result<RunDiff, T
 
     let loops = align(&run_a, &run_b);
     let at: Vec<LoopAt> = loops.iter().map(|(at, ..)| *at).collect();
+    // The columns' units, from A's launch file; none where it cannot be read (the figure then
+    // says B − A alone).
+    let units: BTreeMap<String, &str> = RunFolder::open(a, &[files::LAUNCH])
+        .and_then(|folder| folder.launch(catalog))
+        .map(|(config, scenario)| VectorLayout::new(&config, scenario.as_ref()).trajectory_columns_with_units())
+        .unwrap_or_default()
+        .into_iter()
+        .collect();
     let mut fields = Vec::new();
     for name in &run_a.columns {
         let Some(group) = Group::of_column(name) else { continue };
@@ -504,7 +525,9 @@ pub fn diff_runs(a: &Path, b: &Path, options: &DiffOptions) -> Result<RunDiff, T
         let cells_a: Vec<Option<f64>> = loops.iter().map(|(_, ra, _)| cells(&column_a, *ra)).collect();
         let cells_b: Vec<Option<f64>> = loops.iter().map(|(_, _, rb)| cells(&column_b, *rb)).collect();
         let tolerance = tolerance_for(name, group, &options.tolerances);
-        fields.push(compare_field(name, group, &at, &cells_a, &cells_b, tolerance, options.rtol));
+        let mut field = compare_field(name, group, &at, &cells_a, &cells_b, tolerance, options.rtol);
+        field.unit = units.get(name).map(|unit| unit.to_string());
+        fields.push(field);
     }
     for name in metric_names {
         let (va, vb) = (sa.metrics.get(name).copied(), sb.metrics.get(name).copied());
@@ -515,6 +538,7 @@ pub fn diff_runs(a: &Path, b: &Path, options: &DiffOptions) -> Result<RunDiff, T
         field.max_at = None;
         field.first_over = None;
         field.delta.clear();
+        field.band.clear();
         field.values = Some((va, vb));
         fields.push(field);
     }

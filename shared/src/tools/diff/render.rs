@@ -120,10 +120,11 @@ impl RunDiff {
         verdict
     }
 
-    /// The figure: B − A over time, one panel per field that differs, in trajectory.csv's
-    /// order (a field's own scale and unit: a group mixes units, rad beside rad/s, and its small
-    /// differences would vanish beside its large ones), or one "no difference" panel; the faults
-    /// of both runs marked.
+    /// The figure: B − A over time, one panel per field that differs loop by loop, in
+    /// trajectory.csv's order (a field's own scale and unit: a group mixes units, rad beside
+    /// rad/s, and its small differences would vanish beside its large ones), with its tolerance
+    /// band ±(ABS + R·|A|) where it has one, or one "no difference" panel; the faults of both
+    /// runs marked. The title counts the fields drawn, and the metrics apart (they have no loop).
     pub fn figure(&self) -> Figure {
         let t: Vec<f64> = self.at.iter().map(|at| at.t_s).collect();
         let end = t.iter().copied().filter(|t| t.is_finite()).fold(0.0, f64::max);
@@ -133,15 +134,31 @@ impl RunDiff {
             .differing()
             .filter(|f| f.group != Group::Metrics)
             .map(|f| {
-                let curves = crate::model::figure::runs(&t, &f.delta, step)
+                let mut curves: Vec<Curve> = crate::model::figure::runs(&t, &f.delta, step)
                     .into_iter()
                     .map(|run| Curve::new(DELTA_LABEL, run, Colour::Series(0), Line::Solid(2)))
                     .collect();
+                let exact = f.band.iter().all(|b| !(*b > 0.0));
+                if !exact {
+                    for sign in [1.0, -1.0] {
+                        let band: Vec<f64> = f.band.iter().map(|b| sign * b).collect();
+                        curves.extend(
+                            crate::model::figure::runs(&t, &band, step)
+                                .into_iter()
+                                .map(|run| Curve::new(BAND_LABEL, run, Colour::Limit, Line::Dashed)),
+                        );
+                    }
+                }
                 let largest = match f.max_at {
                     Some(at) => format!("largest {} at t = {} s", metric_text(f.max_abs), at.t_s),
                     None => "no finite difference".into(),
                 };
-                Panel::new(format!("{} · {largest}", f.name), "B − A", curves)
+                let tolerance = if exact { " · exact: no tolerance" } else { "" };
+                let y_desc = match f.unit.as_deref() {
+                    Some(unit) if !unit.is_empty() && unit != "1" => format!("B − A, {unit}"),
+                    _ => "B − A".to_string(),
+                };
+                Panel::new(format!("{} · {largest}{tolerance}", f.name), y_desc, curves)
             })
             .collect();
         if panels.is_empty() {
@@ -149,8 +166,16 @@ impl RunDiff {
                 Curve::new(DELTA_LABEL, vec![(span.start, 0.0), (span.end, 0.0)], Colour::Series(0), Line::Solid(2));
             panels.push(Panel::new("no difference: B − A = 0 in every field and loop", "B − A", vec![zero]));
         }
+        let metrics = self.differing().filter(|f| f.group == Group::Metrics).count();
+        let drawn = self.differing().count() - metrics;
+        let mut title = format!("{}: B − A over time · {}", self.scenario, self.verdict());
+        if metrics > 0 {
+            title.push_str(&format!(
+                " · drawn: the {drawn} field(s) that differ loop by loop; {metrics} metric(s) differ too (diff.json)"
+            ));
+        }
         Figure {
-            title: format!("{}: B − A over time · {}", self.scenario, self.verdict()),
+            title,
             panels,
             x: span,
             x_desc: "t, s",

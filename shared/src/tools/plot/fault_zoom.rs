@@ -1,6 +1,6 @@
 //! One figure per fault, zoomed on it: `fault-<n>-<kind>-<process>.png`, from a little before
-//! the injection to a little after the loop was whole again (or after the loss, for a stage
-//! that never came back): the scenario's error against its limit, and each loop's end-to-end
+//! the injection to a little after the loop was whole again (the whole of its "during", to the
+//! run's end for a stage that never came back): the scenario's error against its limit, and each loop's end-to-end
 //! latency with its deadline misses, each in its cause's colour (`misses.rs`).
 
 use std::path::{Path, PathBuf};
@@ -16,8 +16,6 @@ use crate::tools::run_folder::RunFolder;
 
 /// Shown before the injection and after the end of "during", s (at least 50 loops).
 const MARGIN_S: f64 = 0.5;
-/// The longest "during" shown; a stage lost for good is shown this long after its loss.
-const LONGEST_DURING_S: f64 = 2.0;
 
 /// `fault-1-kill-controller.png`: numbered from 1 in the launch file's order.
 pub fn file_name(n: usize, f: &FaultReport) -> String {
@@ -57,8 +55,7 @@ pub fn plot_faults(
     for (i, f) in summary.faults.iter().enumerate() {
         let during_end =
             f.effect.as_ref().and_then(|e| e.phases.as_ref()).map_or(f.at_s, |p| p.during.to_k as f64 / rate);
-        let window = f.at_s - MARGIN_S.max(50.0 / rate)
-            ..(during_end.min(f.at_s + LONGEST_DURING_S) + MARGIN_S.max(50.0 / rate)).min(data.config().duration_s);
+        let window = f.at_s - MARGIN_S.max(50.0 / rate)..(during_end + MARGIN_S.max(50.0 / rate)).min(data.config().duration_s);
         let window = window.start.max(0.0)..window.end.max(window.start.max(0.0) + 1.0 / rate);
         let within = |points: &[(f64, f64)]| -> Vec<(f64, f64)> {
             points.iter().copied().filter(|(t, _)| window.contains(t)).collect()
@@ -92,7 +89,7 @@ pub fn plot_faults(
             latency_panel.curves.extend(crosses_by_cause(in_view, |_| top));
         }
         let figure = Figure {
-            title: format!("{}: {} (during: {:.3} s to {:.3} s)", scenario.title(), f.fault, f.at_s, during_end),
+            title: format!("{}: {} (during: {:.3} s to {:.3} s)", summary.title, f.fault, f.at_s, during_end),
             panels: vec![error_panel, latency_panel],
             x: window.clone(),
             x_desc: "t, s",

@@ -35,14 +35,16 @@ pub fn thin(points: Vec<(f64, f64)>, max: usize) -> Vec<(f64, f64)> {
 /// A point count that a panel's width shows without losing anything.
 const POINTS_PER_CURVE: usize = 3000;
 
-/// The span of `panel`'s curves and marks (bounds do not widen it).
-fn panel_range(panel: &Panel) -> Range<f64> {
-    y_range(panel.curves.iter().flat_map(|c| &c.points).chain(&panel.marks).map(|p| p.1))
+/// The span of `panel`'s curves and marks over `x`, the figure's span (bounds do not widen it):
+/// a figure of a window of the run is scaled to what it shows.
+fn panel_range(panel: &Panel, x: &Range<f64>) -> Range<f64> {
+    let points = panel.curves.iter().flat_map(|c| &c.points).chain(&panel.marks);
+    y_range(points.filter(|p| p.0 >= x.start && p.0 <= x.end).map(|p| p.1))
 }
 
 /// The bounds that reach into `panel`'s range, the only ones drawn.
-fn bounds_shown(panel: &Panel) -> impl Iterator<Item = &Curve> {
-    let y = panel_range(panel);
+fn bounds_shown<'a>(panel: &'a Panel, x: &Range<f64>) -> impl Iterator<Item = &'a Curve> {
+    let y = panel_range(panel, x);
     panel.bounds.iter().filter(move |c| c.points.iter().any(|p| y.contains(&p.1)))
 }
 
@@ -156,7 +158,7 @@ fn draw_header(figure: &Figure, area: &DrawingArea<PngBackend<'_>, Shift>) -> an
     area.draw_text(&figure.title, &(FONT, size).into_font().color(&BLACK), (16, 8)).map_err(plot_error)?;
     let mut entries: Vec<(String, RGBColor, Line)> = Vec::new();
     for panel in &figure.panels {
-        for c in panel.curves.iter().chain(bounds_shown(panel)) {
+        for c in panel.curves.iter().chain(bounds_shown(panel, &figure.x)) {
             if !entries.iter().any(|(label, ..)| *label == c.label) {
                 entries.push((c.label.clone(), rgb(c.colour), c.line));
             }
@@ -204,7 +206,7 @@ fn draw_header(figure: &Figure, area: &DrawingArea<PngBackend<'_>, Shift>) -> an
 }
 
 fn draw_panel(figure: &Figure, area: &DrawingArea<PngBackend<'_>, Shift>, panel: &Panel) -> anyhow::Result<()> {
-    let y = panel_range(panel);
+    let y = panel_range(panel, &figure.x);
     let mut chart = ChartBuilder::on(area)
         .caption(&panel.title, (FONT, 17))
         .margin(10)
@@ -228,7 +230,7 @@ fn draw_panel(figure: &Figure, area: &DrawingArea<PngBackend<'_>, Shift>, panel:
         .map_err(plot_error)?;
     let area = &chart.plotting_area().clone();
     // Bounds first: a command at its limit stays visible over the limit's line.
-    for curve in bounds_shown(panel).chain(&panel.curves) {
+    for curve in bounds_shown(panel, &figure.x).chain(&panel.curves) {
         let points: Vec<(f64, f64)> =
             curve.points.iter().copied().filter(|p| p.0 >= figure.x.start && p.0 <= figure.x.end).collect();
         match curve.line {

@@ -1,6 +1,7 @@
 //! `looplab plot RUN_DIR`: a run's figures, as PNG in the run folder: truth against estimate,
-//! the commands, each sensor's held values against the truth it measures, the tick period
-//! error and the deadline misses by cause, with every fault marked on the time axis.
+//! the commands, each sensor's held values against the truth it measures, a declared system's
+//! state and outputs against its reference, the tick period error and the deadline misses by
+//! cause, with every fault marked on the time axis; over the whole run or `--from`/`--to`.
 //!
 //! The CSV files are read by column name through the run folder's reader, the names a run of
 //! the launch file writes (`VectorLayout::trajectory_columns`, `loops::columns`).
@@ -16,6 +17,7 @@ use crate::model::catalog::Catalog;
 use crate::model::figure::RunColumns;
 use crate::model::figure::runs;
 use crate::model::layout::VectorLayout;
+use crate::model::reference::{Between, Signal};
 use crate::model::scenario::Scenario;
 use crate::tools::plot::figure::{Colour, Curve, Draw as _, FaultMark, Figure, Line, Panel, series, steps, tick_label};
 use crate::tools::plot::latency;
@@ -75,6 +77,8 @@ pub struct RunData {
     pub misses: Vec<Miss>,
     pub faults: Vec<FaultMark>,
     pub summary: Summary,
+    /// The figures over time show this window of simulation time, s (None: the whole run).
+    pub window: Option<Range<f64>>,
 }
 
 impl RunData {
@@ -98,13 +102,14 @@ impl RunData {
             .iter()
             .map(|f| FaultMark { t: f.at_s, label: format!("{} {}", <&str>::from(f.kind), f.process) })
             .collect();
-        Ok(RunData { config, scenario, layout, columns, trajectory, ticks, misses, faults, summary })
+        Ok(RunData { config, scenario, layout, columns, trajectory, ticks, misses, faults, summary, window: None })
     }
 
-    /// A figure of this run over simulation time `x`, titled "<scenario>: <what>", with its faults
+    /// A figure of this run over simulation time `x`, titled "<the run's title>: <what>" (a
+    /// declared system's by its launch file's own name, as the run was titled), with its faults
     /// marked.
     fn figure_over_time(&self, what: &str, panels: Vec<Panel>, x: Range<f64>) -> Figure {
-        let title = format!("{}: {what}", self.scenario.title());
+        let title = format!("{}: {what}", self.summary.title);
         Figure {
             title,
             panels,
@@ -124,6 +129,10 @@ impl RunColumns for RunData {
 
     fn t(&self) -> &[f64] {
         &self.trajectory[1]
+    }
+
+    fn span(&self) -> Range<f64> {
+        self.window.clone().unwrap_or(0.0..self.config.duration_s)
     }
 
     fn estimate(&self, name: &str) -> Option<&[f64]> {
@@ -288,8 +297,8 @@ fn sensors_figure(data: &RunData) -> Figure {
     let vectors = data.scenario.vectors();
     let state = |row: usize| -> Vec<f64> { data.columns.state.clone().map(|c| data.trajectory[c][row]).collect() };
     let applied = |row: usize| -> Vec<f64> { data.columns.applied.clone().map(|c| data.trajectory[c][row]).collect() };
-    let window = sensor_window(&data.config);
-    let rows = t.iter().take_while(|t| **t <= window.end).count();
+    let window = data.window.clone().unwrap_or_else(|| sensor_window(&data.config));
+    let rows = t.iter().position(|t| *t >= window.start).unwrap_or(t.len())..t.iter().take_while(|t| **t <= window.end).count();
     let mut panels = Vec::new();
     for ((name, _), columns) in data.layout.sensors.iter().zip(&data.columns.sensors) {
         let signal = vectors.signal(&data.config.sensors[name].signal).expect("sensor signals are checked at load");
@@ -297,7 +306,8 @@ fn sensors_figure(data: &RunData) -> Figure {
         // interval, as the sensors' process read it.
         let mut truth = vec![Vec::new(); columns.len()];
         let mut out = vec![0.0; columns.len()];
-        for (row, &at) in t.iter().enumerate().take(rows) {
+        for row in rows.clone() {
+            let at = t[row];
             let applied: Vec<f64> = applied(row).into_iter().map(|u| if u.is_finite() { u } else { 0.0 }).collect();
             let x = state(row);
             if x.iter().all(|v| v.is_finite()) {
@@ -306,7 +316,7 @@ fn sensors_figure(data: &RunData) -> Figure {
             }
         }
         for ((component, column), truth) in signal.components.iter().zip(columns.clone()).zip(truth) {
-            let held = steps(&series(&t[..rows], &data.trajectory[column][..rows]));
+            let held = steps(&series(&t[rows.clone()], &data.trajectory[column][rows.clone()]));
             let spec = &data.config.sensors[name];
             let bias = spec.bias.expand(columns.len())[column - columns.start];
             let bias =
@@ -322,13 +332,51 @@ fn sensors_figure(data: &RunData) -> Figure {
             ));
         }
     }
-    let zoom = if window.end < data.config.duration_s {
+    let zoom = if window.start > 0.0 {
+        format!(", t = {} to {} of {}", seconds(window.start), seconds(window.end), seconds(data.config.duration_s))
+    } else if window.end < data.config.duration_s {
         format!(", first {} of {}", seconds(window.end), seconds(data.config.duration_s))
     } else {
         String::new()
     };
     data.figure_over_time(&format!("sensors' held values against the truth{zoom}"), panels, window)
 }
+
+/// A declared system's state and output components over time, each against its `[reference]`
+/// where it has one; None for a built-in scenario (its paper's figures say more).
+fn outputs_figure(data: &RunData) -> Option<Figure> {
+    if !data.config.is_declared() {
+        return None;
+    }
+    let references = crate::model::reference::declared_references(&data.config).ok()?;
+    let (t, span) = (data.t(), data.span());
+    let panels = data
+        .layout
+        .state
+        .iter()
+        .enumerate()
+        .map(|(i, component)| {
+            let values = series(t, &data.trajectory[data.columns.state.start + i]);
+            let mut curves = vec![Curve::new("the plant's value", values, Colour::Series(0), Line::Solid(2))];
+            let tracked = references.iter().find(|r| r.track.split_once('.').map(|(_, name)| name) == Some(component.name));
+            let title = match tracked {
+                Some(reference) => {
+                    let points: Vec<(f64, f64)> = t.iter().map(|&t| (t, reference.signal.at(t))).collect();
+                    let hold = matches!(reference.signal, Signal::Table { between: Between::Hold, .. });
+                    let points = if hold { steps(&points) } else { points };
+                    curves.push(Curve::new("reference", points, Colour::Series(1), Line::Dashed));
+                    format!("{} against its reference", reference.track)
+                }
+                None => component.name.to_string(),
+            };
+            Panel::new(title, unit_desc(component), curves)
+        })
+        .collect();
+    Some(data.figure_over_time("state and outputs against the reference", panels, span))
+}
+
+/// The file of a declared system's state and outputs figure, in the run folder.
+pub const OUTPUTS_FIGURE: &str = "outputs.png";
 
 /// A duration for a title: "10 ms", "0.25 s".
 fn seconds(s: f64) -> String {
@@ -425,16 +473,31 @@ pub fn misses_figure(data: &RunData) -> Option<Figure> {
     Some(data.figure_over_time(&title, vec![panel], span))
 }
 
-/// The figures of a run folder, written into it: estimate.png, commands.png, sensors.png, in real
-/// time tick-period.png and misses.png, and latency-cdf.png. Returns the paths written.
-pub fn plot_run(run_dir: &Path, catalog: &Catalog) -> Result<Vec<PathBuf>, ToolError> {
-    let data = RunData::read(run_dir, catalog)?;
+/// The figures of a run folder, written into it: estimate.png, commands.png, sensors.png, a
+/// declared system's outputs.png, in real time tick-period.png and misses.png, and
+/// latency-cdf.png; the figures over time over `window` (s) where given. Returns the paths
+/// written.
+pub fn plot_run(run_dir: &Path, catalog: &Catalog, window: Option<Range<f64>>) -> Result<Vec<PathBuf>, ToolError> {
+    let mut data = RunData::read(run_dir, catalog)?;
+    if let Some(w) = &window
+        && !(w.start >= 0.0 && w.start < w.end && w.start < data.config.duration_s)
+    {
+        let to = if w.end.is_finite() { format!("{} s", w.end) } else { "the end".into() };
+        return Err(ToolError::BadInput(format!(
+            "{}: --from {} s to {to}: the window must start within the run (0 to {} s) and end after it starts",
+            run_dir.display(),
+            w.start,
+            data.config.duration_s
+        )));
+    }
+    data.window = window.map(|w| w.start..w.end.min(data.config.duration_s));
     let mut written = Vec::new();
     let mut figures = vec![
         ("estimate.png", estimate_figure(&data)),
         ("commands.png", commands_figure(&data)),
         ("sensors.png", sensors_figure(&data)),
     ];
+    figures.extend(outputs_figure(&data).map(|figure| (OUTPUTS_FIGURE, figure)));
     match tick_period_figure(&data) {
         Some(figure) => figures.push(("tick-period.png", figure)),
         None => {
