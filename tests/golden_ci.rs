@@ -258,3 +258,53 @@ fn a_kill_with_no_effect_on_the_plant_reports_no_degradation() {
     assert!(!killed.dir.join("twin").exists());
     std::fs::remove_dir_all(&root).unwrap();
 }
+
+/// `with_reference = true`: the controller's input carries the reference after the estimate
+/// (`reference.state.angle`), and a controller that reads it there runs the very loop of one
+/// that asks `stage.reference(t)`, byte for byte.
+#[test]
+fn a_controller_given_the_reference_in_its_input_runs_the_loop_of_one_that_asks_for_it() {
+    let root = fresh_dir("with-reference");
+    let repo = repository(&root);
+    let from_input = r#"import looplab
+
+
+class PD:
+    def __init__(self, stage):
+        assert stage.input_names == ["angle", "speed", "reference.state.angle"], stage.input_names
+        p = stage.config["parameters"]
+        self.kp, self.kd = p["kp"], p["kd"]
+
+    def step(self, t, x, u):
+        u[0] = self.kp * (x[2] - x[0]) - self.kd * x[1]
+
+
+looplab.run(PD)
+"#;
+    std::fs::write(repo.join("controllers/pd_input.py"), from_input).unwrap();
+    let stage = |name: &str, extra: &[&str]| {
+        let out = root.join(name);
+        let args = [&["run", "motor.toml", "-q", "--out", out.to_str().unwrap()], extra].concat();
+        let ran = looplab_in(&repo, &args);
+        assert_eq!(ran.status.code(), Some(0), "{}", said(&ran));
+        std::fs::read(out.join("trajectory.csv")).unwrap()
+    };
+    let asked = stage("asked", &[]);
+    let given = stage(
+        "given",
+        &["--set", "stages.controller.command=[\"python3\", \"pd_input.py\"]", "--set", "stages.controller.with_reference=true"],
+    );
+    assert!(asked == given, "the two controllers' runs differ");
+    // Without a [reference] there is nothing to append: one line, exit 2.
+    let none = looplab_in(
+        &repo,
+        &["run", "motor.toml", "--set", "stages.controller.with_reference=true", "--set", "reference={}", "--set", "limits.of=[\"state.angle\"]"],
+    );
+    assert_eq!(none.status.code(), Some(2), "{}", said(&none));
+    assert!(
+        said(&none).contains("key `stages.controller.with_reference`: appends a declared system's [reference] to the controller's input; this launch file has none"),
+        "{}",
+        said(&none)
+    );
+    std::fs::remove_dir_all(&root).unwrap();
+}

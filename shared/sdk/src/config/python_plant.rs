@@ -45,7 +45,7 @@ pub fn parse(document: &toml::Table, dir: PathBuf) -> Result<Option<StageCommand
         return Err(format!("\"{spec}\": {class:?} is not a Python class name"));
     }
     let command = ["python3", "-c", RUN_PLANT, spec].map(str::to_owned).to_vec();
-    Ok(Some(StageCommand { command, build_dir: dir.clone(), dir, build: Vec::new() }))
+    Ok(Some(StageCommand { command, build_dir: dir.clone(), dir, build: Vec::new(), with_reference: false }))
 }
 
 /// `file.py:Class` of a Python plant's command (what [`parse`] made).

@@ -6,6 +6,8 @@
 //! # dir = "../loop"                           # where it starts, relative to the launch file's
 //!                                             # folder (default: that folder)
 //! # build = ["cc", "-O2", "c.c", "-o", "c"]   # run first, in `dir`, when what it names changed
+//! # with_reference = true                     # the controller only: a declared system's
+//!                                             # [reference] at t after the estimate in its input
 //! ```
 //!
 //! The launcher starts the command in place of the built-in stage, with the run's arguments in
@@ -35,6 +37,9 @@ pub struct StageCommand {
     /// file (or the command line) that gave `build`, which may differ from the command's (a
     /// `--set` command on a launch file's build).
     pub build_dir: PathBuf,
+    /// The controller's input carries a declared system's references at t after the estimate
+    /// (`reference.<track>`).
+    pub with_reference: bool,
 }
 
 /// The `[stages]` section, checked.
@@ -66,9 +71,23 @@ impl Stages {
             let toml::Value::Table(spec) = value else {
                 return Err(error(&key, format!("expected a table with `command`, got a {}", value.type_str())));
             };
-            if let Some(unknown) = spec.keys().find(|k| !["command", "dir", "build"].contains(&k.as_str())) {
-                return Err(error(&format!("{key}.{unknown}"), "unknown key; allowed: command, dir, build".into()));
+            const KEYS: [&str; 4] = ["command", "dir", "build", "with_reference"];
+            if let Some(unknown) = spec.keys().find(|k| !KEYS.contains(&k.as_str())) {
+                return Err(error(&format!("{key}.{unknown}"), format!("unknown key; allowed: {}", KEYS.join(", "))));
             }
+            let with_reference = match spec.get("with_reference") {
+                None => false,
+                Some(toml::Value::Boolean(on)) if !*on || role == Role::Controller => *on,
+                Some(toml::Value::Boolean(_)) => {
+                    return Err(error(
+                        &format!("{key}.with_reference"),
+                        "only [stages.controller] takes it: the reference goes to the controller".into(),
+                    ));
+                }
+                Some(other) => {
+                    return Err(error(&format!("{key}.with_reference"), format!("true or false, got a {}", other.type_str())));
+                }
+            };
             let command_key = format!("{key}.command");
             let command = match spec.get("command") {
                 Some(value) => program_and_arguments(value, &command_key, &error)?,
@@ -97,7 +116,7 @@ impl Stages {
                 None => default_dir(&command_key),
             };
             let build_dir = if spec.contains_key("dir") { dir.clone() } else { default_dir(&build_key) };
-            stages.commands.insert(role, StageCommand { command, dir, build, build_dir });
+            stages.commands.insert(role, StageCommand { command, dir, build, build_dir, with_reference });
         }
         Ok(stages)
     }
@@ -278,9 +297,13 @@ mod tests {
             ),
             (
                 "[controller]\ncommand = [\"x\"]\nargs = 1\n",
-                "stages.controller.args: unknown key; allowed: command, dir, build",
+                "stages.controller.args: unknown key; allowed: command, dir, build, with_reference",
             ),
             ("controller = 3\n", "stages.controller: expected a table with `command`, got a integer"),
+            (
+                "estimator = { command = [\"e\"], with_reference = true }\n",
+                "stages.estimator.with_reference: only [stages.controller] takes it: the reference goes to the controller",
+            ),
         ];
         for (text, expected) in cases {
             assert_eq!(parse(text).unwrap_err(), expected, "{text}");
@@ -294,6 +317,7 @@ mod tests {
             dir: std::env::temp_dir(),
             build: Vec::new(),
             build_dir: std::env::temp_dir(),
+            with_reference: false,
         };
         assert_eq!(
             stage(&["no-such-program-ll"]).check().unwrap_err(),

@@ -225,6 +225,17 @@ fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
             tell!("{role}: built with `{}`", stage.build.join(" "));
         }
         stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
+        let has_reference = match config.document.get("reference") {
+            None => false,
+            Some(toml::Value::Table(t)) => !t.is_empty(),
+            Some(_) => true,
+        };
+        if stage.with_reference && !(config.is_declared() && has_reference) {
+            return Err(config.error(
+                &format!("stages.{role}.with_reference"),
+                "appends a declared system's [reference] to the controller's input; this launch file has none",
+            ));
+        }
     }
     Ok(config)
 }

@@ -167,8 +167,19 @@ pub fn stage_names(role: Role, config: &LaunchConfig) -> (Vec<String>, Vec<Strin
     match role {
         Role::Sensors => ([names(schema.state), applied].concat(), readings),
         Role::Estimator => ([readings, applied].concat(), names(schema.estimate)),
-        _ => (names(schema.estimate), names(schema.input)),
+        _ => {
+            let references = appended_references(config).into_iter().map(|r| format!("reference.{}", r.track));
+            (names(schema.estimate).into_iter().chain(references).collect(), names(schema.input))
+        }
     }
+}
+
+/// The references a controller's input carries after the estimate (`[stages.controller]
+/// with_reference = true`); none otherwise.
+fn appended_references(config: &LaunchConfig) -> Vec<NamedReference> {
+    let asked = config.stages.command(Role::Controller).is_some_and(|stage| stage.with_reference);
+    // A launch file whose [reference] does not read is refused at load; none here.
+    if asked { declared_references(config).unwrap_or_default() } else { Vec::new() }
 }
 
 /// The number at dotted `key` of a launch document (`"controller.gains.1"`: tables by name,
@@ -212,6 +223,8 @@ struct StageNumbers {
     sensor_dims: Vec<usize>,
     /// Each sensor's samples so far (a user's sensors stage counts them here).
     sensor_seq: Vec<u64>,
+    /// The references the controller's input carries after the estimate.
+    references: Vec<NamedReference>,
 }
 
 /// A sensor's numbers after its components: valid, fresh, sample_time.
@@ -227,6 +240,7 @@ impl StageNumbers {
             estimates: schema.estimate.len(),
             sensor_seq: vec![0; sensor_dims.len()],
             sensor_dims,
+            references: appended_references(config),
         }
     }
 
@@ -348,8 +362,14 @@ impl UserTask<Measurements, Estimate> {
 
 impl UserTask<Estimate, Command> {
     fn controller(step: Box<dyn Step>, layout: StageNumbers, limits: Vec<(f64, f64)>) -> Self {
-        let sizes = (layout.estimates, layout.inputs);
-        let read = |l: &StageNumbers, e: &Estimate, into: &mut [f64]| into.copy_from_slice(&e.x[..l.estimates]);
+        let sizes = (layout.estimates + layout.references.len(), layout.inputs);
+        let read = |l: &StageNumbers, e: &Estimate, into: &mut [f64]| {
+            into[..l.estimates].copy_from_slice(&e.x[..l.estimates]);
+            let t = e.header().t;
+            for (value, reference) in into[l.estimates..].iter_mut().zip(&l.references) {
+                *value = reference.signal.at(t);
+            }
+        };
         let write = |l: &mut StageNumbers, _: &Estimate, from: &[f64], out: &mut Command| {
             out.u[..l.inputs].copy_from_slice(from);
         };
