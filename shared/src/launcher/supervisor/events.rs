@@ -44,7 +44,7 @@ impl Supervisor<'_> {
     /// Files an event; returns the process whose output ended.
     pub(super) fn handle(&mut self, event: Event) -> Option<Role> {
         let ChildLine { role, incarnation, line } = match event {
-            Event::Child(line) => line,
+            Event::Child(line) => *line,
             Event::Cleaned { role, removed } => {
                 self.cleaned(role, removed);
                 return None;

@@ -84,7 +84,8 @@ fn last_line(path: &Path) -> Option<String> {
 
 /// What reaches the supervision loop.
 enum Event {
-    Child(ChildLine),
+    /// Boxed: a plant's report is large beside the other events.
+    Child(Box<ChildLine>),
     /// The clean-up after a death of `role` is done.
     Cleaned {
         role: Role,
@@ -370,7 +371,7 @@ impl<'a> Supervisor<'a> {
             Some(stage) => Program::Stage(stage),
             None => Program::Binary(&binary),
         };
-        let spawned = child::spawn(role, program, &args, self.tx.clone(), Event::Child)?;
+        let spawned = child::spawn(role, program, &args, self.tx.clone(), |line| Event::Child(Box::new(line)))?;
         self.readers.push(spawned.reader);
         self.processes[role].started(spawned.start, spawned.stdin);
         Ok(())

@@ -138,7 +138,7 @@ impl RunDiff {
                     .into_iter()
                     .map(|run| Curve::new(DELTA_LABEL, run, Colour::Series(0), Line::Solid(2)))
                     .collect();
-                let exact = f.band.iter().all(|b| !(*b > 0.0));
+                let exact = !f.band.iter().any(|b| *b > 0.0);
                 if !exact {
                     for sign in [1.0, -1.0] {
                         let band: Vec<f64> = f.band.iter().map(|b| sign * b).collect();
