@@ -289,3 +289,34 @@ fn a_declared_system_draws_its_state_against_the_reference_over_a_window() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A FIFO or a link planted where a figure goes: `looplab plot` says which file and why at once
+/// (a FIFO no longer blocks it), and writes nothing through the link. The figure is drawn where
+/// no one else can reach it and written through one checked descriptor, so there is no moment at
+/// which a name swapped for a link is written through.
+#[test]
+fn a_fifo_or_a_link_where_a_figure_goes_is_refused_at_once() {
+    let dir = fresh_dir("plot-planted");
+    let file = crate::golden_ci::motor_under_state_feedback(&dir);
+    let out = dir.join("run");
+    let ran = looplab().arg("run").arg(&file).args(["--in-process", "-q", "--out"]).arg(&out).output().unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let figure = out.join("estimate.png");
+    let name = std::ffi::CString::new(figure.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a path of our own test folder.
+    assert_eq!(unsafe { libc::mkfifo(name.as_ptr(), 0o600) }, 0);
+    let plotted = looplab().arg("plot").arg(&out).output().unwrap();
+    assert_eq!(plotted.status.code(), Some(1), "{}", String::from_utf8_lossy(&plotted.stderr));
+    let said = String::from_utf8_lossy(&plotted.stderr).into_owned();
+    assert!(said.contains(&format!("cannot write {}: it is not a regular file", figure.display())), "{said}");
+    std::fs::remove_file(&figure).unwrap();
+    let victim = dir.join("victim");
+    std::fs::write(&victim, b"precious").unwrap();
+    std::os::unix::fs::symlink(&victim, &figure).unwrap();
+    let plotted = looplab().arg("plot").arg(&out).output().unwrap();
+    assert_eq!(plotted.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&plotted.stderr).into_owned();
+    assert!(said.contains(&format!("cannot write {}: it is a symbolic link", figure.display())), "{said}");
+    assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

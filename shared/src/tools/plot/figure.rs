@@ -10,7 +10,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 pub use crate::model::figure::{Colour, Curve, FaultMark, Figure, Line, Panel, series, steps};
-use crate::tools::plot::{FONT, PngBackend, colour, plot_error, png};
+use crate::tools::plot::{Canvas, FONT, PngBackend, colour, draw_png, plot_error};
 
 /// At most about `max` points that keep each bucket's lowest and highest value, so a spike
 /// stays visible when a long run is drawn at a figure's width.
@@ -122,24 +122,28 @@ impl Draw for Figure {
     }
 
     fn draw(&self, path: &Path) -> anyhow::Result<()> {
-        let root = png(path, self.size())?;
-        let (header, body) = root.split_vertically(HEADER);
-        draw_header(self, &header)?;
-        let body = match &self.caption {
-            Some(caption) => {
-                let (body, bottom) = body.split_vertically(body.dim_in_pixel().1 - CAPTION);
-                bottom.draw_text(caption, &(FONT, 17).into_font().color(&BLACK), (16, 8)).map_err(plot_error)?;
-                body
-            }
-            None => body,
-        };
-        let columns = grid_columns(self.panels.len());
-        let rows = self.panels.len().div_ceil(columns).max(1);
-        for (area, panel) in body.split_evenly((rows, columns)).iter().zip(&self.panels) {
-            draw_panel(self, area, panel)?;
-        }
-        root.present().map_err(plot_error)
+        draw_png(path, self.size(), |root| draw_figure(self, root))
     }
+}
+
+/// `figure` on `root`: its title and legend, then its panels.
+fn draw_figure(figure: &Figure, root: &Canvas<'_>) -> anyhow::Result<()> {
+    let (header, body) = root.split_vertically(HEADER);
+    draw_header(figure, &header)?;
+    let body = match &figure.caption {
+        Some(caption) => {
+            let (body, bottom) = body.split_vertically(body.dim_in_pixel().1 - CAPTION);
+            bottom.draw_text(caption, &(FONT, 17).into_font().color(&BLACK), (16, 8)).map_err(plot_error)?;
+            body
+        }
+        None => body,
+    };
+    let columns = grid_columns(figure.panels.len());
+    let rows = figure.panels.len().div_ceil(columns).max(1);
+    for (area, panel) in body.split_evenly((rows, columns)).iter().zip(&figure.panels) {
+        draw_panel(figure, area, panel)?;
+    }
+    Ok(())
 }
 
 /// The title and one legend for every panel (each panel has the same curves).

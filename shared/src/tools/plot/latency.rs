@@ -15,7 +15,7 @@ use crate::contract::run_format::files;
 use crate::launcher::summary::Summary;
 use crate::monitor::distribution::Distribution;
 use crate::tools::ToolError;
-use crate::tools::plot::{FONT, colour, legend_mark, plot_error, png};
+use crate::tools::plot::{Canvas, FONT, colour, draw_png, legend_mark, plot_error};
 use crate::tools::run_folder::{RunFolder, Table};
 
 /// A series: its name and its samples in ns, sorted.
@@ -230,9 +230,9 @@ pub struct Panel {
 /// loops with one, and its legend says how many had none. Each deadline is a dashed vertical
 /// line. Below the chart, a legend with each series' p50, p99 and max.
 pub fn cdf(path: &Path, title: &str, series: &[Series], deadlines_ns: &[u64]) -> Result<()> {
-    let root = png(path, (900, 520 + legend_height(series.len(), LARGE)))?;
-    draw_cdf(&root, title, series, deadlines_ns, LARGE)?;
-    root.present().map_err(plot_error)
+    draw_png(path, (900, 520 + legend_height(series.len(), LARGE)), |root| {
+        draw_cdf(root, title, series, deadlines_ns, LARGE)
+    })
 }
 
 /// Several [`cdf`] charts in one figure: the first across the whole width, the others below it,
@@ -245,18 +245,19 @@ pub fn cdf_panels(path: &Path, panels: &[Panel]) -> Result<()> {
         .chunks(2)
         .map(|row| (row, 360 + legend_height(row.iter().map(|p| p.series.len()).max().unwrap_or(0), SMALL)))
         .collect();
-    let root = png(path, (width, first_height + rows.iter().map(|(_, h)| h).sum::<u32>()))?;
-    let (top, mut rest) = root.split_vertically(first_height);
-    draw_cdf(&top, &first.title, &first.series, &first.deadlines_ns, LARGE)?;
-    for (row, height) in rows {
-        let (this_row, below) = rest.split_vertically(height);
-        let (left, right) = this_row.split_horizontally(half);
-        for (panel, area) in row.iter().zip([left, right]) {
-            draw_cdf(&area, &panel.title, &panel.series, &panel.deadlines_ns, SMALL)?;
+    draw_png(path, (width, first_height + rows.iter().map(|(_, h)| h).sum::<u32>()), |root| {
+        let (top, mut rest) = root.split_vertically(first_height);
+        draw_cdf(&top, &first.title, &first.series, &first.deadlines_ns, LARGE)?;
+        for (row, height) in rows {
+            let (this_row, below) = rest.split_vertically(height);
+            let (left, right) = this_row.split_horizontally(half);
+            for (panel, area) in row.iter().zip([left, right]) {
+                draw_cdf(&area, &panel.title, &panel.series, &panel.deadlines_ns, SMALL)?;
+            }
+            rest = below;
         }
-        rest = below;
-    }
-    root.present().map_err(plot_error)
+        Ok(())
+    })
 }
 
 type Area<'a> = DrawingArea<crate::tools::plot::PngBackend<'a>, Shift>;
@@ -376,7 +377,10 @@ fn draw_legend(area: &Area, left: i32, series: &[Series], sizes: Sizes) -> Resul
 
 /// Median one-way latency against payload size, log-log: one curve per transport.
 pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()> {
-    let root = png(path, (900, 560))?;
+    draw_png(path, (900, 560), |root| draw_payload(root, series))
+}
+
+fn draw_payload(root: &Canvas<'_>, series: &[(String, Vec<(usize, f64)>)]) -> Result<()> {
     let xs = series.iter().flat_map(|(_, p)| p.iter().map(|(b, _)| *b as f64));
     let (x_lo, x_hi) = xs.fold((f64::MAX, 1.0f64), |(lo, hi), x| (lo.min(x), hi.max(x)));
     let ys = series.iter().flat_map(|(_, p)| p.iter().map(|(_, us)| *us));
@@ -416,7 +420,7 @@ pub fn payload(path: &Path, series: &[(String, Vec<(usize, f64)>)]) -> Result<()
         .border_style(BLACK)
         .draw()
         .map_err(plot_error)?;
-    root.present().map_err(plot_error)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -51,15 +51,61 @@ pub(crate) fn register_fonts() {
     });
 }
 
+/// Draws a PNG of `size` pixels with `draw` on a white canvas and writes it to `path` (staged:
+/// see [`Staged`]).
+pub fn draw_png(path: &Path, size: (u32, u32), draw: impl FnOnce(&Canvas<'_>) -> Result<()>) -> Result<()> {
+    let staged = Staged::new(path)?;
+    {
+        let root = png(staged.path(), size)?;
+        draw(&root)?;
+        root.present().map_err(plot_error)?;
+    }
+    staged.commit()
+}
+
+/// What a figure is drawn on.
+pub type Canvas<'a> = DrawingArea<PngBackend<'a>, Shift>;
+
 /// A white PNG canvas of `size` pixels at `path`; `present()` it to write the file.
-pub fn png(path: &Path, size: (u32, u32)) -> Result<DrawingArea<PngBackend<'_>, Shift>> {
+fn png(path: &Path, size: (u32, u32)) -> Result<Canvas<'_>> {
     register_fonts();
-    // plotters opens the file itself, following links; a link where the figure goes is refused
-    // here first (the folder is the user's own, so no one else can put one there in between).
-    crate::runtime::storage::run_file::open(path, crate::runtime::storage::run_file::Existing::Replace)?;
     let root = PngBackend(BitMapBackend::new(path, size)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_error)?;
     Ok(root)
+}
+
+/// A figure drawn where no one else can reach it, then written where it goes. plotters writes
+/// its file by name: in a run folder another user owns, the name could be swapped for a link
+/// between a check and that write (and root would write through it). So it draws into a folder
+/// of this process's own (0700, under the temporary folder), and [`Staged::commit`] writes the
+/// bytes to the figure's path through one checked descriptor (`run_file`: no link followed, a
+/// regular file only). The folder goes when the value does.
+struct Staged {
+    dir: tempfile::TempDir,
+    file: std::path::PathBuf,
+    dest: std::path::PathBuf,
+}
+
+impl Staged {
+    /// Stages the figure that goes to `dest`.
+    pub fn new(dest: &Path) -> Result<Self> {
+        let dir = tempfile::Builder::new().prefix("looplab-figure-").tempdir()?;
+        let file = dir.path().join("figure.png");
+        Ok(Staged { dir, file, dest: dest.to_path_buf() })
+    }
+
+    /// Where plotters draws it.
+    pub fn path(&self) -> &Path {
+        &self.file
+    }
+
+    /// Writes the drawn figure to its path.
+    pub fn commit(self) -> Result<()> {
+        let bytes = std::fs::read(&self.file)?;
+        crate::runtime::storage::run_file::write(&self.dest, &bytes)?;
+        drop(self.dir);
+        Ok(())
+    }
 }
 
 /// plotters' errors carry the backend's error type; the figures report them as text.
@@ -79,9 +125,10 @@ mod tests {
     #[test]
     fn a_png_with_text_is_written() {
         let path = std::env::temp_dir().join(format!("looplab-png-test-{}.png", std::process::id()));
-        let root = png(&path, (200, 100)).unwrap();
-        root.draw_text("latency, µs", &(FONT, 16).into_font().color(&BLACK), (10, 40)).unwrap();
-        root.present().unwrap();
+        draw_png(&path, (200, 100), |root| {
+            root.draw_text("latency, µs", &(FONT, 16).into_font().color(&BLACK), (10, 40)).map_err(plot_error)
+        })
+        .unwrap();
         let bytes = std::fs::read(&path).unwrap();
         std::fs::remove_file(&path).unwrap();
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");

@@ -1,5 +1,7 @@
 //! The one way LoopLab creates a file in a run folder (or any output folder of its own): never
-//! through a symbolic link (`O_NOFOLLOW`), and closed in the processes it starts (`O_CLOEXEC`).
+//! through a symbolic link (`O_NOFOLLOW`), only a regular file (a FIFO planted there would block
+//! the open, a device take the bytes: `O_NONBLOCK`, then checked), and closed in the processes it
+//! starts (`O_CLOEXEC`).
 //! A link planted where a run's file goes would make the run write wherever it points (a root
 //! run would overwrite any file); it is refused instead, with one line naming the file. Files
 //! get the user's umask, as other tools' files do.
@@ -23,17 +25,25 @@ pub fn open(path: &Path, existing: Existing) -> Result<File> {
     open_io(path, existing).map_err(|e| refused(path, e))
 }
 
-/// [`open`] with the system's error as it is (ELOOP: a symbolic link).
+/// [`open`] with the system's error as it is (ELOOP: a symbolic link; InvalidInput: not a
+/// regular file).
 pub fn open_io(path: &Path, existing: Existing) -> std::io::Result<File> {
     use std::os::unix::fs::OpenOptionsExt;
-    std::fs::OpenOptions::new()
+    let file = std::fs::OpenOptions::new()
         .write(true)
         .create(true)
         .append(existing == Existing::Append)
         .truncate(existing == Existing::Replace)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-        .open(path)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC | libc::O_NONBLOCK)
+        .open(path)?;
+    if !file.metadata()?.is_file() {
+        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, NOT_REGULAR));
+    }
+    Ok(file)
 }
+
+/// Why a FIFO, a device or a folder where a file goes is refused.
+const NOT_REGULAR: &str = "it is not a regular file (a FIFO, a device or a folder), and LoopLab writes only into one";
 
 /// Writes `contents` into `path`, replacing what is there, never through a symbolic link.
 pub fn write(path: &Path, contents: &[u8]) -> Result<()> {
@@ -45,6 +55,9 @@ pub fn write(path: &Path, contents: &[u8]) -> Result<()> {
 pub fn refused(path: &Path, e: std::io::Error) -> anyhow::Error {
     if e.raw_os_error() == Some(libc::ELOOP) {
         anyhow!("cannot write {}: it is a symbolic link, and LoopLab does not write through one", path.display())
+    } else if e.raw_os_error() == Some(libc::ENXIO) {
+        // O_NONBLOCK on a FIFO without a reader.
+        anyhow!("cannot write {}: {NOT_REGULAR}", path.display())
     } else {
         anyhow!("cannot write {}: {e}", path.display())
     }
@@ -72,6 +85,22 @@ mod tests {
         use std::io::Write as _;
         open(&dir.join("plain"), Existing::Append).unwrap().write_all(b"b").unwrap();
         assert_eq!(std::fs::read(dir.join("plain")).unwrap(), b"ab");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A FIFO planted where a file goes is refused at once (no reader: the open would block), and
+    /// so is a device.
+    #[test]
+    fn a_fifo_or_a_device_is_refused_without_blocking() {
+        let dir = std::env::temp_dir().join(format!("looplab-run-file-fifo-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let fifo = dir.join("estimate.png");
+        let name = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+        assert_eq!(unsafe { libc::mkfifo(name.as_ptr(), 0o600) }, 0);
+        for path in [fifo.as_path(), Path::new("/dev/null")] {
+            let e = write(path, b"x").unwrap_err().to_string();
+            assert!(e.ends_with("it is not a regular file (a FIFO, a device or a folder), and LoopLab writes only into one"), "{e}");
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
