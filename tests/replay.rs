@@ -296,3 +296,22 @@ fn bad_input_is_one_line_exit_2_and_writes_nothing() {
     }
     let _ = std::fs::remove_dir_all(no_mcap);
 }
+
+/// A recording whose launch file plans a week (`duration_s = 604800`, allowed) but holds 2 s:
+/// the replay is sized by what was recorded, runs those 200 loops and exits 0 (it asked for
+/// 1.6 TB and aborted, sized by the plan).
+#[test]
+fn a_recording_shorter_than_its_plan_is_replayed_as_far_as_it_goes() {
+    let dir = fresh_dir("replay-short");
+    let file = crate::golden_ci::motor_under_state_feedback(&dir);
+    let recording = dir.join("run");
+    let ran = looplab().arg("run").arg(&file).args(["--in-process", "-q", "--out"]).arg(&recording).output().unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let launch = std::fs::read_to_string(recording.join("launch.toml")).unwrap();
+    let week = launch.replace("duration_s = 2.0", "duration_s = 604800.0");
+    assert_ne!(launch, week, "the plan is in the file");
+    std::fs::write(recording.join("launch.toml"), week).unwrap();
+    let text = replay(&recording, &dir.join("replayed"), &["--stage", "controller"]);
+    assert!(text.contains("outputs: identical to the recording's, bit for bit, in all 200 loops"), "{text}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -147,6 +147,13 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
     let seen = RecordedStage::new(&recorded_config, role, &loops);
 
     let mut overrides = vec![set("mode", "lockstep".into())];
+    // A recording that ended early (a run stopped or killed) is replayed as far as it goes.
+    if (loops.len() as u64) < recorded_config.loops() {
+        let seconds = loops.len() as f64 / recorded_config.rate_hz;
+        let mut duration = set("duration_s", toml::Value::Float(seconds));
+        duration.text = format!("duration_s = {seconds} (the recording's {} loops)", loops.len());
+        overrides.push(duration);
+    }
     for text in &args.set {
         overrides.push(Override::parse(text).map_err(|e| bad(e.to_string()))?);
     }

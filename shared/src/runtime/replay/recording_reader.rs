@@ -34,8 +34,9 @@ pub struct RecordedLoop {
     pub record: Option<LoopRecord>,
 }
 
-/// Every loop of the run recorded in `run_dir` by its monitor(s), indexed by k, `loops` long
-/// (the run's planned loops; a loop nobody recorded is all None). `layout` is the recording's
+/// Every loop of the run recorded in `run_dir` by its monitor(s), indexed by k, up to its last
+/// recorded loop and at most `loops` (the run's planned loops; a loop nobody recorded is all
+/// None). `layout` is the recording's
 /// (from its own launch file). Fails with one line naming the file when the folder has no
 /// `run.mcap`, when it was written by `looplab export` (no sample times or flags), or by a
 /// version of LoopLab that did not record a field a stage reads.
@@ -45,10 +46,12 @@ pub fn load(run_dir: &Path, layout: &VectorLayout, loops: u64) -> Result<Vec<Rec
         bail!("{} has no {FILE}; replay needs the recording a run writes", run_dir.display());
     }
     let loops = usize::try_from(loops).context("more loops than this machine can index")?;
-    let mut recorded = vec![RecordedLoop::default(); loops];
+    // Sized by what the files hold, up to the planned loops: a launch file's duration (up to a
+    // week) is no measure of a recording that ended early.
+    let mut recorded = Vec::new();
     let restarted = (1..).map(|n| run_dir.join(files::restarted_recording(n))).take_while(|p| p.exists());
     for path in std::iter::once(first).chain(restarted) {
-        read_file(&path, layout, &mut recorded)?;
+        read_file(&path, layout, &mut recorded, loops)?;
     }
     fill_incarnations(&mut recorded);
     Ok(recorded)
@@ -62,7 +65,7 @@ fn topic_of(name: &str) -> Option<Topic> {
 
 /// Adds one recording file's messages to `recorded`, where no earlier file (or message) has one
 /// for that topic and loop.
-fn read_file(path: &Path, layout: &VectorLayout, recorded: &mut [RecordedLoop]) -> Result<()> {
+fn read_file(path: &Path, layout: &VectorLayout, recorded: &mut Vec<RecordedLoop>, loops: usize) -> Result<()> {
     let bytes = std::fs::read(path).with_context(|| format!("read {}", path.display()))?;
     refuse_export(path, &bytes)?;
     check_names(path, layout)?;
@@ -90,7 +93,11 @@ fn read_file(path: &Path, layout: &VectorLayout, recorded: &mut [RecordedLoop]) 
         let mut at = At { path, topic: &message.channel.topic, k: None };
         let k = at.unsigned(fields, field::K)?;
         at.k = Some(k);
-        let Some(slot) = usize::try_from(k).ok().and_then(|k| recorded.get_mut(k)) else { continue };
+        let Some(k_index) = usize::try_from(k).ok().filter(|&k| k < loops) else { continue };
+        if recorded.len() <= k_index {
+            recorded.resize(k_index + 1, RecordedLoop::default());
+        }
+        let slot = &mut recorded[k_index];
         let t = at.float(fields, field::T)?;
         let mut header = Header { k, t, lost: at.lost(fields)?, ..Header::default() };
         if let Some(sender) = topic.writer().slot() {
