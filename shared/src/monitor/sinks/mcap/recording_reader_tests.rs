@@ -162,7 +162,8 @@ fn awkward_floats_and_every_flag_come_back_bit_for_bit() {
     let layout = VectorLayout::example();
     let written = write(&dir.path().join("run.mcap"), Detail::Live, 0..20, 0, true);
     let recorded = load(dir.path(), &layout, 22).unwrap();
-    assert_eq!(recorded.len(), 22);
+    // As far as the recording goes, not the 22 planned.
+    assert_eq!(recorded.len(), 20);
     for (got, written) in recorded.iter().zip(&written) {
         assert_loop(got, written, &layout);
     }
@@ -171,8 +172,6 @@ fn awkward_floats_and_every_flag_come_back_bit_for_bit() {
     assert!(recorded[9].state.unwrap().x[0].is_nan());
     assert_eq!(recorded[0].estimate.unwrap().x[0], f64::MIN_POSITIVE);
     assert_eq!(recorded[1].command.unwrap().header.lost, 1);
-    // Loops past the recording's end are empty.
-    assert!(recorded[20].state.is_none() && recorded[21].record.is_none());
     // Loops past the run's are not kept.
     assert_eq!(load(dir.path(), &layout, 5).unwrap().len(), 5);
 }
