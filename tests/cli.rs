@@ -512,3 +512,26 @@ fn a_bad_value_in_the_file_is_reported_even_when_set_on_the_command_line() {
     assert!(said.starts_with(&format!("error: {}: key `mode`: ", file.display())), "{said}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A launch file that is a FIFO or a device is refused in one line, exit 2, at once: not read
+/// forever (`/dev/zero`) nor waited on (a FIFO with no writer).
+#[test]
+fn a_launch_file_that_is_a_fifo_or_a_device_is_refused_at_once() {
+    let dir = fresh_dir("launch-fifo");
+    std::fs::create_dir_all(&dir).unwrap();
+    let fifo = dir.join("launch.toml");
+    let name = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a path of our own test folder.
+    assert_eq!(unsafe { libc::mkfifo(name.as_ptr(), 0o600) }, 0);
+    for target in [fifo.to_str().unwrap(), "/dev/zero"] {
+        let output = looplab().args(["run", target]).output().unwrap();
+        assert_eq!(output.status.code(), Some(2), "{target}");
+        assert_eq!(
+            String::from_utf8_lossy(&output.stderr),
+            format!(
+                "error: {target}: cannot read the launch file: it is not a regular file (a FIFO, a device or a folder)\n"
+            )
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -145,8 +145,7 @@ pub fn resolve_config(
         && !Path::new(target).is_dir()
         && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
     let (origin, document, launch_folder) = if looks_like_path {
-        let text = std::fs::read_to_string(target)
-            .map_err(|e| LaunchError::new(target, None, format!("cannot read the launch file: {e}")))?;
+        let text = read_launch_text(Path::new(target)).map_err(|e| LaunchError::new(target, None, e))?;
         let user: toml::Table = toml::from_str(&text).map_err(|e| toml_error(target, &text, &e))?;
         if declared::is_declared(&user) {
             let mut document: toml::Table = toml::from_str(declared::DECLARED_DEFAULTS).expect("the defaults parse");
@@ -264,10 +263,38 @@ pub fn load_run_config(path: &Path) -> Result<LaunchConfig, LaunchError> {
 
 fn read_resolved(path: &Path) -> Result<(toml::Table, String), LaunchError> {
     let origin = path.display().to_string();
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| LaunchError::new(&origin, None, format!("cannot read the launch file: {e}")))?;
+    let text = read_launch_text(path).map_err(|e| LaunchError::new(&origin, None, e))?;
     let document = toml::from_str(&text).map_err(|e| toml_error(&origin, &text, &e))?;
     Ok((document, origin))
+}
+
+/// The largest launch file read, bytes: far above any real one (the longest shipped is 12 KB).
+pub const MAX_LAUNCH_FILE: u64 = 1 << 20;
+
+/// A launch file's text: a regular file of at most [`MAX_LAUNCH_FILE`] bytes. A FIFO is opened
+/// without blocking and refused, as is a device (`/dev/zero` would be read forever).
+fn read_launch_text(path: &Path) -> Result<String, String> {
+    use std::io::Read as _;
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let cannot = |e: std::io::Error| format!("cannot read the launch file: {e}");
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC)
+        .open(path)
+        .map_err(cannot)?;
+    let metadata = file.metadata().map_err(cannot)?;
+    if !metadata.is_file() {
+        return Err("cannot read the launch file: it is not a regular file (a FIFO, a device or a folder)".into());
+    }
+    if metadata.len() > MAX_LAUNCH_FILE {
+        return Err(format!(
+            "cannot read the launch file: it is {} bytes, more than a launch file's {MAX_LAUNCH_FILE}",
+            metadata.len()
+        ));
+    }
+    let mut text = String::new();
+    file.take(MAX_LAUNCH_FILE).read_to_string(&mut text).map_err(cannot)?;
+    Ok(text)
 }
 
 /// `launch_folder`: the launch file's folder, where a stage's command given in it starts (one
