@@ -385,7 +385,7 @@ fn draw_payload(root: &Canvas<'_>, series: &[(String, Vec<(usize, f64)>)]) -> Re
     let (x_lo, x_hi) = xs.fold((f64::MAX, 1.0f64), |(lo, hi), x| (lo.min(x), hi.max(x)));
     let ys = series.iter().flat_map(|(_, p)| p.iter().map(|(_, us)| *us));
     let (y_lo, y_hi) = ys.fold((f64::MAX, 1.0f64), |(lo, hi), y| (lo.min(y), hi.max(y)));
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption("one-way latency against payload size (median)", (FONT, 20))
         .margin(15)
         .x_label_area_size(45)
