@@ -6,7 +6,12 @@ use crate::common::*;
 
 /// `looplab sweep` of the controller's delay, the fault from `at`, over 7 to 11 ticks: its exit
 /// code, sweep.json and what it printed.
-fn sweep_delays(file: &std::path::Path, name: &str, at: &str, extra: &[&str]) -> (Option<i32>, serde_json::Value, String) {
+fn sweep_delays(
+    file: &std::path::Path,
+    name: &str,
+    at: &str,
+    extra: &[&str],
+) -> (Option<i32>, serde_json::Value, String) {
     let out = fresh_dir(name);
     let fault = format!("delay controller by 0 ticks at {at}");
     let args = [
@@ -56,11 +61,13 @@ fn a_declared_linear_loop_has_a_delay_margin_that_lockstep_and_real_time_measure
 fn a_reference_step_inside_the_fault_window_does_not_move_the_measured_margin() {
     let dir = fresh_dir("motor-step-margin");
     let file = crate::golden_ci::motor_under_state_feedback(&dir);
-    let (code, json, text) = sweep_delays(&file, "motor-step-sweep", "0.3s", &["--duration", "3", "--fail-on", "limits"]);
+    let (code, json, text) =
+        sweep_delays(&file, "motor-step-sweep", "0.3s", &["--duration", "3", "--fail-on", "limits"]);
     assert_eq!(code, Some(3), "a control gate failed: {text}");
     assert_eq!(json["judged_against"], "the fault-free baseline", "{json}");
     assert_eq!(json["first_unstable"], 9.0, "{text}");
-    let verdicts: Vec<&str> = json["points"].as_array().unwrap().iter().map(|p| p["verdict"].as_str().unwrap()).collect();
+    let verdicts: Vec<&str> =
+        json["points"].as_array().unwrap().iter().map(|p| p["verdict"].as_str().unwrap()).collect();
     assert_eq!(verdicts, ["exceeded", "exceeded", "unstable", "unstable", "unstable"], "{text}");
     assert!(text.contains("faults.0.delay_ticks = 9: control gate failed: limits (LOST at t = "), "{text}");
     assert!(text.contains("measured and theory agree within one tick (+0 ticks)"), "{text}");

@@ -123,7 +123,10 @@ fn a_changed_observer_gain_moves_the_estimate_from_the_first_loop() {
     assert_eq!(first_applied, first_cmd + 1, "what the actuator applied follows the command by a loop");
     assert_eq!(field("theta_rad")["first_over"]["k"], first_applied);
     // Each field's unit, from the run's launch file: the figure's axis says it.
-    assert_eq!((field("theta_rad")["unit"].as_str(), field("cmd.current_A")["unit"].as_str()), (Some("rad"), Some("A")));
+    assert_eq!(
+        (field("theta_rad")["unit"].as_str(), field("cmd.current_A")["unit"].as_str()),
+        (Some("rad"), Some("A"))
+    );
     assert_eq!(over, PENDULUM_FIELDS + metrics - 1, "{text}");
     // Numbers that a reader can check: the largest difference is the one the JSON keeps.
     let largest = field("est.theta_rad")["max_abs"].as_f64().unwrap();

@@ -292,13 +292,27 @@ looplab.run(PD)
     let asked = stage("asked", &[]);
     let given = stage(
         "given",
-        &["--set", "stages.controller.command=[\"python3\", \"pd_input.py\"]", "--set", "stages.controller.with_reference=true"],
+        &[
+            "--set",
+            "stages.controller.command=[\"python3\", \"pd_input.py\"]",
+            "--set",
+            "stages.controller.with_reference=true",
+        ],
     );
     assert!(asked == given, "the two controllers' runs differ");
     // Without a [reference] there is nothing to append: one line, exit 2.
     let none = looplab_in(
         &repo,
-        &["run", "motor.toml", "--set", "stages.controller.with_reference=true", "--set", "reference={}", "--set", "limits.of=[\"state.angle\"]"],
+        &[
+            "run",
+            "motor.toml",
+            "--set",
+            "stages.controller.with_reference=true",
+            "--set",
+            "reference={}",
+            "--set",
+            "limits.of=[\"state.angle\"]",
+        ],
     );
     assert_eq!(none.status.code(), Some(2), "{}", said(&none));
     assert!(

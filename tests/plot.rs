@@ -78,16 +78,25 @@ fn a_stopped_controller_leaves_a_gap_in_the_commands_and_the_held_input_beside_i
         gap.len() >= 500 && first <= injected_ms.ceil() && last >= injected_ms,
         "no stretch without commands at the stop ({injected_ms:.3} ms after tick 0): {gap:?}"
     );
-    // Across the stop the applied input is one value in every row that has the plant's state (a
-    // tick the plant skipped on a loaded machine has neither): from gap.start + 1 on, since the
-    // last command may take effect a tick after it came. That value is one of the last two
-    // commands before the stop.
-    let stop = &applied[gap.start + 1..gap.end];
-    let held = *stop.iter().find(|u| u.is_finite()).expect("the stop has rows with the plant's state");
-    assert!(stop.iter().filter(|u| u.is_finite()).all(|u| *u == held), "the applied input changed during the stop");
-    let last_commands: Vec<f64> =
-        command[..gap.start].iter().rev().filter(|u| u.is_finite()).take(2).copied().collect();
-    assert!(last_commands.contains(&held), "held {held}, not one of the last commands {last_commands:?}");
+    // Across the stop the plant applies nothing new: in the rows that have its state (a tick
+    // the plant skipped on a loaded machine has neither), each applied value is a command sent
+    // before the stop, and once the newest of them has taken effect (on a loaded machine it may
+    // arrive ticks into the gap, late) it is held to the end of the stop.
+    let before: Vec<f64> = command[..gap.start].iter().filter(|u| u.is_finite()).copied().collect();
+    let in_stop: Vec<(usize, f64)> =
+        (gap.start..gap.end).filter(|&r| applied[r].is_finite()).map(|r| (r, applied[r])).collect();
+    let held = *before.last().expect("commands before the stop");
+    let held_from =
+        in_stop.iter().position(|(_, u)| *u == held).expect("the newest command before the stop takes effect");
+    assert!(
+        in_stop[held_from..].iter().all(|(_, u)| *u == held),
+        "the applied input changed after the newest command took effect"
+    );
+    assert!(
+        in_stop[..held_from].iter().all(|(_, u)| before.contains(u)),
+        "a value applied during the stop was no command: {in_stop:?}"
+    );
+    let held_row = in_stop[held_from].0;
 
     let figure = commands_figure(&data);
     let (gap_t0, gap_t1) = (t[gap.start], t[gap.end - 1]);
@@ -109,7 +118,7 @@ fn a_stopped_controller_leaves_a_gap_in_the_commands_and_the_held_input_beside_i
         .iter()
         .filter(|c| c.label == APPLIED_LABEL)
         .flat_map(|c| c.points.iter().copied())
-        .filter(|(at, _)| (t[gap.start + 1]..gap_t1).contains(at))
+        .filter(|(at, _)| (t[held_row]..gap_t1).contains(at))
         .collect();
     assert!(!applied_points.is_empty() && applied_points.iter().all(|(_, u)| *u == held), "{applied_points:?}");
     assert_figure(&r.dir.join("commands.png"), 1, false);

@@ -766,7 +766,8 @@ fn run(args: RunArgs, catalog: &Catalog) -> ExitCode {
             {
                 code = gated;
             }
-            let plotted = if args.plot { figures(plot::run::plot_run(&run_dir, catalog, None)) } else { ExitCode::SUCCESS };
+            let plotted =
+                if args.plot { figures(plot::run::plot_run(&run_dir, catalog, None)) } else { ExitCode::SUCCESS };
             // A run that failed keeps its code; a failed plot fails a run that completed.
             if code == launcher::EXIT_OK { plotted } else { ExitCode::from(code) }
         }

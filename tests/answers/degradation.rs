@@ -45,7 +45,10 @@ fn a_lockstep_run_without_its_controller_runs_every_loop_and_its_phases_add_up()
     assert_eq!(held.on_stale, "hold");
     assert_eq!(held.applied, [("current".to_string(), applied[1999], "A".to_string())]);
     assert_eq!(applied[1999], applied[500], "held since the loss");
-    let said = format!("the plant's fail-safe held its last command (supervision.on_stale = \"hold\"): current = {} A", applied[1999]);
+    let said = format!(
+        "the plant's fail-safe held its last command (supervision.on_stale = \"hold\"): current = {} A",
+        applied[1999]
+    );
     assert!(stderr.contains(&said), "{stderr}");
     let effect = s.faults[0].effect.as_ref().unwrap();
     assert!(effect.never_back && effect.recovery_s.is_none(), "{effect:?}");

@@ -49,7 +49,11 @@ fn lost_text(s: &Summary) -> String {
     let held = s.fail_safe.as_ref().map_or(String::new(), |f| {
         let applied: Vec<String> = f.applied.iter().map(|(name, v, unit)| format!("{name} = {v} {unit}")).collect();
         let what = if f.on_stale == "hold" { "held its last command" } else { "applied zero" };
-        format!("; the plant's fail-safe {what} (supervision.on_stale = \"{}\"): {} at the end", f.on_stale, applied.join(", "))
+        format!(
+            "; the plant's fail-safe {what} (supervision.on_stale = \"{}\"): {} at the end",
+            f.on_stale,
+            applied.join(", ")
+        )
     });
     format!("with {stage} LOST: {} and was not restarted (on_death = continue){held}", lost.join(", "))
 }

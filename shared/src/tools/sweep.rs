@@ -278,13 +278,19 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         }
     }
     let key = |value: f64| if one_baseline { values[0] } else { value };
-    let judge = |baselines: &Baselines, value: f64, config: &LaunchConfig, scenario: &dyn Scenario, done: (Summary, Outcome)| {
+    let judge = |baselines: &Baselines,
+                 value: f64,
+                 config: &LaunchConfig,
+                 scenario: &dyn Scenario,
+                 done: (Summary, Outcome)| {
         let (summary, outcome) = done;
         let judged = match baselines.get(key(value)) {
             Some(base) if by_baseline => against_baseline(config, scenario, &summary, base, fault_index),
             _ => Ok(against_zero(&summary, fault_index)),
         };
-        judged.map_err(|e| format!("{e}")).and_then(|judged| point(value, &summary, &outcome, fault_index, judged, &args.gates, config))
+        judged
+            .map_err(|e| format!("{e}"))
+            .and_then(|judged| point(value, &summary, &outcome, fault_index, judged, &args.gates, config))
     };
     let names = |value: f64| format!("{}={}", args.param, value_text(value));
     let results = run_all(&configs, binaries.as_ref(), &out, &names, args.jobs.max(1), &stop);
@@ -362,7 +368,8 @@ pub fn run(args: SweepArgs, catalog: &Catalog) -> ExitCode {
         Some(Err(why)) => (None, Some(why)),
         None => (None, None),
     };
-    let judged_against = fault_index.map(|_| if by_baseline { "the fault-free baseline" } else { "zero error" }.to_owned());
+    let judged_against =
+        fault_index.map(|_| if by_baseline { "the fault-free baseline" } else { "zero error" }.to_owned());
     let mut warnings = vec![];
     if !by_baseline && let Some(window) = fault_index.and_then(|i| judged_window(config, i)) {
         warnings.extend(reference_moves(config, window));
@@ -883,10 +890,8 @@ mod tests {
     fn a_reference_that_moves_inside_the_judged_window_is_warned_of() {
         let file = concat!(env!("CARGO_MANIFEST_DIR"), "/../launch/declared.toml");
         let warning = |fault: &str| {
-            let overrides = [
-                Override::parse("reference.table=[[0.0, 0.0], [2.0, 0.1]]").unwrap(),
-                Override::fault(fault).unwrap(),
-            ];
+            let overrides =
+                [Override::parse("reference.table=[[0.0, 0.0], [2.0, 0.1]]").unwrap(), Override::fault(fault).unwrap()];
             let (config, _) = crate::scenarios::resolve(file, &overrides).unwrap();
             reference_moves(&config, judged_window(&config, 0).unwrap())
         };

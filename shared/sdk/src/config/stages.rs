@@ -85,7 +85,10 @@ impl Stages {
                     ));
                 }
                 Some(other) => {
-                    return Err(error(&format!("{key}.with_reference"), format!("true or false, got a {}", other.type_str())));
+                    return Err(error(
+                        &format!("{key}.with_reference"),
+                        format!("true or false, got a {}", other.type_str()),
+                    ));
                 }
             };
             let command_key = format!("{key}.command");

@@ -17,8 +17,8 @@ use crate::launcher::outcome::{Outcome, StopReason};
 use crate::launcher::restart::RestartRecord;
 use crate::launcher::run_dir::write_atomically;
 use crate::launcher::summary::{
-    FailSafe, FaultReport, Jitter, Latency, LostStage, Machine, MonitorCounts, ProcessInfo, RestartSteps, SCHEMA_VERSION,
-    SharedMemoryCheck, SlowLoops, Summary, TimelineEntry,
+    FailSafe, FaultReport, Jitter, Latency, LostStage, Machine, MonitorCounts, ProcessInfo, RestartSteps,
+    SCHEMA_VERSION, SharedMemoryCheck, SlowLoops, Summary, TimelineEntry,
 };
 use crate::launcher::{budget, network, verdict};
 use crate::model::layout::VectorLayout;

@@ -87,10 +87,7 @@ enum Event {
     /// Boxed: a plant's report is large beside the other events.
     Child(Box<ChildLine>),
     /// The clean-up after a death of `role` is done.
-    Cleaned {
-        role: Role,
-        removed: u64,
-    },
+    Cleaned { role: Role, removed: u64 },
 }
 
 /// Why start-up did not finish.

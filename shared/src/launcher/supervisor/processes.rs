@@ -343,7 +343,17 @@ mod tests {
         p.became_ready(at(0));
         p.stopped = true;
         let death = p.died(at(2500));
-        assert_eq!(death, Death { clean: true, restarts: 0, quick_restarts: 0, ran_s: Some(2.5), disk_full: false, same_failure_in_a_row: 0 });
+        assert_eq!(
+            death,
+            Death {
+                clean: true,
+                restarts: 0,
+                quick_restarts: 0,
+                ran_s: Some(2.5),
+                disk_full: false,
+                same_failure_in_a_row: 0
+            }
+        );
         assert!(!p.ready && !p.stopped);
         assert_eq!(p.row().state, ProcessState::Exited);
         assert_eq!(p.exit_text(), "plant exited with status 0");

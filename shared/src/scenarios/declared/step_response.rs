@@ -110,10 +110,15 @@ impl StepResponse {
         };
         let mut notes = vec![];
         if self.target == start {
-            notes.push(format!("{prefix}: the step at t = {} s is already where the response is; no rise or settling", self.at));
+            notes.push(format!(
+                "{prefix}: the step at t = {} s is already where the response is; no rise or settling",
+                self.at
+            ));
         } else {
             if self.rise_90.is_none() {
-                notes.push(format!("{prefix}: the response never reached 90 % of the step by t = {end} s; no rise time"));
+                notes.push(format!(
+                    "{prefix}: the response never reached 90 % of the step by t = {end} s; no rise time"
+                ));
             }
             if self.settled_at.is_none() {
                 notes.push(format!(

@@ -55,7 +55,8 @@ pub fn plot_faults(
     for (i, f) in summary.faults.iter().enumerate() {
         let during_end =
             f.effect.as_ref().and_then(|e| e.phases.as_ref()).map_or(f.at_s, |p| p.during.to_k as f64 / rate);
-        let window = f.at_s - MARGIN_S.max(50.0 / rate)..(during_end + MARGIN_S.max(50.0 / rate)).min(data.config().duration_s);
+        let window =
+            f.at_s - MARGIN_S.max(50.0 / rate)..(during_end + MARGIN_S.max(50.0 / rate)).min(data.config().duration_s);
         let window = window.start.max(0.0)..window.end.max(window.start.max(0.0) + 1.0 / rate);
         let within = |points: &[(f64, f64)]| -> Vec<(f64, f64)> {
             points.iter().copied().filter(|(t, _)| window.contains(t)).collect()

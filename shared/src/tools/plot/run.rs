@@ -298,7 +298,8 @@ fn sensors_figure(data: &RunData) -> Figure {
     let state = |row: usize| -> Vec<f64> { data.columns.state.clone().map(|c| data.trajectory[c][row]).collect() };
     let applied = |row: usize| -> Vec<f64> { data.columns.applied.clone().map(|c| data.trajectory[c][row]).collect() };
     let window = data.window.clone().unwrap_or_else(|| sensor_window(&data.config));
-    let rows = t.iter().position(|t| *t >= window.start).unwrap_or(t.len())..t.iter().take_while(|t| **t <= window.end).count();
+    let rows = t.iter().position(|t| *t >= window.start).unwrap_or(t.len())
+        ..t.iter().take_while(|t| **t <= window.end).count();
     let mut panels = Vec::new();
     for ((name, _), columns) in data.layout.sensors.iter().zip(&data.columns.sensors) {
         let signal = vectors.signal(&data.config.sensors[name].signal).expect("sensor signals are checked at load");
@@ -358,7 +359,8 @@ fn outputs_figure(data: &RunData) -> Option<Figure> {
         .map(|(i, component)| {
             let values = series(t, &data.trajectory[data.columns.state.start + i]);
             let mut curves = vec![Curve::new("the plant's value", values, Colour::Series(0), Line::Solid(2))];
-            let tracked = references.iter().find(|r| r.track.split_once('.').map(|(_, name)| name) == Some(component.name));
+            let tracked =
+                references.iter().find(|r| r.track.split_once('.').map(|(_, name)| name) == Some(component.name));
             let title = match tracked {
                 Some(reference) => {
                     let points: Vec<(f64, f64)> = t.iter().map(|&t| (t, reference.signal.at(t))).collect();

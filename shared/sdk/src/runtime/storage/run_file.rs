@@ -99,7 +99,12 @@ mod tests {
         assert_eq!(unsafe { libc::mkfifo(name.as_ptr(), 0o600) }, 0);
         for path in [fifo.as_path(), Path::new("/dev/null")] {
             let e = write(path, b"x").unwrap_err().to_string();
-            assert!(e.ends_with("it is not a regular file (a FIFO, a device or a folder), and LoopLab writes only into one"), "{e}");
+            assert!(
+                e.ends_with(
+                    "it is not a regular file (a FIFO, a device or a folder), and LoopLab writes only into one"
+                ),
+                "{e}"
+            );
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }
