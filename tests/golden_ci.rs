@@ -82,6 +82,15 @@ pub fn motor_under_state_feedback(dir: &Path) -> PathBuf {
     file
 }
 
+/// The motor of [`motor_under_state_feedback`] run in this process into `dir/run`: its folder.
+pub fn motor_run_in_process(dir: &Path) -> PathBuf {
+    let file = motor_under_state_feedback(dir);
+    let out = dir.join("run");
+    let ran = looplab().arg("run").arg(&file).args(["--in-process", "-q", "--out"]).arg(&out).output().unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    out
+}
+
 /// `looplab <args>` in `dir` with the Python module importable.
 fn looplab_in(dir: &Path, args: &[&str]) -> Output {
     python_launcher().current_dir(dir).args(args).output().expect("start looplab")

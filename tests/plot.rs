@@ -275,10 +275,7 @@ fn every_paper_figure_is_drawn() {
 #[test]
 fn a_declared_system_draws_its_state_against_the_reference_over_a_window() {
     let dir = fresh_dir("plot-declared");
-    let file = crate::golden_ci::motor_under_state_feedback(&dir);
-    let out = dir.join("run");
-    let ran = looplab().arg("run").arg(&file).args(["--in-process", "-q", "--out"]).arg(&out).output().unwrap();
-    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let out = crate::golden_ci::motor_run_in_process(&dir);
     let plotted = looplab().arg("plot").arg(&out).args(["--from", "0.3", "--to", "1.5"]).output().unwrap();
     assert!(plotted.status.success(), "{}", String::from_utf8_lossy(&plotted.stderr));
     let figure = out.join("outputs.png");
@@ -306,10 +303,7 @@ fn a_declared_system_draws_its_state_against_the_reference_over_a_window() {
 #[test]
 fn a_fifo_or_a_link_where_a_figure_goes_is_refused_at_once() {
     let dir = fresh_dir("plot-planted");
-    let file = crate::golden_ci::motor_under_state_feedback(&dir);
-    let out = dir.join("run");
-    let ran = looplab().arg("run").arg(&file).args(["--in-process", "-q", "--out"]).arg(&out).output().unwrap();
-    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let out = crate::golden_ci::motor_run_in_process(&dir);
     let figure = out.join("estimate.png");
     let name = std::ffi::CString::new(figure.as_os_str().as_encoded_bytes()).unwrap();
     // SAFETY: a path of our own test folder.

@@ -303,10 +303,7 @@ fn bad_input_is_one_line_exit_2_and_writes_nothing() {
 #[test]
 fn a_recording_shorter_than_its_plan_is_replayed_as_far_as_it_goes() {
     let dir = fresh_dir("replay-short");
-    let file = crate::golden_ci::motor_under_state_feedback(&dir);
-    let recording = dir.join("run");
-    let ran = looplab().arg("run").arg(&file).args(["--in-process", "-q", "--out"]).arg(&recording).output().unwrap();
-    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let recording = crate::golden_ci::motor_run_in_process(&dir);
     let launch = std::fs::read_to_string(recording.join("launch.toml")).unwrap();
     let week = launch.replace("duration_s = 2.0", "duration_s = 604800.0");
     assert_ne!(launch, week, "the plan is in the file");
