@@ -6,7 +6,7 @@
 
 use crate::common;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use common::*;
@@ -123,5 +123,99 @@ fn a_bad_fmu_is_one_line_and_exit_2() {
         assert_eq!(stderr.trim().lines().count(), 1, "{set}: {stderr}");
         assert!(!dir.join("run").exists(), "{set}: nothing starts, so no run folder and no shared memory");
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The pendulum FMU's source with `on_load` run by the dynamic loader when its binary is opened.
+fn misbehaving_fmu(dir: &Path, name: &str, on_load: &str) -> PathBuf {
+    let source = dir.join(name);
+    std::fs::create_dir_all(&source).unwrap();
+    let copied = std::process::Command::new("cp").arg("-r").arg(pendulum_source().join(".")).arg(&source).status();
+    assert!(copied.unwrap().success());
+    let c = source.join("fmi2.c");
+    let code = std::fs::read_to_string(&c).unwrap();
+    let hook = format!(
+        "\n#include <signal.h>\n#include <stdlib.h>\n#include <unistd.h>\n\
+         __attribute__((constructor)) static void misbehave_on_load(void) {{ {on_load} }}\n"
+    );
+    std::fs::write(&c, code + &hook).unwrap();
+    let fmu = dir.join(format!("{name}.fmu"));
+    build_fmu(&source, Version::Fmi2, &fmu).unwrap();
+    fmu
+}
+
+/// The launcher runs none of an FMU's code: an FMU that exits, crashes or sleeps as it is loaded
+/// does so in the plant process, which fails the run in one line (never a run that passes with no
+/// loop at all, never a hang), and leaves nothing behind.
+#[test]
+fn an_fmu_that_exits_crashes_or_hangs_while_loading_fails_the_run_it_never_passes() {
+    let dir = fresh_dir("fmu-misbehaving");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases = [
+        ("exits", "exit(0);", "plant exited with status 0 during start-up"),
+        ("crashes", "signal(SIGSEGV, SIG_DFL); raise(SIGSEGV);", "plant exited with status signal 11 during start-up"),
+        ("sleeps", "sleep(3600);", "not ready after 1 s (supervision.ready_timeout_s): "),
+    ];
+    for (name, on_load, expected) in cases {
+        let fmu = misbehaving_fmu(&dir, name, on_load);
+        let out = dir.join(format!("{name}-run"));
+        let output = launcher()
+            .args(["run", LAUNCH, "--duration", "1", "-q", "--set", "supervision.ready_timeout_s=1", "--set"])
+            .arg(format!("plant.fmu=\"{}\"", fmu.display()))
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{name}: {stderr}");
+        assert!(stderr.contains(expected), "{name}: {stderr}\n  should say: {expected}");
+        assert!(stderr.contains("plant"), "{name}: the plant is named: {stderr}");
+        assert_nothing_left(&load_summary(&out));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An FMU's unpack folder is its process's own (0700); one left by a process that is gone is
+/// removed by `looplab clean`, one of a live process is not.
+#[test]
+fn fmu_unpack_folders_are_private_and_those_of_dead_processes_are_cleaned() {
+    let tmp = std::env::temp_dir();
+    // A pid that is not running: the highest the kernel hands out, past any real one here.
+    let max: i32 = std::fs::read_to_string("/proc/sys/kernel/pid_max").unwrap().trim().parse().unwrap();
+    let dead = tmp.join(format!("looplab-fmu-{}-test{}", max, std::process::id()));
+    let live = tmp.join(format!("looplab-fmu-{}-test", std::process::id()));
+    for folder in [&dead, &live] {
+        std::fs::create_dir_all(folder.join("binaries")).unwrap();
+        std::fs::write(folder.join("binaries/model.so"), b"x").unwrap();
+    }
+    let output = looplab().arg("clean").output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let said = String::from_utf8_lossy(&output.stdout);
+    assert!(!dead.exists(), "{said}");
+    assert!(said.contains(&format!("removed {}", dead.display())), "{said}");
+    assert!(live.exists(), "a live process's folder is left alone");
+    std::fs::remove_dir_all(&live).unwrap();
+}
+
+/// An open-loop replay plays the plant back from the recording: it neither checks nor loads the
+/// FMU the run used, so one replaced since (here by a file that is no FMU) changes nothing.
+#[test]
+fn an_open_loop_replay_neither_checks_nor_loads_the_recorded_fmu() {
+    let dir = fresh_dir("fmu-replay");
+    std::fs::create_dir_all(&dir).unwrap();
+    let own = dir.join("plant.fmu");
+    std::fs::copy(fmu(Version::Fmi2), &own).unwrap();
+    let run = run_from(
+        launcher(),
+        "fmu-recorded",
+        &[LAUNCH, "--mode", "lockstep", "--duration", "1", "--set", &format!("plant.fmu=\"{}\"", own.display())],
+    );
+    assert!(run.summary().completed, "{:?}", run.summary().stopped_because);
+    std::fs::write(&own, b"not a zip").unwrap();
+    let out = dir.join("replay");
+    let output =
+        launcher().arg("replay").arg(&run.dir).args(["--stage", "controller", "--out"]).arg(&out).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(0), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }

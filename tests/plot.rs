@@ -323,3 +323,52 @@ fn a_fifo_or_a_link_where_a_figure_goes_is_refused_at_once() {
     assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A FIFO or a link planted in place of a run folder's file: `plot`, `diff` and `replay` say
+/// which file and why at once (a FIFO no longer blocks them), and read nothing through the link.
+#[test]
+fn a_fifo_or_a_link_in_place_of_a_run_file_is_refused_at_once() {
+    let dir = fresh_dir("read-planted");
+    let out = crate::golden_ci::motor_run_in_process(&dir);
+    let victim = dir.join("victim.json");
+    std::fs::copy(out.join("summary.json"), &victim).unwrap();
+    let plant = |file: &str, fifo: bool| {
+        let path = out.join(file);
+        std::fs::rename(&path, dir.join(file)).unwrap();
+        if fifo {
+            let name = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
+            // SAFETY: a path of our own test folder.
+            assert_eq!(unsafe { libc::mkfifo(name.as_ptr(), 0o600) }, 0);
+        } else {
+            std::os::unix::fs::symlink(&victim, &path).unwrap();
+        }
+        path
+    };
+    let restore = |file: &str| {
+        std::fs::remove_file(out.join(file)).unwrap();
+        std::fs::rename(dir.join(file), out.join(file)).unwrap();
+    };
+    let out_arg = out.to_str().unwrap();
+    let unused = dir.join("unused");
+    let unused = unused.to_str().unwrap();
+    let cases: [(&str, bool, Vec<&str>, &str); 4] = [
+        ("trajectory.csv", true, vec!["plot", out_arg], "it is not a regular file"),
+        ("summary.json", false, vec!["plot", out_arg], "it is a symbolic link"),
+        ("trajectory.csv", true, vec!["diff", out_arg, out_arg], "it is not a regular file"),
+        (
+            "run.mcap",
+            true,
+            vec!["replay", out_arg, "--stage", "controller", "--out", unused],
+            "it is not a regular file",
+        ),
+    ];
+    for (file, fifo, args, expected) in cases {
+        let path = plant(file, fifo);
+        let output = looplab().args(&args).output().unwrap();
+        let said = String::from_utf8_lossy(&output.stderr).into_owned();
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {said}");
+        assert!(said.contains(&format!("cannot read {}: {expected}", path.display())), "{args:?}: {said}");
+        restore(file);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

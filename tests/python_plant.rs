@@ -216,3 +216,79 @@ fn a_python_plant_that_cannot_load_is_bad_input_in_one_line_and_nothing_starts()
         std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
     }
 }
+
+/// The example pendulum whose `derivative` never returns from t = 1 s on: once (the first
+/// incarnation leaves `hung_once` beside it), or on every start.
+fn hanging_plant(dir: &Path, every_start: bool) -> String {
+    let example = std::fs::read_to_string(example("python-plant/pendulum_plant.py")).unwrap();
+    let marker = dir.join("hung_once");
+    let condition = if every_start { String::new() } else { format!(" and not os.path.exists({marker:?})") };
+    let hang = format!(
+        "    def derivative(self, t, x, u, dx):\n        if t >= 1.0{condition}:\n            \
+         open({marker:?}, \"w\").close()\n            time.sleep(3600)\n        self.model(t, x, u, dx)\n\n    \
+         def model(self, t, x, u, dx):"
+    );
+    let source = example.replace("    def derivative(self, t, x, u, dx):", &hang);
+    format!("import os\nimport time\n{source}")
+}
+
+/// A plant stuck inside its model neither hangs the run nor passes unseen: stalled for
+/// `hang_timeout_s`, it is killed and restarted, and goes on from its snapshot as if it had not
+/// hung (lockstep, byte for byte).
+#[test]
+fn a_python_plant_that_hangs_once_is_killed_restarted_and_goes_on_byte_for_byte() {
+    let dir = declared_folder("hangs-once", None);
+    std::fs::write(dir.join("pendulum_plant.py"), hanging_plant(&dir, false)).unwrap();
+    let common = ["--mode", "lockstep", "--duration", "2"];
+    let nominal = run_from(
+        launcher(),
+        "hang-nominal",
+        &[&[&example("python-plant/pendulum_plant.toml")[..]], &common[..]].concat(),
+    );
+    let launch = dir.join("pendulum_plant.toml");
+    let hung = run_from(
+        launcher(),
+        "hangs-once",
+        &[&[launch.to_str().unwrap()], &common[..], &["--set", "supervision.hang_timeout_s=1"]].concat(),
+    );
+    let s = hung.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.restarts[&Role::Plant], 1, "{:?}", s.restarts);
+    let killed = "inside its own code (supervision.hang_timeout_s = 1 s); killed it";
+    let said = s.timeline.iter().filter(|e| e.event.starts_with("plant hung: stalled ") && e.event.ends_with(killed));
+    assert_eq!(said.count(), 1, "{:?}", s.timeline);
+    assert!(trajectory_bytes(&hung) == trajectory_bytes(&nominal), "the restarted plant did not go on");
+    assert_nothing_left(s);
+    std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
+}
+
+/// A plant that hangs on every start is a crash loop: the run ends after three hangs, says so,
+/// and counts the loops the monitor recorded although the plant never reported.
+#[test]
+fn a_python_plant_that_hangs_on_every_start_ends_the_run_and_its_loops_are_counted() {
+    let dir = declared_folder("hangs-always", None);
+    std::fs::write(dir.join("pendulum_plant.py"), hanging_plant(&dir, true)).unwrap();
+    let out = dir.join("run");
+    let output = launcher()
+        .arg("run")
+        .arg(dir.join("pendulum_plant.toml"))
+        .args(["--mode", "lockstep", "--duration", "2", "-q", "--set", "supervision.hang_timeout_s=0.5", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
+    let s = load_summary(&out);
+    let why = match &s.stopped_because {
+        Some(StopReason::Failed(why)) => why.clone(),
+        other => panic!("not a failure: {other:?}"),
+    };
+    assert!(why.starts_with("plant hung: stalled "), "{why}");
+    assert!(why.contains("inside its own code, and was killed; not restarted: a crash loop"), "{why}");
+    assert_eq!(s.restarts[&Role::Plant], 2, "{:?}", s.restarts);
+    // The plant hung integrating loop 1000 to 1001: loops 0 to 1000 were recorded.
+    let rows = Table::read(&out.join("trajectory.csv")).rows.len() as u64;
+    assert_eq!(s.loops, rows, "the summary's loops against trajectory.csv's rows");
+    assert!(rows > 900, "{rows} rows");
+    assert_nothing_left(&s);
+    std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
+}

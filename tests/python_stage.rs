@@ -355,3 +355,57 @@ looplab.run(Checking)
     assert_nothing_left(r.summary());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A controller that starts two children before it runs: one holds its output, one closed its
+/// descriptors. Each prints their pids on stderr.
+const CONTROLLER_WITH_CHILDREN: &str = r#"import runpy
+import subprocess
+import sys
+
+holder = subprocess.Popen(["sleep", "300"])
+quiet = subprocess.Popen(["sleep", "301"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+print(f"children {holder.pid} {quiet.pid}", file=sys.stderr, flush=True)
+runpy.run_path(sys.argv[1], run_name="__main__")
+"#;
+
+/// What a stage starts ends with it: a child holding its output neither hides its death (killed
+/// mid-run, it is restarted) nor hangs the launcher at the end, and every child is killed and
+/// named in the summary's notes, in each incarnation.
+#[test]
+fn the_children_a_stage_leaves_behind_are_killed_and_named_and_hang_nothing() {
+    let dir = fresh_dir("stage-children");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("with_children.py");
+    std::fs::write(&script, CONTROLLER_WITH_CHILDREN).unwrap();
+    let stage = format!(
+        "stages.controller.command=[\"python3\", \"{}\", \"{}\"]",
+        script.display(),
+        example("controller/pendulum_controller.py")
+    );
+    let common = ["pendulum", "--mode", "lockstep", "--duration", "2", "--set", &stage];
+    let run = run_from(launcher(), "stage-children", &[&common[..], &["--fault", "kill controller at 1s"]].concat());
+    let s = run.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.restarts[&Role::Controller], 1, "{:?}", s.restarts);
+    let children: Vec<(u32, u32)> = log(&run, "controller")
+        .lines()
+        .filter_map(|l| l.strip_prefix("children "))
+        .map(|pids| {
+            let (holder, quiet) = pids.split_once(' ').unwrap();
+            (holder.parse().unwrap(), quiet.parse().unwrap())
+        })
+        .collect();
+    assert_eq!(children.len(), 2, "one pair per incarnation: {children:?}");
+    for (holder, quiet) in children {
+        let said = format!(
+            "controller exited leaving 2 process(es) it started running: pid {} (sleep), pid {} (sleep); killed them",
+            holder.min(quiet),
+            holder.max(quiet)
+        );
+        assert!(s.notes.contains(&said), "{said} not in {:?}", s.notes);
+        assert!(!alive(holder.into()) && !alive(quiet.into()), "{holder} or {quiet} outlived the run");
+    }
+    assert_nothing_left(s);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -312,3 +312,43 @@ fn a_recording_shorter_than_its_plan_is_replayed_as_far_as_it_goes() {
     assert!(text.contains("outputs: identical to the recording's, bit for bit, in all 200 loops"), "{text}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The byte offset of the first chunk record of an MCAP file (after the 8 magic bytes, records
+/// are an opcode, a u64 length and the body; a chunk's opcode is 0x06).
+fn first_chunk(mcap: &[u8]) -> usize {
+    let mut at = 8;
+    while mcap[at] != 0x06 {
+        at += 9 + u64::from_le_bytes(mcap[at + 1..at + 9].try_into().unwrap()) as usize;
+    }
+    at
+}
+
+/// A corrupt `run.mcap` is refused in one line naming it, never read as far as it goes nor
+/// blamed on the stage: one byte flipped inside a chunk fails its CRC; a chunk whose length runs
+/// past the end of a finished file is no killed monitor's last chunk.
+#[test]
+fn a_corrupt_recording_is_refused_not_replayed_in_part() {
+    let dir = fresh_dir("replay-corrupt");
+    let recording = crate::golden_ci::motor_run_in_process(&dir);
+    let good = std::fs::read(recording.join("run.mcap")).unwrap();
+    let chunk = first_chunk(&good);
+    let mut flipped = good.clone();
+    // Well inside the chunk's compressed records (past its 9-byte record head and fixed fields).
+    flipped[chunk + 200] ^= 0x01;
+    let mut too_long = good.clone();
+    too_long[chunk + 1..chunk + 9].copy_from_slice(&(1u64 << 62).to_le_bytes());
+    for (name, bytes, expected) in [
+        ("flipped", flipped, "run.mcap: corrupt: a chunk"),
+        ("too-long", too_long, "run.mcap: corrupt: record with opcode 06 length exceeds limit"),
+    ] {
+        std::fs::write(recording.join("run.mcap"), &bytes).unwrap();
+        let out = dir.join(name);
+        let output = replay_with(looplab(), &recording, &out, &["--stage", "controller"]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{name}: {stderr}");
+        assert!(stderr.contains(expected), "{name}: {stderr}");
+        assert_eq!(stderr.trim().lines().count(), 1, "{name}: {stderr}");
+        assert!(!out.exists(), "{name}: wrote {}", out.display());
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

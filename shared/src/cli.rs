@@ -574,10 +574,17 @@ fn report_abandoned(done: &run_storage::Abandoned) {
 fn clean() -> ExitCode {
     let done = run_storage::clean_abandoned_runs();
     report_abandoned(&done);
-    if done.runs.is_empty() {
+    let (removed, left) = crate::scenarios::declared::fmu::remove_abandoned_unpack_folders();
+    for folder in &removed {
+        say!("looplab: removed {} (an FMU unpacked by a process that is gone)", folder.display());
+    }
+    for folder in &left {
+        tell!("looplab: could not remove {}", folder.display());
+    }
+    if done.runs.is_empty() && removed.is_empty() {
         say!("nothing to clean: no abandoned run of this user in {}", run_storage::SHM_DIR);
     }
-    if done.leftover.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE }
+    if done.leftover.is_empty() && left.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE }
 }
 
 fn report_failure(result: Result<()>) -> ExitCode {

@@ -99,16 +99,19 @@ fn build_siblings_under_cargo(exe_dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Makes `command` a child that this process stops: in its own process group, so that a Ctrl-C
-/// in the terminal reaches only us and we stop the children in order; and asked to stop
-/// (SIGTERM) if we die, so that nothing is orphaned.
+/// Makes `command` a child that this process stops: in a session of its own, so that a Ctrl-C
+/// in the terminal reaches only us and we stop the children in order, and so that what it starts
+/// can be found and stopped when it exits; and asked to stop (SIGTERM) if we die, so that nothing
+/// is orphaned.
 pub fn supervised(command: &mut std::process::Command) {
-    command.process_group(0);
     let parent = std::process::id() as libc::pid_t;
-    // SAFETY: prctl and getppid are async-signal-safe. If the parent died before prctl took
-    // effect, the child does not start at all.
+    // SAFETY: setsid, prctl and getppid are async-signal-safe. If the parent died before prctl
+    // took effect, the child does not start at all.
     unsafe {
         command.pre_exec(move || {
+            if libc::setsid() < 0 {
+                return Err(std::io::Error::last_os_error());
+            }
             libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
             if libc::getppid() != parent {
                 return Err(std::io::Error::other("the parent is gone"));
@@ -141,14 +144,26 @@ pub struct Start {
     pub wakeups: u64,
     /// Times another task took its CPU while it could run (involuntary context switches).
     pub preemptions: u64,
+    /// The processes of its session still running when it exited (what it started and
+    /// left behind, `pid 123 (sleep)`): killed then, and said.
+    pub left_running: Vec<String>,
 }
 
 impl Start {
+    pub fn running(pid: u32) -> Start {
+        Start { pid, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0, left_running: vec![] }
+    }
+
     /// Reaps it if it has exited (without blocking), with its CPU time; true once it is reaped.
     pub fn try_reap(&mut self) -> bool {
         if self.exit != Exit::Running {
             return true;
         }
+        if !self.has_exited() {
+            return false;
+        }
+        // Its pid is not reaped yet, so its session's id cannot have been reused.
+        self.left_running = kill_session_members(self.pid);
         let mut status = 0;
         // SAFETY: plain wait4 on our own child; rusage is a valid out-parameter.
         let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
@@ -166,6 +181,20 @@ impl Start {
         true
     }
 
+    /// Whether it has exited, asked without reaping it.
+    pub fn has_exited(&self) -> bool {
+        if self.exit != Exit::Running {
+            return true;
+        }
+        // SAFETY: waitid on our own unreaped child; info is a valid out-parameter. WNOWAIT leaves
+        // it a zombie.
+        unsafe {
+            let mut info: libc::siginfo_t = std::mem::zeroed();
+            let waited = libc::waitid(libc::P_PID, self.pid, &mut info, libc::WEXITED | libc::WNOHANG | libc::WNOWAIT);
+            waited == 0 && info.si_pid() != 0
+        }
+    }
+
     /// Sends `signal` unless it has been reaped.
     pub fn signal(&self, signal: i32) {
         if self.exit == Exit::Running {
@@ -173,6 +202,54 @@ impl Start {
             unsafe { libc::kill(self.pid as i32, signal) };
         }
     }
+}
+
+/// Kills what is left of session `sid` (a child's, started by `supervised`) but its leader, and
+/// says what that was: a stage's background child would otherwise outlive the run, and one that
+/// holds the stage's output would keep the launcher reading it.
+fn kill_session_members(sid: u32) -> Vec<String> {
+    let mut killed = vec![];
+    // A member may fork while it is being killed: look again until none is left.
+    for _ in 0..8 {
+        let members = session_members(sid);
+        if members.is_empty() {
+            break;
+        }
+        for (pid, comm) in members {
+            // SAFETY: plain kill of a process seen in the session; the session's id stays
+            // reserved while its leader is unreaped.
+            unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+            let seen = format!("pid {pid} ({comm})");
+            if !killed.contains(&seen) {
+                killed.push(seen);
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    killed
+}
+
+/// The processes of session `sid` other than its leader, by pid with their names.
+fn session_members(sid: u32) -> Vec<(u32, String)> {
+    let Ok(entries) = std::fs::read_dir("/proc") else { return vec![] };
+    let mut members: Vec<(u32, String)> = entries
+        .flatten()
+        .filter_map(|entry| entry.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|&pid| pid != sid)
+        .filter_map(|pid| {
+            let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+            // `pid (comm) state ppid pgrp session …`; comm may hold spaces and parentheses.
+            let (head, tail) = stat.rsplit_once(')')?;
+            let comm = head.split_once('(')?.1;
+            let mut fields = tail.split_whitespace();
+            let state = fields.next()?;
+            let session: u32 = fields.nth(2)?.parse().ok()?;
+            // A zombie is dead already; its parent reaps it.
+            (session == sid && state != "Z").then(|| (pid, comm.to_owned()))
+        })
+        .collect();
+    members.sort();
+    members
 }
 
 /// One line of a child's output, or its end.
@@ -298,9 +375,5 @@ pub fn spawn<E: Send + 'static>(
         }
         let _ = send(Line::Closed);
     });
-    Ok(Spawned {
-        start: Start { pid: child.id(), exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 },
-        stdin: child.stdin.take(),
-        reader,
-    })
+    Ok(Spawned { start: Start::running(child.id()), stdin: child.stdin.take(), reader })
 }

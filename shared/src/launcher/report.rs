@@ -128,9 +128,11 @@ pub fn read_summary(run_dir: &std::path::Path) -> anyhow::Result<Summary> {
     if !run_dir.is_dir() {
         anyhow::bail!("{}: no such run folder", run_dir.display());
     }
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("{}: not a finished run folder (no summary.json)", run_dir.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{}: not a summary LoopLab wrote", path.display()))
+    if std::fs::symlink_metadata(&path).is_err() {
+        anyhow::bail!("{}: not a finished run folder (no summary.json)", run_dir.display());
+    }
+    let bytes = crate::runtime::storage::run_file::read(&path)?;
+    serde_json::from_slice(&bytes).with_context(|| format!("{}: not a summary LoopLab wrote", path.display()))
 }
 
 pub fn render(s: &Summary) -> String {

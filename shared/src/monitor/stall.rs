@@ -28,6 +28,8 @@ pub struct StallWatch {
     newest: PerTopic<Option<u64>>,
     /// When the newest state was published.
     state_seen_ns: u64,
+    /// When the newest command was published.
+    command_seen_ns: u64,
     /// Per stage's input topic, the inputs its stage has not answered yet: (k, publish stamp).
     unanswered: PerTopic<VecDeque<(u64, u64)>>,
     /// Per process of [`Role::LOOP`]: since when its input has waited, and whether it was reported.
@@ -45,6 +47,7 @@ impl StallWatch {
             last_tick: loops.saturating_sub(1),
             newest: PerTopic::default(),
             state_seen_ns: clock(),
+            command_seen_ns: clock(),
             unanswered: PerTopic::default(),
             waiting: [None; Role::LOOP.len()],
             stalled: [false; Role::LOOP.len()],
@@ -58,6 +61,9 @@ impl StallWatch {
         let newer = self.newest[topic].is_none_or(|n| k > n);
         if topic == Topic::State && newer {
             self.state_seen_ns = published;
+        }
+        if topic == Topic::Command && newer {
+            self.command_seen_ns = published;
         }
         self.newest[topic] = self.newest[topic].max(Some(k));
         for role in Role::LOOP {
@@ -95,8 +101,12 @@ impl StallWatch {
         }
         match self.plant_period_ns {
             // Command k answers state k: the plant waits once the command for its newest
-            // state is in.
-            None => (input.is_some_and(|i| output.is_none_or(|o| i >= o)), None),
+            // state is in, since that command was sent (a plant that keeps up waits a moment
+            // every loop, which is no stall).
+            None => {
+                let waits = input.is_some_and(|i| output.is_none_or(|o| i >= o));
+                (waits, Some(self.command_seen_ns).filter(|_| waits))
+            }
             // Its input is its clock: a state is due every period, so silence dates from the last.
             Some(period) => (now > self.state_seen_ns + period, Some(self.state_seen_ns)),
         }
@@ -231,8 +241,23 @@ mod tests {
         // Command 0 is in and state 1 never comes.
         now.set(1001 * MS);
         assert_eq!(watch.check(), []);
-        now.set(1051 * MS);
-        assert_eq!(watch.check(), [stall("plant", 1001, 1051)]);
+        now.set(1049 * MS);
+        assert_eq!(watch.check(), []);
+        // Dated from command 0's arrival.
+        now.set(1050 * MS);
+        assert_eq!(watch.check(), [stall("plant", 1000, 1050)]);
+    }
+
+    /// A lockstep plant that keeps up still waits a moment for each command: checks that always
+    /// land in that moment, loop after loop, see no stall.
+    #[test]
+    fn a_lockstep_plant_that_answers_each_command_at_once_is_not_stalled() {
+        let (mut watch, now) = watch(None);
+        for k in 0..200 {
+            now.set((1000 + k) * MS);
+            whole_loop(&mut watch, k);
+            assert_eq!(watch.check(), [], "loop {k}");
+        }
     }
 
     #[test]

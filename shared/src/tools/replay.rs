@@ -132,7 +132,7 @@ pub fn replay(args: &ReplayArgs, catalog: &Catalog) -> Result<ReplayReport, Tool
         .canonicalize()
         .map_err(|e| bad(format!("{}: cannot open the recording: {e}", args.recording.display())))?;
     let launch_file = recording.join(files::LAUNCH);
-    if !launch_file.is_file() {
+    if std::fs::symlink_metadata(&launch_file).is_err() {
         return Err(bad(format!("{}: not a run folder (it has no launch.toml)", recording.display())));
     }
     let (role, program) = parse_stage(&args.stage).map_err(|e| bad(format!("--stage {}: {e}", args.stage)))?;

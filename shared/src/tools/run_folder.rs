@@ -6,8 +6,6 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use anyhow::Context as _;
-
 use crate::config::launch::LaunchConfig;
 use crate::contract::msg::LoopTrace;
 use crate::contract::run_format::files;
@@ -25,13 +23,13 @@ pub struct RunFolder {
 
 impl RunFolder {
     /// `dir`, once it is a folder holding each of `files`; else one bad-input error saying which
-    /// file it lacks.
+    /// file it lacks. (Each is read as a regular file only, which its reader checks.)
     pub fn open(dir: &Path, files: &[&str]) -> Result<Self, ToolError> {
         let bad = |why: String| Err(ToolError::BadInput(format!("{}: {why}", dir.display())));
         if !dir.is_dir() {
             return bad(if dir.exists() { "not a folder".into() } else { "no such run folder".into() });
         }
-        match files.iter().find(|name| !dir.join(name).is_file()) {
+        match files.iter().find(|name| std::fs::symlink_metadata(dir.join(name)).is_err()) {
             Some(missing) => bad(format!("not a run folder (it has no {missing})")),
             None => Ok(RunFolder { dir: dir.to_path_buf() }),
         }
@@ -58,10 +56,12 @@ impl RunFolder {
     /// A file of the folder as text.
     pub fn text(&self, file: &str) -> Result<String, ToolError> {
         let path = self.dir.join(file);
-        if !path.is_file() {
+        if std::fs::symlink_metadata(&path).is_err() {
             return Err(self.bad(format!("no {file}")));
         }
-        Ok(std::fs::read_to_string(&path).with_context(|| format!("read {}", path.display()))?)
+        let bytes =
+            crate::runtime::storage::run_file::read(&path).map_err(|e| ToolError::BadInput(format!("{e:#}")))?;
+        String::from_utf8(bytes).map_err(|_| ToolError::BadInput(format!("{}: not UTF-8 text", path.display())))
     }
 
     /// A CSV file of the folder (trajectory.csv, loops.csv), its header and rows.

@@ -311,6 +311,9 @@ pub struct Supervision {
     /// A process whose input has been waiting this long with no output from it is stalled
     /// (wall-clock seconds; a stopped process looks alive to iceoryx2).
     pub stall_timeout_s: f64,
+    /// A process stalled this long (its input waiting, nothing out; not stopped by a fault) is
+    /// stuck inside its own code: it is killed, and its restart policy decides what follows.
+    pub hang_timeout_s: f64,
     /// Real time: once the newest command is older than this (s), the plant applies `on_stale`.
     pub command_timeout_s: f64,
     pub on_stale: OnStale,
@@ -337,6 +340,7 @@ impl Default for Supervision {
             backoff_s: 0.01,
             backoff_reset_s: 1.0,
             stall_timeout_s: 0.05,
+            hang_timeout_s: 5.0,
             command_timeout_s: 0.02,
             on_stale: OnStale::Hold,
             lockstep_stall_s: 10.0,

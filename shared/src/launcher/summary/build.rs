@@ -93,7 +93,10 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
     let realtime = config.mode == Mode::Realtime;
     let wall_ns = plant.last_publish_ns.saturating_sub(plant.first_publish_ns);
     let wall_time_s = wall_ns as f64 * 1e-9;
-    let missing = monitor.missing.clone().up_to(monitor.loops_seen, plant.loops);
+    // A plant that never reported (killed, or hung and stopped) ran at least the loops the
+    // monitor saw.
+    let loops = reports.plant.as_ref().map_or(monitor.loops_seen, |p| p.loops);
+    let missing = monitor.missing.clone().up_to(monitor.loops_seen, loops);
     let stage_total =
         |f: fn(&StageReport) -> u64| -> u64 { reports.stages.values().flat_map(|r| r.values()).map(f).sum() };
     Summary {
@@ -111,7 +114,7 @@ pub fn build(inputs: SummaryInputs<'_>) -> Summary {
         run_id: run_id.into(),
         run_dir: run_dir.display().to_string(),
         started_at,
-        loops: plant.loops,
+        loops,
         loops_planned: config.loops(),
         completed: *outcome == Outcome::Completed
             && !plant.stopped_early

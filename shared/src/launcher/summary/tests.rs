@@ -99,8 +99,11 @@ fn a_summary_builds_from_the_reports_alone() {
         monitor: Some(monitor),
         ..Default::default()
     };
-    let starts: BTreeMap<Role, Vec<Start>> =
-        [(Role::Sensors, vec![Start { pid: 7, exit: Exit::Status(0), cpu_s: 0.5, wakeups: 0, preemptions: 0 }])].into();
+    let starts: BTreeMap<Role, Vec<Start>> = [(
+        Role::Sensors,
+        vec![Start { pid: 7, exit: Exit::Status(0), cpu_s: 0.5, wakeups: 0, preemptions: 0, left_running: vec![] }],
+    )]
+    .into();
     let summary = build(SummaryInputs {
         config: &config,
         scenario: scenario.as_ref(),
@@ -197,7 +200,7 @@ fn each_incarnation_of_a_stage_has_its_own_counts() {
         }),
         ..Default::default()
     };
-    let start = |pid, exit| Start { pid, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0 };
+    let start = |pid, exit| Start { pid, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0, left_running: vec![] };
     let starts: BTreeMap<Role, Vec<Start>> = [
         (Role::Estimator, vec![start(1, Exit::Signal(9)), start(2, Exit::Status(0))]),
         (Role::Plant, vec![start(3, Exit::Status(0))]),

@@ -20,6 +20,7 @@ impl Supervisor<'_> {
     /// process is restarted, or the run fails. Returns the outcome if the run is over.
     pub(super) fn ended(&mut self, role: Role) -> Option<Outcome> {
         let ns = now_ns();
+        self.note_left_running(role);
         let mut death = self.processes[role].died(ns);
         if role == Role::Plant {
             // A pause belongs to the plant that asked; its successor asks again at the same tick.
@@ -31,9 +32,14 @@ impl Supervisor<'_> {
         {
             return Some(plant_finished(report, self.config.supervision.lockstep_stall_s));
         }
-        let last_words = self.last_words(role);
-        let exit = format!("{}{last_words}", self.processes[role].exit_text());
-        let healthy = death.ran_s.is_some_and(|s| s >= self.config.supervision.backoff_reset_s);
+        let hung = self.processes[role].hung_s.is_some();
+        // A hang is a failure of its own: three in a row are a crash loop, however long each ran.
+        let last_words = if hung { ": hung".to_owned() } else { self.last_words(role) };
+        let exit = match hung {
+            true => self.processes[role].exit_text(),
+            false => format!("{}{last_words}", self.processes[role].exit_text()),
+        };
+        let healthy = !hung && death.ran_s.is_some_and(|s| s >= self.config.supervision.backoff_reset_s);
         death.same_failure_in_a_row = self.processes[role].same_failure_in_a_row(&last_words, healthy);
         self.faults.detect(role, DetectedBy::ProcessExited, ns);
         // Free what the dead process held in shared memory before its successor opens it, on the
@@ -84,6 +90,58 @@ impl Supervisor<'_> {
         self.log.lost.push(LostStage { process: role, at_ms, at_loop, why });
         self.tell_plant_lost();
         None
+    }
+
+    /// Kills each process stuck inside its own code: stalled for `hang_timeout_s`, and not
+    /// because a fault stopped it or the loop is held for one. Its death then goes the way of
+    /// any other (its restart policy), so a run never hangs on a model that never returns.
+    pub(super) fn kill_hung(&mut self, now: u64) {
+        let hang_s = self.config.supervision.hang_timeout_s;
+        for role in self.config.hosts.processes() {
+            let p = &self.processes[role];
+            let Some(since) = p.stalled_since_ns else { continue };
+            let held = p.stopped || self.paused || (self.config.hosts.is_remote(role) && self.faults.cut_open());
+            // A delay fault holds each of its answers that long (real time).
+            let delayed_s = self.config.faults.iter().filter(|f| inject::target(f) == role).filter_map(|f| f.delay_s);
+            let limit_s = hang_s + delayed_s.fold(0.0, f64::max);
+            if held
+                || p.hung_s.is_some()
+                || !p.ready
+                || !p.running()
+                || (now.saturating_sub(since) as f64) < limit_s * 1e9
+            {
+                continue;
+            }
+            let stalled_s = now.saturating_sub(since) as f64 * 1e-9;
+            // Still stalled, as the monitor sees it, until the next incarnation answers: its hang
+            // clock starts again once it is ready.
+            self.processes[role].hung_s = Some(stalled_s);
+            self.processes[role].signal(libc::SIGKILL);
+            self.note(
+                now,
+                format!(
+                    "{role} hung: stalled {stalled_s:.1} s inside its own code \
+                     (supervision.hang_timeout_s = {hang_s} s); killed it"
+                ),
+            );
+        }
+    }
+
+    /// Says what `role`'s last incarnation left running in its session when it exited
+    /// (killed then), on the timeline and in the summary's notes.
+    pub(super) fn note_left_running(&mut self, role: Role) {
+        let Some(run) = self.processes[role].runs.last_mut() else { return };
+        let left = std::mem::take(&mut run.left_running);
+        if left.is_empty() {
+            return;
+        }
+        let line = format!(
+            "{role} exited leaving {} process(es) it started running: {}; killed them",
+            left.len(),
+            left.join(", ")
+        );
+        self.note(now_ns(), line.clone());
+        self.left_running.push(line);
     }
 
     /// Lockstep: a stage was lost, so command k will never come; the plant goes on without

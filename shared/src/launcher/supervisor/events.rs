@@ -9,12 +9,16 @@ use crate::contract::protocol::ChildEvent;
 use crate::contract::role::Role;
 use crate::launcher::child::{ChildLine, Line};
 use crate::launcher::inject::DetectedBy;
+use crate::launcher::outcome::Exit;
 
 use super::{Event, Supervisor};
 
 /// How long a process whose output ended may take to be reapable before its death is handled
 /// anyway (its exit status then unknown).
 pub(super) const REAP_WAIT: Duration = Duration::from_secs(2);
+/// How long the output of a process that exited may stay open before its death is handled
+/// without waiting for it to close.
+const OUTPUT_GRACE: Duration = Duration::from_secs(2);
 
 impl Supervisor<'_> {
     /// Reaps `role`, waiting up to `limit` (where nothing else is to go on meanwhile).
@@ -25,9 +29,37 @@ impl Supervisor<'_> {
         }
     }
 
+    /// The processes that exited whose output has stayed open for [`OUTPUT_GRACE`] since: a
+    /// process they started holds it. (Their last lines, the report among them, come before
+    /// their output closes, so a process that closes it is waited for.)
+    pub(super) fn exited_with_output_held(&mut self) -> Vec<Role> {
+        let now = Instant::now();
+        let mut held = vec![];
+        for p in self.processes.iter_mut().filter(|p| !p.end_seen) {
+            if !p.runs.last().is_some_and(|r| r.exit == Exit::Running && r.has_exited()) {
+                continue;
+            }
+            if now.duration_since(*p.exited_seen_at.get_or_insert(now)) >= OUTPUT_GRACE {
+                held.push(p.role);
+            }
+        }
+        held
+    }
+
+    /// `role`'s output ended: its death is handled once it is reaped (or waited for long enough).
+    pub(super) fn closed(&mut self, role: Role) {
+        if !std::mem::replace(&mut self.processes[role].end_seen, true) {
+            self.closing.push((role, Instant::now() + REAP_WAIT));
+        }
+    }
+
     /// The processes whose output ended that are reaped now, or that were waited for long
-    /// enough: their deaths are to be handled.
+    /// enough: their deaths are to be handled. A process that exited while its output stays open
+    /// (held by a process it started) is among them too.
     pub(super) fn reaped(&mut self) -> Vec<Role> {
+        for role in self.exited_with_output_held() {
+            self.closed(role);
+        }
         let now = Instant::now();
         let processes = &mut self.processes;
         let mut done = vec![];
@@ -89,6 +121,7 @@ impl Supervisor<'_> {
                     return None;
                 }
                 if let Ok(stalled) = process.parse::<Role>() {
+                    self.processes[stalled].stalled_since_ns = Some(since_ns.min(detected_ns));
                     self.faults.detect(stalled, DetectedBy::InputDeadline, detected_ns);
                     // A stage across the link waits on the link: a cut stalls it.
                     if self.config.hosts.is_remote(stalled) {
@@ -100,6 +133,7 @@ impl Supervisor<'_> {
             }
             ChildEvent::Resumed { process, at_ns } => {
                 if let Ok(resumed) = process.parse::<Role>() {
+                    self.processes[resumed].stalled_since_ns = None;
                     self.faults.resume(resumed, at_ns);
                     if self.config.hosts.is_remote(resumed) {
                         self.faults.resume_cut(at_ns);

@@ -82,6 +82,11 @@ impl<'a> FaultLedger<'a> {
             .and_then(|i| Some((i, self.seen[i].injected_ns?)))
     }
 
+    /// A cut of the link is in effect: a stage across it waits on it.
+    pub(super) fn cut_open(&self) -> bool {
+        self.injected_on(Role::Bridge, FaultKind::Cut).into_iter().any(|i| self.seen[i].continued_ns.is_none())
+    }
+
     /// Fault `i`'s process was sent SIGCONT at `ns`.
     pub(super) fn continued(&mut self, i: usize, ns: u64) {
         self.seen[i].continued_ns = Some(ns);

@@ -132,6 +132,9 @@ impl Supervisor<'_> {
             let ns = now_ns();
             self.processes[role].signal(libc::SIGCONT);
             self.processes[role].stopped = false;
+            // Its stall was the stop's: a hang is timed from now, until it answers again.
+            let stalled = &mut self.processes[role].stalled_since_ns;
+            *stalled = stalled.map(|_| ns);
             self.faults.continued(i, ns);
             self.note(ns, format!("SIGCONT {role}{why}"));
         }

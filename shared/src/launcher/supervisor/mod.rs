@@ -109,7 +109,10 @@ struct Supervisor<'a> {
     processes: Processes,
     tx: Sender<Event>,
     events: Receiver<Event>,
-    readers: Vec<std::thread::JoinHandle<()>>,
+    /// The threads reading each start's output, by role.
+    readers: Vec<(Role, std::thread::JoinHandle<()>)>,
+    /// What a process left running when it exited (killed since), one line each.
+    left_running: Vec<String>,
     reports: Reports,
     /// Restarts and the timeline, for the summary (its faults come from `faults` at the end).
     log: RunLog,
@@ -184,6 +187,7 @@ impl<'a> Supervisor<'a> {
             tx,
             events,
             readers: vec![],
+            left_running: vec![],
             reports: Reports::default(),
             log: RunLog::default(),
             faults: FaultLedger::new(&config.faults),
@@ -217,12 +221,12 @@ impl<'a> Supervisor<'a> {
         };
         let (tx, _) = crossbeam_channel::unbounded();
         drop(std::mem::replace(&mut supervisor.tx, tx));
-        for reader in supervisor.readers.drain(..) {
-            let _ = reader.join();
-        }
+        supervisor.join_readers();
         supervisor.cleaner = None;
         let _ = clean_thread.join();
         let mut cleanup = run_storage::clean_up_run(&supervisor.run_id)?;
+        // A plant that died with its FMU unpacked left the folder behind.
+        crate::scenarios::declared::fmu::remove_abandoned_unpack_folders();
         // The other host's bridge tidied its host up last and said what it left there.
         if let Some(remote) = supervisor.reports.bridges.get(&Role::BridgeRemote).and_then(|r| r.values().last()) {
             cleanup.leftover.extend(remote.leftover.iter().map(|f| format!("{f} (on the other host)")));
@@ -248,6 +252,7 @@ impl<'a> Supervisor<'a> {
                 foreign: cleanup.foreign,
             },
         });
+        summary.notes.extend(supervisor.left_running.iter().cloned());
         summary.probe = probe;
         summary.steal_share = cpu_at_start.zip(CpuTimes::now()).and_then(|(start, end)| start.steal_share_until(end));
         if let Some(trace) = sched_trace {
@@ -309,6 +314,10 @@ impl<'a> Supervisor<'a> {
                 Err(_) if Instant::now() > deadline => return Err(NotReady::Late(late)),
                 Err(_) => {}
             }
+            if let Some(&ended) = self.exited_with_output_held().first() {
+                self.reap_within(ended, events::REAP_WAIT);
+                return Err(NotReady::Ended(ended));
+            }
         }
     }
 
@@ -369,7 +378,7 @@ impl<'a> Supervisor<'a> {
             None => Program::Binary(&binary),
         };
         let spawned = child::spawn(role, program, &args, self.tx.clone(), |line| Event::Child(Box::new(line)))?;
-        self.readers.push(spawned.reader);
+        self.readers.push((role, spawned.reader));
         self.processes[role].started(spawned.start, spawned.stdin);
         Ok(())
     }
@@ -433,7 +442,7 @@ impl<'a> Supervisor<'a> {
             match self.events.recv_timeout(SUPERVISE_TICK) {
                 Ok(event) => {
                     if let Some(role) = self.handle(event) {
-                        self.closing.push((role, Instant::now() + events::REAP_WAIT));
+                        self.closed(role);
                     }
                 }
                 Err(RecvTimeoutError::Timeout) => {}
@@ -456,6 +465,7 @@ impl<'a> Supervisor<'a> {
         self.inject_held_monitor_faults(now);
         self.continue_stopped(now);
         self.continue_past_run_end(now);
+        self.kill_hung(now);
         if let Some(outcome) = self.lockstep_plant_stall(now) {
             return Some(outcome);
         }
@@ -473,6 +483,9 @@ impl<'a> Supervisor<'a> {
             return None;
         }
         self.paused = false;
+        // The plant waited for the pause, not inside its own code: a hang is timed from now.
+        let stalled = &mut self.processes[Role::Plant].stalled_since_ns;
+        *stalled = stalled.map(|_| now_ns());
         if !self.processes[Role::Plant].write_line("go") {
             return Some(Outcome::Failed("cannot tell the plant to go on".into()));
         }

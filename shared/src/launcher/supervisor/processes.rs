@@ -39,6 +39,16 @@ pub(super) struct Process {
     pub(super) lost: bool,
     /// The last words of its quick deaths in a row, numbers aside, and how many ended with them.
     same_failure: Option<(String, u32)>,
+    /// Its running incarnation's end was seen (its output closed, or it exited while something
+    /// it started still holds its output): its death is being handled.
+    pub(super) end_seen: bool,
+    /// Since when the monitor has seen it stalled (its input waiting, nothing out), until it
+    /// resumes; a restarted one is dated from when it is ready again.
+    pub(super) stalled_since_ns: Option<u64>,
+    /// Its running incarnation was killed as hung, after stalling this long (s).
+    pub(super) hung_s: Option<f64>,
+    /// When its running incarnation was first seen exited with its output still open.
+    pub(super) exited_seen_at: Option<std::time::Instant>,
 }
 
 /// A restart under way: it starts once the dead process's resources are removed and the backoff
@@ -63,6 +73,10 @@ impl Process {
             gone: false,
             lost: false,
             same_failure: None,
+            end_seen: false,
+            stalled_since_ns: None,
+            hung_s: None,
+            exited_seen_at: None,
         }
     }
 
@@ -86,6 +100,9 @@ impl Process {
     }
 
     pub(super) fn exit_text(&self) -> String {
+        if let Some(stalled_s) = self.hung_s {
+            return format!("{} hung: stalled {stalled_s:.1} s inside its own code, and was killed", self.role);
+        }
         match self.runs.last().map(|r| r.exit) {
             Some(exit) if exit == Exit::Status(EXIT_DISK_FULL.into()) => {
                 format!("{} exited with status {exit} (its disk is full)", self.role)
@@ -130,12 +147,18 @@ impl Process {
         self.ready = false;
         self.ready_since_ns = None;
         self.restart = None;
+        self.end_seen = false;
+        self.hung_s = None;
+        self.exited_seen_at = None;
     }
 
     /// Its running incarnation said it is ready, at `now_ns`.
     pub(super) fn became_ready(&mut self, now_ns: u64) {
         self.ready = true;
         self.ready_since_ns = Some(now_ns);
+        if self.stalled_since_ns.is_some() {
+            self.stalled_since_ns = Some(now_ns);
+        }
     }
 
     /// Its output ended at `now_ns`: it is no longer ready nor stopped. Returns what the restart
@@ -215,6 +238,10 @@ impl Processes {
         self.0.iter()
     }
 
+    pub(super) fn iter_mut(&mut self) -> impl Iterator<Item = &mut Process> {
+        self.0.iter_mut()
+    }
+
     /// Every process is ready, or gone for good.
     pub(super) fn all_up(&self) -> bool {
         self.iter().all(|p| p.ready || p.gone)
@@ -276,7 +303,7 @@ mod tests {
     /// A process with one start that ended with `exit` (no real process: its pid is never used).
     fn ended(role: Role, exit: Exit) -> Process {
         let mut p = Process::new(role, ON_FAILURE);
-        p.started(Start { pid: 0, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
+        p.started(Start { pid: 0, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0, left_running: vec![] }, None);
         p
     }
 
@@ -315,7 +342,7 @@ mod tests {
         assert!(p.cleaned() && !p.cleaned(), "the clean-up counts once");
         assert!(!p.restart_due(died + 9_999_999), "within the backoff");
         assert!(p.restart_due(died + 10_000_000));
-        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
+        p.started(Start::running(0), None);
         assert!(!p.restart_due(died + 20_000_000) && p.incarnation() == 1);
         assert_eq!(p.row().state, ProcessState::Starting);
     }
@@ -325,14 +352,14 @@ mod tests {
         let mut p = ended(Role::Sensors, Exit::Running);
         p.became_ready(at(0));
         assert_eq!(kill(&mut p, 1.0, at(100)), Decision::Restart { backoff: ms(10), quick_restarts: 1 });
-        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
+        p.started(Start::running(0), None);
         p.became_ready(at(200));
         assert_eq!(kill(&mut p, 1.0, at(300)), Decision::Restart { backoff: ms(20), quick_restarts: 2 });
-        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
+        p.started(Start::running(0), None);
         p.became_ready(at(400));
         // It ran one second (backoff_reset_s) ready: healthy, back to the first backoff.
         assert_eq!(kill(&mut p, 1.0, at(1400)), Decision::Restart { backoff: ms(10), quick_restarts: 1 });
-        p.started(Start { pid: 0, exit: Exit::Running, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
+        p.started(Start::running(0), None);
         // Killed before it was ready: it never ran healthy; and it reached max_restarts.
         assert_eq!(kill(&mut p, 1.0, at(9000)), Decision::TooMany { max_restarts: 3 });
     }

@@ -12,6 +12,8 @@ use super::processes::Processes;
 
 /// Longest a stage may take to exit after SIGTERM before it is killed.
 const STOP_TIMEOUT: Duration = Duration::from_secs(5);
+/// Longest the launcher waits for the processes' output to close once every process has exited.
+const READERS_TIMEOUT: Duration = Duration::from_secs(2);
 /// The monitor writes its files on exit, so it gets longer.
 const MONITOR_STOP_TIMEOUT: Duration = Duration::from_secs(60);
 
@@ -56,9 +58,34 @@ impl Supervisor<'_> {
                 }
             }
         }
+        for role in self.processes.stop_order() {
+            self.note_left_running(role);
+        }
         // Every process has exited: read what is left in their pipes, until every reader is done.
         while let Ok(event) = self.events.recv_timeout(Duration::from_millis(200)) {
             self.handle(event);
+        }
+    }
+
+    /// Waits for the threads reading the processes' output. Every process has exited and what
+    /// each left in its session is killed, so their pipes are closed, unless a process that
+    /// left its session holds one: that reader is left behind, and said, not waited for forever.
+    pub(super) fn join_readers(&mut self) {
+        let until = Instant::now() + READERS_TIMEOUT;
+        while Instant::now() < until && self.readers.iter().any(|(_, reader)| !reader.is_finished()) {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        for (role, reader) in std::mem::take(&mut self.readers) {
+            if reader.is_finished() {
+                let _ = reader.join();
+            } else {
+                let line = format!(
+                    "{role}'s output stayed open after it exited: a process it started holds it from a session of \
+                     its own, and was not stopped"
+                );
+                self.note(crate::contract::clock::now_ns(), line.clone());
+                self.left_running.push(line);
+            }
         }
     }
 
@@ -94,7 +121,7 @@ mod tests {
         let policy = Policy { restart: Restart::OnFailure, on_death: OnDeath::End, max_restarts: 0, backoff_s: 0.0 };
         let processes = Role::START_ORDER.into_iter().zip(exits).map(|(role, exit)| {
             let mut p = Process::new(role, policy);
-            p.started(Start { pid: 0, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0 }, None);
+            p.started(Start { pid: 0, exit, cpu_s: 0.0, wakeups: 0, preemptions: 0, left_running: vec![] }, None);
             p
         });
         Processes::new(processes.collect())

@@ -66,17 +66,24 @@ fn topic_of(name: &str) -> Option<Topic> {
 /// Adds one recording file's messages to `recorded`, where no earlier file (or message) has one
 /// for that topic and loop.
 fn read_file(path: &Path, layout: &VectorLayout, recorded: &mut Vec<RecordedLoop>, loops: usize) -> Result<()> {
-    let bytes = std::fs::read(path).with_context(|| format!("read {}", path.display()))?;
+    let bytes = crate::runtime::storage::run_file::read(path)?;
     refuse_export(path, &bytes)?;
     check_names(path, layout)?;
-    let stream = mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
+    // A file with its end magic was finished: it cannot end in the middle of a record.
+    let finished = bytes.len() > 2 * mcap::MAGIC.len() && bytes.ends_with(mcap::MAGIC);
+    check_chunks(path, &bytes, finished)?;
+    let options = mcap::read::Options::IgnoreEndMagic | mcap::read::Options::ValidateChunkCrcs;
+    let stream = mcap::MessageStream::new_with_options(&bytes, options)
         .map_err(|e| anyhow!("{}: not an MCAP recording ({e})", path.display()))?;
     let mut version_checked = false;
     for message in stream {
         let message = match message {
             Ok(message) => message,
             // A killed monitor's file ends where it last flushed: what came before is whole.
-            Err(mcap::McapError::UnexpectedEof | mcap::McapError::UnexpectedEoc) => break,
+            Err(mcap::McapError::UnexpectedEof | mcap::McapError::UnexpectedEoc) if !finished => break,
+            Err(mcap::McapError::UnexpectedEof | mcap::McapError::UnexpectedEoc) => {
+                bail!("{}: corrupt: a record runs past the end of the file", path.display())
+            }
             Err(e @ mcap::McapError::BadMagic) => bail!("{}: not an MCAP recording ({e})", path.display()),
             Err(e) => bail!("{}: unreadable ({e})", path.display()),
         };
@@ -120,6 +127,45 @@ fn read_file(path: &Path, layout: &VectorLayout, recorded: &mut Vec<RecordedLoop
             }
             Topic::Loop if slot.record.is_none() => slot.record = Some(at.record(fields, header)?),
             _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// The most a chunk may hold uncompressed: the monitor's are well under a MiB.
+const MAX_CHUNK_BYTES: u64 = 1 << 30;
+
+/// Checks each whole chunk before its messages are read: it decompresses to the size it states
+/// and matches its CRC, so that a changed byte is refused as such, not read as other numbers (and
+/// blamed on the stage) or handed to a decoder that trusts it. In a finished file every record
+/// is whole; a killed monitor's file ends where it last wrote, and the check ends there too.
+fn check_chunks(path: &Path, bytes: &[u8], finished: bool) -> Result<()> {
+    let corrupt = |why: String| anyhow!("{}: corrupt: {why}", path.display());
+    let records = mcap::read::LinearReader::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())
+        .map_err(|e| anyhow!("{}: not an MCAP recording ({e})", path.display()))?;
+    for record in records {
+        let (header, data) = match record {
+            Ok(mcap::records::Record::Chunk { header, data }) => (header, data),
+            Ok(_) => continue,
+            Err(_) if !finished => return Ok(()),
+            Err(mcap::McapError::UnexpectedEof | mcap::McapError::UnexpectedEoc) => {
+                return Err(corrupt("a record runs past the end of the file".into()));
+            }
+            Err(e) => return Err(corrupt(e.to_string())),
+        };
+        if header.uncompressed_size > MAX_CHUNK_BYTES {
+            return Err(corrupt(format!("a chunk says it holds {} bytes", header.uncompressed_size)));
+        }
+        let records = match header.compression.as_str() {
+            "zstd" => zstd::bulk::decompress(&data, header.uncompressed_size as usize)
+                .map_err(|e| corrupt(format!("a chunk does not decompress ({e})")))?,
+            "" => data.into_owned(),
+            other => bail!("{}: its chunks are compressed with {other:?}; LoopLab reads zstd", path.display()),
+        };
+        if records.len() as u64 != header.uncompressed_size
+            || (header.uncompressed_crc != 0 && crc32fast::hash(&records) != header.uncompressed_crc)
+        {
+            return Err(corrupt("a chunk fails its CRC (the file changed after it was written)".into()));
         }
     }
     Ok(())

@@ -38,17 +38,23 @@ use crate::model::scenario::{
 use crate::model::vectors::Vectors;
 
 /// The scenario a declared system's configuration describes (`Catalog::with_declared`).
-/// `check_model`: build the plant's model once now, so that a bad model is an error at resolve
-/// time (the launcher), not in the plant process.
+/// `check_model`: check the plant's model now, so that a bad model is an error at resolve time
+/// (the launcher), not in the plant process: a linear model is built once; an FMU is checked
+/// without running its code, which runs only in the plant process.
 pub fn build(c: &LaunchConfig, check_model: bool) -> Result<Box<dyn Scenario>, LaunchError> {
     let system = System::from_config(c)?;
     let vectors = sensors::vectors(c, &system)?;
-    if check_model && !matches!(system.source, PlantSource::Python { .. }) {
-        let key = match system.source {
-            PlantSource::Linear(_) => "plant.linear",
-            _ => "plant.fmu",
-        };
-        declared_plant(&system).map_err(|message| c.error(key, message))?;
+    // An open-loop replay plays the plant back: its model is neither checked nor loaded.
+    let played_back = c.replay.as_ref().is_some_and(|r| r.plays_back(crate::contract::role::Role::Plant));
+    if check_model && !played_back {
+        match &system.source {
+            PlantSource::Linear(_) => {
+                declared_plant(&system).map_err(|message| c.error("plant.linear", message))?;
+            }
+            PlantSource::Fmu(path) => fmu::inspect(&system.spec, path, system.fmu_interface)
+                .map_err(|message| c.error("plant.fmu", message))?,
+            PlantSource::Python { .. } => {}
+        }
     }
     let file = std::path::Path::new(&system.spec.file);
     let name = file.file_name().map_or_else(|| system.spec.file.clone(), |f| f.to_string_lossy().into_owned());

@@ -267,6 +267,16 @@ pub(super) fn check_supervision(s: &Supervision, c: &LaunchConfig) -> Result<(),
         }
     };
     timeout("stall_timeout_s", s.stall_timeout_s)?;
+    timeout("hang_timeout_s", s.hang_timeout_s)?;
+    if s.hang_timeout_s <= s.stall_timeout_s {
+        return Err(c.error(
+            "supervision.hang_timeout_s",
+            format!(
+                "must be longer than supervision.stall_timeout_s ({} s): a process is stalled before it hangs, got {}",
+                s.stall_timeout_s, s.hang_timeout_s
+            ),
+        ));
+    }
     timeout("command_timeout_s", s.command_timeout_s)?;
     timeout("lockstep_stall_s", s.lockstep_stall_s)?;
     timeout("ready_timeout_s", s.ready_timeout_s)?;

@@ -145,12 +145,16 @@ impl PlantCore {
         let x = self.plant.state();
         msg.x[..x.len()].copy_from_slice(x);
         msg.header.trace.stamp_published(Role::Plant, published_ns);
-        self.published_k = Some(self.k);
-        if self.report.published == 0 {
-            self.report.first_publish_ns = published_ns;
+        // A plant restarted from the snapshot kept after its state went out (lockstep: killed
+        // inside its step) sends that state again: the same loop, counted once.
+        if self.published_k != Some(self.k) {
+            if self.report.published == 0 {
+                self.report.first_publish_ns = published_ns;
+            }
+            self.report.published += 1;
         }
+        self.published_k = Some(self.k);
         self.report.last_publish_ns = published_ns;
-        self.report.published += 1;
         msg
     }
 

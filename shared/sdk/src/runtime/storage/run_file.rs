@@ -51,6 +51,33 @@ pub fn write(path: &Path, contents: &[u8]) -> Result<()> {
     open(path, Existing::Replace)?.write_all(contents).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
 }
 
+/// Reads a file of a run folder, which may be another user's: only a regular file, never through
+/// a symbolic link planted in its place, and without waiting on a FIFO. Errors name the file.
+pub fn read(path: &Path) -> Result<Vec<u8>> {
+    use std::io::Read as _;
+    use std::os::unix::fs::OpenOptionsExt;
+    let opened = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC | libc::O_NONBLOCK)
+        .open(path);
+    let cannot = |why: String| anyhow!("cannot read {}: {why}", path.display());
+    let file = match opened {
+        Ok(file) => file,
+        Err(e) if e.raw_os_error() == Some(libc::ELOOP) => {
+            return Err(cannot(
+                "it is a symbolic link, and LoopLab reads a run folder's files only as they are".into(),
+            ));
+        }
+        Err(e) => return Err(cannot(e.to_string())),
+    };
+    if !file.metadata().map_err(|e| cannot(e.to_string()))?.is_file() {
+        return Err(cannot("it is not a regular file (a FIFO, a device or a folder)".into()));
+    }
+    let mut bytes = Vec::new();
+    (&file).read_to_end(&mut bytes).map_err(|e| cannot(e.to_string()))?;
+    Ok(bytes)
+}
+
 /// The error for a file that could not be opened: a symbolic link is named as such.
 pub fn refused(path: &Path, e: std::io::Error) -> anyhow::Error {
     if e.raw_os_error() == Some(libc::ELOOP) {

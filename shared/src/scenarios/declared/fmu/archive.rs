@@ -1,5 +1,6 @@
 //! The FMU archive: read its modelDescription.xml, unpack its binary for this platform (and its
-//! resources) into a temporary folder removed when the model is dropped; and build one from C
+//! resources) into a private temporary folder removed when the model is dropped (or, after a
+//! crash, by the launcher at the run's end and by `looplab clean`); and build one from C
 //! source with `cc` (the project's own pendulum, services/fmu/pendulum/).
 
 use std::io::{Read, Write};
@@ -18,11 +19,7 @@ pub struct Unpacked {
 impl Unpacked {
     pub fn binary(&self, identifier: &str) -> PathBuf {
         let platform = platform(self.description.version);
-        self.folder
-            .path()
-            .join("binaries")
-            .join(platform)
-            .join(format!("{identifier}.{}", std::env::consts::DLL_EXTENSION))
+        self.folder.path().join("binaries").join(platform).join(binary_file(identifier))
     }
 
     pub fn resources(&self) -> PathBuf {
@@ -54,23 +51,51 @@ pub fn platform(version: Version) -> String {
     }
 }
 
-/// Reads the description and unpacks what running it needs. Errors name the file and what is
-/// wrong (not found, not a zip, no modelDescription.xml, no binary for this platform).
-pub fn unpack(fmu: &Path, name: &str) -> Result<Unpacked, String> {
-    let file = std::fs::File::open(fmu).map_err(|e| format!("{name}: cannot open the FMU {}: {e}", fmu.display()))?;
+/// The longest modelDescription.xml read: a modelling tool's largest are a few MiB.
+const MAX_DESCRIPTION_BYTES: u64 = 64 << 20;
+/// The most an FMU may unpack to (its binary and resources).
+const MAX_UNPACKED_BYTES: u64 = 1 << 30;
+/// Each unpack folder's name: this prefix, the pid of the process that unpacked it, a dash.
+const UNPACK_PREFIX: &str = "looplab-fmu-";
+
+/// An FMU's archive, read but not unpacked: its description, and its entries.
+pub struct Archive {
+    pub description: Description,
+    zip: zip::ZipArchive<std::fs::File>,
+}
+
+/// Reads the description and checks that the archive has a binary for this platform. No code of
+/// the FMU runs, and nothing is unpacked. Errors name the file and what is wrong (not found, not
+/// a regular file, not a zip, no modelDescription.xml, too large, no binary for this platform).
+pub fn open(fmu: &Path, name: &str) -> Result<Archive, String> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let cannot = |e: std::io::Error| format!("{name}: cannot open the FMU {}: {e}", fmu.display());
+    // Non-blocking, so that a FIFO in its place is refused rather than waited on.
+    let file = std::fs::OpenOptions::new().read(true).custom_flags(libc::O_NONBLOCK).open(fmu).map_err(cannot)?;
+    if !file.metadata().map_err(cannot)?.is_file() {
+        return Err(format!("{name}: the FMU {} is not a regular file", fmu.display()));
+    }
     let mut zip = zip::ZipArchive::new(file).map_err(|e| format!("{name}: not an FMU (a zip archive): {e}"))?;
     let mut xml = String::new();
-    zip.by_name("modelDescription.xml")
-        .map_err(|_| format!("{name}: the archive has no modelDescription.xml"))?
+    let entry =
+        zip.by_name("modelDescription.xml").map_err(|_| format!("{name}: the archive has no modelDescription.xml"))?;
+    let too_large = || format!("{name}: modelDescription.xml is larger than {} MiB", MAX_DESCRIPTION_BYTES >> 20);
+    if entry.size() > MAX_DESCRIPTION_BYTES {
+        return Err(too_large());
+    }
+    entry
+        .take(MAX_DESCRIPTION_BYTES + 1)
         .read_to_string(&mut xml)
         .map_err(|e| format!("{name}: cannot read modelDescription.xml: {e}"))?;
+    if xml.len() as u64 > MAX_DESCRIPTION_BYTES {
+        return Err(too_large());
+    }
     let description = Description::parse(&xml).map_err(|e| format!("{name}: modelDescription.xml: {e}"))?;
     let platform = platform(description.version);
     let wanted = format!("binaries/{platform}/");
-    let names: Vec<String> = zip.file_names().map(str::to_string).collect();
-    if !names.iter().any(|n| n.starts_with(&wanted) && n.len() > wanted.len()) {
-        let mut offered: Vec<&str> = names
-            .iter()
+    if !zip.file_names().any(|n| n.starts_with(&wanted) && n.len() > wanted.len()) {
+        let mut offered: Vec<&str> = zip
+            .file_names()
             .filter_map(|n| n.strip_prefix("binaries/")?.split('/').next())
             .filter(|p| !p.is_empty())
             .collect();
@@ -79,28 +104,94 @@ pub fn unpack(fmu: &Path, name: &str) -> Result<Unpacked, String> {
         let offered = if offered.is_empty() { "none (a source-only FMU)".to_string() } else { offered.join(", ") };
         return Err(format!("{name}: no binary for this platform ({platform}); the FMU has binaries for: {offered}"));
     }
-    let folder = tempfile::Builder::new()
-        .prefix("looplab-fmu-")
-        .tempdir()
-        .map_err(|e| format!("{name}: cannot make a folder to unpack into: {e}"))?;
-    for i in 0..zip.len() {
-        let mut entry = zip.by_index(i).map_err(|e| format!("{name}: corrupt archive: {e}"))?;
-        let Some(relative) = entry.enclosed_name() else { continue };
-        let keep = relative.starts_with(Path::new("binaries").join(&platform)) || relative.starts_with("resources");
-        if !keep || entry.is_dir() {
+    Ok(Archive { description, zip })
+}
+
+impl Archive {
+    /// Whether it holds the binary of the interface `identifier` for this platform.
+    pub fn has_binary(&self, identifier: &str) -> bool {
+        let binary = Path::new("binaries").join(platform(self.description.version)).join(binary_file(identifier));
+        self.zip.file_names().any(|n| Path::new(n) == binary)
+    }
+
+    /// Unpacks its binary for this platform and its resources into a folder of this process's
+    /// own (0700, named after its pid so that `remove_abandoned_unpack_folders` finds it if the
+    /// process dies before it removes it), each file created new, never through a link.
+    pub fn unpack(mut self, name: &str) -> Result<Unpacked, String> {
+        use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt, PermissionsExt};
+        let folder = tempfile::Builder::new()
+            .prefix(&format!("{UNPACK_PREFIX}{}-", std::process::id()))
+            .permissions(std::fs::Permissions::from_mode(0o700))
+            .tempdir()
+            .map_err(|e| format!("{name}: cannot make a folder to unpack into: {e}"))?;
+        let platform = platform(self.description.version);
+        let mut left = MAX_UNPACKED_BYTES;
+        for i in 0..self.zip.len() {
+            let mut entry = self.zip.by_index(i).map_err(|e| format!("{name}: corrupt archive: {e}"))?;
+            let Some(relative) = entry.enclosed_name() else { continue };
+            let keep = relative.starts_with(Path::new("binaries").join(&platform)) || relative.starts_with("resources");
+            if !keep || entry.is_dir() {
+                continue;
+            }
+            let target = folder.path().join(&relative);
+            let unpacked = (|| {
+                let parent = target.parent().unwrap_or(folder.path());
+                std::fs::DirBuilder::new().recursive(true).mode(0o700).create(parent)?;
+                let mut out = std::fs::OpenOptions::new()
+                    .write(true)
+                    .create_new(true)
+                    .mode(0o600)
+                    .custom_flags(libc::O_NOFOLLOW)
+                    .open(&target)?;
+                std::io::copy(&mut (&mut entry).take(left + 1), &mut out)
+            })();
+            let written = unpacked.map_err(|e| format!("{name}: cannot unpack {}: {e}", relative.display()))?;
+            if written > left {
+                return Err(format!("{name}: unpacks to more than {} MiB", MAX_UNPACKED_BYTES >> 20));
+            }
+            left -= written;
+        }
+        std::fs::create_dir_all(folder.path().join("resources")).map_err(|e| format!("{name}: {e}"))?;
+        Ok(Unpacked { description: self.description, folder })
+    }
+}
+
+/// The binary's file name for the interface `identifier` (`<identifier>.so`).
+fn binary_file(identifier: &str) -> String {
+    format!("{identifier}.{}", std::env::consts::DLL_EXTENSION)
+}
+
+/// Removes the FMU unpack folders of this user's processes that are gone (a plant killed or
+/// crashed while its FMU was unpacked), from the temporary folder. Returns the folders removed
+/// and those that could not be.
+pub fn remove_abandoned_unpack_folders() -> (Vec<PathBuf>, Vec<PathBuf>) {
+    use std::os::unix::fs::MetadataExt;
+    let (mut removed, mut left) = (vec![], vec![]);
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return (removed, left) };
+    // SAFETY: geteuid cannot fail.
+    let me = unsafe { libc::geteuid() };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) =
+            name.to_str().and_then(|n| n.strip_prefix(UNPACK_PREFIX)?.split('-').next()?.parse::<i32>().ok())
+        else {
+            continue;
+        };
+        // Never through a link, only this user's own folders.
+        let ours = entry.metadata().is_ok_and(|m| m.is_dir() && m.uid() == me);
+        // SAFETY: signal 0 only asks whether the process exists.
+        let gone =
+            unsafe { libc::kill(pid, 0) } != 0 && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
+        if !ours || !gone || pid <= 0 {
             continue;
         }
-        let target = folder.path().join(&relative);
-        let unpacked = (|| {
-            std::fs::create_dir_all(target.parent().unwrap_or(folder.path()))?;
-            let mut out = std::fs::File::create(&target)?;
-            std::io::copy(&mut entry, &mut out)?;
-            Ok::<_, std::io::Error>(())
-        })();
-        unpacked.map_err(|e| format!("{name}: cannot unpack {}: {e}", relative.display()))?;
+        let path = entry.path();
+        match std::fs::remove_dir_all(&path) {
+            Ok(()) => removed.push(path),
+            Err(_) => left.push(path),
+        }
     }
-    std::fs::create_dir_all(folder.path().join("resources")).map_err(|e| format!("{name}: {e}"))?;
-    Ok(Unpacked { description, folder })
+    (removed, left)
 }
 
 /// The project's own pendulum FMU's source folder.

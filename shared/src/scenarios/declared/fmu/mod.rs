@@ -18,7 +18,7 @@ mod tests;
 
 use std::path::Path;
 
-pub use archive::{build_fmu, pendulum_source, platform};
+pub use archive::{build_fmu, pendulum_source, platform, remove_abandoned_unpack_folders};
 pub use description::Version;
 
 use crate::model::plant_model::{ModelSpec, PlantModel};
@@ -60,10 +60,36 @@ pub fn load(spec: &ModelSpec, fmu: &Path) -> Result<Box<dyn PlantModel>, String>
 /// A relative `fmu` is relative to the launch file's folder. Every error is one line that starts
 /// with the FMU's file name (the caller names the launch file and its key).
 pub fn load_as(spec: &ModelSpec, fmu: &Path, kind: Option<FmiKind>) -> Result<Box<dyn PlantModel>, String> {
+    let Checked { archive, interface, kind, map, label } = check(spec, fmu, kind)?;
+    let describe = format!("{label}, {} {}", archive.description.version.label(), kind.label());
+    let unpacked = archive.unpack(&label)?;
+    model::FmuModel::new(unpacked, interface, kind, map, spec, label.clone(), describe)
+        .map(|m| Box::new(m) as Box<dyn PlantModel>)
+        .map_err(|e| format!("{label}: {e:#}"))
+}
+
+/// Checks the FMU against the declared system without running any of its code: its description,
+/// the interface, the names mapped, its binary. The launcher checks this way; the FMU's code runs
+/// only in the plant process, which the launcher supervises (a crash, an exit or a hang while it
+/// loads is that process's, and fails the run).
+pub fn inspect(spec: &ModelSpec, fmu: &Path, kind: Option<FmiKind>) -> Result<(), String> {
+    check(spec, fmu, kind).map(|_| ())
+}
+
+/// An FMU checked against the declared system, not unpacked yet.
+struct Checked {
+    archive: archive::Archive,
+    interface: description::Interface,
+    kind: FmiKind,
+    map: Mapping,
+    label: String,
+}
+
+fn check(spec: &ModelSpec, fmu: &Path, kind: Option<FmiKind>) -> Result<Checked, String> {
     let path = if fmu.is_relative() { spec.folder.join(fmu) } else { fmu.to_path_buf() };
     let label = fmu.file_name().map_or_else(|| fmu.display().to_string(), |n| n.to_string_lossy().into_owned());
-    let unpacked = archive::unpack(&path, &label)?;
-    let d = &unpacked.description;
+    let archive = archive::open(&path, &label)?;
+    let d = &archive.description;
     let kind = match kind {
         Some(k) => k,
         None if d.model_exchange.is_some() => FmiKind::ModelExchange,
@@ -83,14 +109,10 @@ pub fn load_as(spec: &ModelSpec, fmu: &Path, kind: Option<FmiKind>) -> Result<Bo
         return Err(format!("{label} offers no {} (it offers {offered})", kind.label()));
     };
     let map = Mapping::new(spec, d, kind, &label)?;
-    let binary = unpacked.binary(&interface.identifier);
-    if !binary.exists() {
+    if !archive.has_binary(&interface.identifier) {
         return Err(format!("{label}: no {} in binaries/{}", interface.identifier, platform(d.version)));
     }
-    let describe = format!("{label}, {} {}", d.version.label(), kind.label());
-    model::FmuModel::new(unpacked, interface, kind, map, spec, label.clone(), describe)
-        .map(|m| Box::new(m) as Box<dyn PlantModel>)
-        .map_err(|e| format!("{label}: {e:#}"))
+    Ok(Checked { archive, interface, kind, map, label })
 }
 
 /// The declared names as the FMU's value references.

@@ -373,3 +373,20 @@ fn step_cost_per_tick() {
         println!("{version:?} serialised state: {saved} bytes");
     }
 }
+
+/// An FMU unpacks into a folder only its process's user can enter, named after the process, its
+/// files created new and private; the folder goes when the model does.
+#[test]
+fn an_fmu_unpacks_into_a_private_folder_of_its_process() {
+    use std::os::unix::fs::PermissionsExt;
+    let label = "pendulum-fmi2.fmu";
+    let unpacked = archive::open(&pendulum_fmu(Version::Fmi2), label).unwrap().unpack(label).unwrap();
+    let folder = unpacked.folder.path().to_path_buf();
+    let name = folder.file_name().unwrap().to_string_lossy().into_owned();
+    assert!(name.starts_with(&format!("looplab-fmu-{}-", std::process::id())), "{name}");
+    assert_eq!(folder.metadata().unwrap().permissions().mode() & 0o777, 0o700);
+    let binary = unpacked.binary("pendulum");
+    assert_eq!(binary.metadata().unwrap().permissions().mode() & 0o777, 0o600, "{}", binary.display());
+    drop(unpacked);
+    assert!(!folder.exists());
+}
