@@ -292,3 +292,24 @@ fn a_python_plant_that_hangs_on_every_start_ends_the_run_and_its_loops_are_count
     assert_nothing_left(&s);
     std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
 }
+
+/// A Python plant whose module never finishes importing is bad input within the ready timeout,
+/// in one line, and nothing starts: its check runs in a child that is killed, never a hang.
+#[test]
+fn a_python_plant_whose_import_never_returns_is_bad_input_within_the_ready_timeout() {
+    let dir = declared_folder("import-hangs", Some("import time\ntime.sleep(3600)\n"));
+    let out = dir.join("run");
+    let output = launcher()
+        .arg("run")
+        .arg(dir.join("pendulum_plant.toml"))
+        .args(["--duration", "1", "-q", "--set", "supervision.ready_timeout_s=1", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{said}");
+    assert!(said.contains("plant.python") && said.contains("did not finish within 1 s"), "{said}");
+    assert_eq!(said.trim().lines().count(), 1, "{said}");
+    assert!(!out.exists(), "nothing starts");
+    std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
+}

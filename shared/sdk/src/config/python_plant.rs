@@ -56,21 +56,17 @@ pub fn spec(plant: &StageCommand) -> &str {
 /// Checks, before anything starts, that the plant `parse` made can start: the file exists,
 /// python3 imports LoopLab's module, and the file's class has `derivative`. Err: what is wrong,
 /// one line.
-pub fn check(plant: &StageCommand) -> Result<(), String> {
+pub fn check(plant: &StageCommand, limit: std::time::Duration) -> Result<(), String> {
     let (spec, dir) = (spec(plant), &plant.dir);
     let file = spec.rsplit_once(':').map_or(spec, |(file, _)| file);
     if !dir.join(file).is_file() {
         return Err(format!("{file} is not found in {}", dir.display()));
     }
-    plant.check()?;
+    plant.check(limit)?;
     let program = plant.program()?;
-    let checked = std::process::Command::new(&program)
-        .args(["-c", CHECK_PLANT, spec])
-        .current_dir(dir)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .output()
-        .map_err(|e| format!("cannot run {}: {e}", program.display()))?;
+    let mut command = std::process::Command::new(&program);
+    command.args(["-c", CHECK_PLANT, spec]).current_dir(dir);
+    let checked = crate::config::stages::output_within(command, limit).map_err(|e| format!("checking {spec}: {e}"))?;
     if checked.status.success() {
         return Ok(());
     }

@@ -17,6 +17,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Component, Path, PathBuf};
+use std::time::Duration;
 
 use crate::config::stage_build;
 use crate::contract::role::Role;
@@ -193,6 +194,42 @@ fn program_and_arguments<E>(
     }
 }
 
+/// Runs `command` to its end, its stderr kept, in a process group of its own that is killed
+/// whole past `limit`: a check that runs the user's code (an import that never returns) is an
+/// error, never a hang. Err: why it did not finish, in words.
+pub fn output_within(mut command: std::process::Command, limit: Duration) -> Result<std::process::Output, String> {
+    use std::os::unix::process::CommandExt;
+    let mut child = command
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .process_group(0)
+        .spawn()
+        .map_err(|e| format!("cannot be run: {e}"))?;
+    let mut stderr = child.stderr.take().expect("stderr is piped");
+    let reader = std::thread::spawn(move || {
+        let mut text = Vec::new();
+        let _ = std::io::Read::read_to_end(&mut stderr, &mut text);
+        text
+    });
+    let until = std::time::Instant::now() + limit;
+    let status = loop {
+        if let Some(status) = child.try_wait().map_err(|e| format!("cannot be waited for: {e}"))? {
+            break status;
+        }
+        if std::time::Instant::now() >= until {
+            // SAFETY: killpg of the group our unreaped child leads.
+            unsafe { libc::killpg(child.id() as libc::pid_t, libc::SIGKILL) };
+            let _ = child.wait();
+            return Err(format!(
+                "did not finish within {} s (supervision.ready_timeout_s); killed it",
+                limit.as_secs_f64()
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    Ok(std::process::Output { status, stdout: vec![], stderr: reader.join().unwrap_or_default() })
+}
+
 impl StageCommand {
     /// The program as it will be run: a path with a `/` is taken from the stage's folder, a bare
     /// name from PATH. Err: what is wrong, in words.
@@ -214,8 +251,9 @@ impl StageCommand {
     }
 
     /// Checks, before anything starts, that the command can run: its program exists, every
-    /// script it names (`.py`) exists, and a Python interpreter can import LoopLab's module.
-    pub fn check(&self) -> Result<(), String> {
+    /// script it names (`.py`) exists, and a Python interpreter can import LoopLab's module
+    /// within `limit`.
+    pub fn check(&self, limit: Duration) -> Result<(), String> {
         let program = self.program()?;
         for script in self.command[1..].iter().filter(|a| a.ends_with(".py")) {
             if !self.dir.join(script).is_file() {
@@ -225,13 +263,10 @@ impl StageCommand {
         let is_python =
             Path::new(&self.command[0]).file_name().is_some_and(|n| n.to_string_lossy().starts_with("python"));
         if is_python {
-            let imported = std::process::Command::new(&program)
-                .args(["-c", "import looplab"])
-                .current_dir(&self.dir)
-                .stdout(std::process::Stdio::null())
-                .stderr(std::process::Stdio::piped())
-                .output()
-                .map_err(|e| format!("cannot run {}: {e}", program.display()))?;
+            let mut import = std::process::Command::new(&program);
+            import.args(["-c", "import looplab"]).current_dir(&self.dir);
+            let imported = output_within(import, limit)
+                .map_err(|e| format!("{} -c \"import looplab\" (in {}) {e}", self.command[0], self.dir.display()))?;
             if !imported.status.success() {
                 let why = String::from_utf8_lossy(&imported.stderr);
                 let last = why.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("it failed");
@@ -315,6 +350,7 @@ mod tests {
 
     #[test]
     fn a_missing_program_or_script_is_found_before_anything_starts() {
+        const LIMIT: Duration = Duration::from_secs(20);
         let stage = |command: &[&str]| StageCommand {
             command: command.iter().map(|s| s.to_string()).collect(),
             dir: std::env::temp_dir(),
@@ -323,13 +359,13 @@ mod tests {
             with_reference: false,
         };
         assert_eq!(
-            stage(&["no-such-program-ll"]).check().unwrap_err(),
+            stage(&["no-such-program-ll"]).check(LIMIT).unwrap_err(),
             "program no-such-program-ll is not found on PATH"
         );
-        assert!(stage(&["sh", "-c", "true"]).check().is_ok());
-        let missing = stage(&["sh", "no-such-script-ll.py"]).check().unwrap_err();
+        assert!(stage(&["sh", "-c", "true"]).check(LIMIT).is_ok());
+        let missing = stage(&["sh", "no-such-script-ll.py"]).check(LIMIT).unwrap_err();
         assert!(missing.starts_with("script no-such-script-ll.py is not found in "), "{missing}");
-        let relative = stage(&["./no-such-binary-ll"]).check().unwrap_err();
+        let relative = stage(&["./no-such-binary-ll"]).check(LIMIT).unwrap_err();
         assert!(relative.starts_with("program ./no-such-binary-ll is not an executable file in "), "{relative}");
     }
 }

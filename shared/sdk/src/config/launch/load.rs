@@ -215,6 +215,12 @@ pub fn resolve_config(
     check_stages(config)
 }
 
+/// How long a check of the user's code may take: as long as its process may take to be ready.
+fn ready_timeout(config: &LaunchConfig) -> std::time::Duration {
+    // Positive, finite and at most an hour (checked at load).
+    std::time::Duration::from_secs_f64(config.supervision.ready_timeout_s)
+}
+
 /// A user's stage that cannot start (or whose `build` fails) is bad input, found before anything
 /// starts.
 fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
@@ -223,7 +229,9 @@ fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
         if built == Some(crate::config::stage_build::Built::Ran) {
             tell!("{role}: built with `{}`", stage.build.join(" "));
         }
-        stage.check().map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
+        stage
+            .check(ready_timeout(&config))
+            .map_err(|message| config.error(&format!("stages.{role}.command"), message))?;
         let has_reference = match config.document.get("reference") {
             None => false,
             Some(toml::Value::Table(t)) => !t.is_empty(),
@@ -243,7 +251,8 @@ fn check_stages(config: LaunchConfig) -> Result<LaunchConfig, LaunchError> {
 /// scenario is built, so that what is wrong with the rest of `[plant]` is said first.
 pub fn check_python_plant(config: &LaunchConfig) -> Result<(), LaunchError> {
     match &config.stages.plant {
-        Some(plant) => python_plant::check(plant).map_err(|message| config.error(python_plant::KEY, message)),
+        Some(plant) => python_plant::check(plant, ready_timeout(config))
+            .map_err(|message| config.error(python_plant::KEY, message)),
         None => Ok(()),
     }
 }
