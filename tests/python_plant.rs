@@ -285,7 +285,7 @@ fn a_python_plant_that_hangs_on_every_start_ends_the_run_and_its_loops_are_count
     assert!(why.starts_with("plant hung: stalled "), "{why}");
     assert!(why.contains("inside its own code, and was killed; not restarted: a crash loop"), "{why}");
     assert_eq!(s.restarts[&Role::Plant], 2, "{:?}", s.restarts);
-    // The plant hung integrating loop 1000 to 1001: loops 0 to 1000 were recorded.
+    // The plant hung in its step to t = 1 s (RK4 looks at t + dt): about 1000 loops were recorded.
     let rows = Table::read(&out.join("trajectory.csv")).rows.len() as u64;
     assert_eq!(s.loops, rows, "the summary's loops against trajectory.csv's rows");
     assert!(rows > 900, "{rows} rows");
