@@ -148,6 +148,26 @@ fn a_python_plant_killed_in_lockstep_goes_on_from_its_snapshot_byte_for_byte() {
     assert_nothing_left(s);
 }
 
+/// `looplab run` of the folder's launch file with `args` into `out`, expected to fail (exit 1):
+/// its summary and why it failed.
+fn failed_run(dir: &Path, out: &Path, args: &[&str]) -> (Summary, String) {
+    let output = launcher()
+        .arg("run")
+        .arg(dir.join("pendulum_plant.toml"))
+        .args(args)
+        .args(["-q", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
+    let s = load_summary(out);
+    let why = match &s.stopped_because {
+        Some(StopReason::Failed(why)) => why.clone(),
+        other => panic!("not a failure: {other:?}"),
+    };
+    (s, why)
+}
+
 const RAISING_PLANT: &str = "\
 class Pendulum:
     def __init__(self, plant):
@@ -163,19 +183,7 @@ class Pendulum:
 fn a_python_plant_that_raises_ends_the_run_with_one_clear_line() {
     let dir = declared_folder("raising", Some(RAISING_PLANT));
     let out = dir.join("run");
-    let output = launcher()
-        .arg("run")
-        .arg(dir.join("pendulum_plant.toml"))
-        .args(["--duration", "2", "-q", "--set", "supervision.plant.restart=never", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
-    let s = load_summary(&out);
-    let why = match &s.stopped_because {
-        Some(StopReason::Failed(why)) => why.clone(),
-        other => panic!("not a failure: {other:?}"),
-    };
+    let (s, why) = failed_run(&dir, &out, &["--duration", "2", "--set", "supervision.plant.restart=never"]);
     assert!(why.contains("plant exited with status 1") && why.contains("ValueError: the model broke"), "{why}");
     let log = log(&out, "plant");
     assert!(log.contains("Traceback (most recent call last):"), "the traceback is in the plant's log: {log}");
@@ -269,19 +277,8 @@ fn a_python_plant_that_hangs_on_every_start_ends_the_run_and_its_loops_are_count
     let dir = declared_folder("hangs-always", None);
     std::fs::write(dir.join("pendulum_plant.py"), hanging_plant(&dir, true)).unwrap();
     let out = dir.join("run");
-    let output = launcher()
-        .arg("run")
-        .arg(dir.join("pendulum_plant.toml"))
-        .args(["--mode", "lockstep", "--duration", "2", "-q", "--set", "supervision.hang_timeout_s=0.5", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
-    let s = load_summary(&out);
-    let why = match &s.stopped_because {
-        Some(StopReason::Failed(why)) => why.clone(),
-        other => panic!("not a failure: {other:?}"),
-    };
+    let (s, why) =
+        failed_run(&dir, &out, &["--mode", "lockstep", "--duration", "2", "--set", "supervision.hang_timeout_s=0.5"]);
     assert!(why.starts_with("plant hung: stalled "), "{why}");
     assert!(why.contains("inside its own code, and was killed; not restarted: a crash loop"), "{why}");
     assert_eq!(s.restarts[&Role::Plant], 2, "{:?}", s.restarts);

@@ -35,9 +35,10 @@ impl Supervisor<'_> {
         let hung = self.processes[role].hung_s.is_some();
         // A hang is a failure of its own: three in a row are a crash loop, however long each ran.
         let last_words = if hung { ": hung".to_owned() } else { self.last_words(role) };
-        let exit = match hung {
-            true => self.processes[role].exit_text(),
-            false => format!("{}{last_words}", self.processes[role].exit_text()),
+        let exit = if hung {
+            self.processes[role].exit_text()
+        } else {
+            format!("{}{last_words}", self.processes[role].exit_text())
         };
         let healthy = !hung && death.ran_s.is_some_and(|s| s >= self.config.supervision.backoff_reset_s);
         death.same_failure_in_a_row = self.processes[role].same_failure_in_a_row(&last_words, healthy);

@@ -133,8 +133,7 @@ impl Supervisor<'_> {
             self.processes[role].signal(libc::SIGCONT);
             self.processes[role].stopped = false;
             // Its stall was the stop's: a hang is timed from now, until it answers again.
-            let stalled = &mut self.processes[role].stalled_since_ns;
-            *stalled = stalled.map(|_| ns);
+            self.processes[role].time_hang_from(ns);
             self.faults.continued(i, ns);
             self.note(ns, format!("SIGCONT {role}{why}"));
         }

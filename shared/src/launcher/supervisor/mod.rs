@@ -484,8 +484,7 @@ impl<'a> Supervisor<'a> {
         }
         self.paused = false;
         // The plant waited for the pause, not inside its own code: a hang is timed from now.
-        let stalled = &mut self.processes[Role::Plant].stalled_since_ns;
-        *stalled = stalled.map(|_| now_ns());
+        self.processes[Role::Plant].time_hang_from(now_ns());
         if !self.processes[Role::Plant].write_line("go") {
             return Some(Outcome::Failed("cannot tell the plant to go on".into()));
         }

@@ -152,13 +152,19 @@ impl Process {
         self.exited_seen_at = None;
     }
 
+    /// A stall it was in is timed as a hang from `now_ns` on: what held it (a stop, a pause, its
+    /// start-up) is over, and it has not answered yet.
+    pub(super) fn time_hang_from(&mut self, now_ns: u64) {
+        if self.stalled_since_ns.is_some() {
+            self.stalled_since_ns = Some(now_ns);
+        }
+    }
+
     /// Its running incarnation said it is ready, at `now_ns`.
     pub(super) fn became_ready(&mut self, now_ns: u64) {
         self.ready = true;
         self.ready_since_ns = Some(now_ns);
-        if self.stalled_since_ns.is_some() {
-            self.stalled_since_ns = Some(now_ns);
-        }
+        self.time_hang_from(now_ns);
     }
 
     /// Its output ended at `now_ns`: it is no longer ready nor stopped. Returns what the restart
