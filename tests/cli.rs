@@ -49,6 +49,14 @@ fn rejects(args: &[&str], expected: &[&str]) {
 #[test]
 fn bad_input_is_one_clear_error_with_exit_code_2() {
     rejects(&["pendulm"], &["unknown scenario \"pendulm\"", "allowed: pendulum"]);
+    // A control character in the input is shown escaped, never sent to the terminal.
+    rejects(&["pendulum", "--set", "duration_s=1\u{1b}[2J"], &["--set duration_s=1\\u{1b}[2J: key `duration_s`"]);
+    let escape = fresh_dir("escape");
+    std::fs::create_dir_all(&escape).unwrap();
+    let file = escape.join("launch.toml");
+    std::fs::write(&file, "scenario = \"pendulum\"\n\"x\\u001b[31m\" = 1\n").unwrap();
+    rejects(&[file.to_str().unwrap()], &["key `x\\u{1b}[31m`: unknown key"]);
+    std::fs::remove_dir_all(&escape).unwrap();
     rejects(
         &["pendulum", "--set", "sensors.encoder.biass=1"],
         &["key `sensors.encoder.biass`", "unknown field", "`bias`"],
@@ -495,6 +503,58 @@ fn an_out_folder_others_can_write_in_is_refused() {
         assert_eq!(output.status.code(), Some(2));
         let said = String::from_utf8_lossy(&output.stderr);
         assert!(said.contains("the folder belongs to another user (uid 65534)"), "{said}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+
+    // A new --out in a folder others may write in (no sticky bit): they could rename the run
+    // folder mid-run and put a link in its place. Under a sticky one (as /tmp) it is fine.
+    let open = fresh_dir("open-parent");
+    std::fs::create_dir_all(&open).unwrap();
+    std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o777)).unwrap();
+    let output = run(&open.join("run"));
+    assert_eq!(output.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&output.stderr).trim_end(),
+        format!(
+            "error: --out {}: {} is writable by others without the sticky bit (mode 777); another user could swap \
+             the run folder for a link mid-run; give a folder under folders only you (or root) can write in",
+            open.join("run").display(),
+            open.display()
+        )
+    );
+    assert!(!open.join("run").exists(), "nothing made");
+    std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o1777)).unwrap();
+    assert_eq!(run(&open.join("run")).status.code(), Some(0));
+    std::fs::remove_dir_all(&open).unwrap();
+}
+
+/// Two runs given the same new --out at the same moment: one takes it, the other is refused and
+/// writes nothing into it.
+#[test]
+fn two_runs_into_one_new_out_folder_one_takes_it_the_other_is_refused() {
+    let dir = fresh_dir("claimed-out");
+    for _ in 0..5 {
+        let _ = std::fs::remove_dir_all(&dir);
+        let start = || {
+            looplab()
+                .args(["run", "pendulum", "--mode", "lockstep", "--duration", "0.2", "-q", "--out"])
+                .arg(&dir)
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap()
+        };
+        let (first, second) = (start(), start());
+        let outputs = [first.wait_with_output().unwrap(), second.wait_with_output().unwrap()];
+        let codes: Vec<Option<i32>> = outputs.iter().map(|o| o.status.code()).collect();
+        let said: Vec<String> = outputs.iter().map(|o| String::from_utf8_lossy(&o.stderr).into_owned()).collect();
+        assert!(codes.contains(&Some(0)) && codes.contains(&Some(2)), "{codes:?}: {said:?}");
+        let refused = &said[codes.iter().position(|c| *c == Some(2)).unwrap()];
+        let taken = format!("--out {}: another run took the folder as this one started", dir.display());
+        let not_empty = format!("--out {}: the folder exists and is not empty", dir.display());
+        assert!(refused.contains(&taken) || refused.contains(&not_empty), "{refused}");
+        let s = load_summary(&dir);
+        assert!(s.completed, "{:?}", s.stopped_because);
+        assert_eq!(s.loops, 200);
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

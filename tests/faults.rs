@@ -268,8 +268,8 @@ fn a_restarted_monitor_accounts_for_every_loop_and_continues_the_latency_log() {
         .collect();
     assert!(!starts.is_empty(), "latency.hlog has no interval");
     assert!(starts.windows(2).all(|w| w[0] <= w[1]), "interval start times go back: {starts:?}");
-    // Three monitors wrote loops.csv, each appending after what the last one flushed (which
-    // may go past its last checkpoint).
+    // Three monitors wrote loops.csv, each appending after what the last one saved (cut back
+    // to its last checkpoint).
     let rows = assert_loops_csv_integers(&r.dir) as u64;
     assert!(rows >= m.records, "{rows} rows, {} recorded", m.records);
     assert_every_process_ended_alive(s);

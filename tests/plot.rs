@@ -351,8 +351,10 @@ fn a_fifo_or_a_link_in_place_of_a_run_file_is_refused_at_once() {
     let out_arg = out.to_str().unwrap();
     let unused = dir.join("unused");
     let unused = unused.to_str().unwrap();
-    let cases: [(&str, bool, Vec<&str>, &str); 4] = [
+    let export = vec!["export", out_arg, "--mcap", "--force"];
+    let cases: [(&str, bool, Vec<&str>, &str); 5] = [
         ("trajectory.csv", true, vec!["plot", out_arg], "it is not a regular file"),
+        ("trajectory.csv", false, export.clone(), "it is a symbolic link"),
         ("summary.json", false, vec!["plot", out_arg], "it is a symbolic link"),
         ("trajectory.csv", true, vec!["diff", out_arg, out_arg], "it is not a regular file"),
         (
@@ -370,5 +372,13 @@ fn a_fifo_or_a_link_in_place_of_a_run_file_is_refused_at_once() {
         assert!(said.contains(&format!("cannot read {}: {expected}", path.display())), "{args:?}: {said}");
         restore(file);
     }
+    // The run's launch file too: export would put what it names into the recording it writes.
+    let path = plant("launch.toml", false);
+    let output = looplab().args(&export).output().unwrap();
+    let said = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(output.status.code(), Some(2), "{said}");
+    let expected = format!("{}: cannot read the launch file: it is a symbolic link", path.display());
+    assert!(said.contains(&expected), "{said}");
+    restore("launch.toml");
     std::fs::remove_dir_all(&dir).unwrap();
 }

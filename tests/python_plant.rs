@@ -193,6 +193,37 @@ fn a_python_plant_that_raises_ends_the_run_with_one_clear_line() {
     std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
 }
 
+/// A plant whose model crashes the process (a null pointer read through ctypes: a real SIGSEGV)
+/// at t = 1 s, before it wrote a word.
+const CRASHING_PLANT: &str = "\
+import ctypes
+
+class Pendulum:
+    def __init__(self, plant):
+        pass
+
+    def derivative(self, t, x, u, dx):
+        if t >= 1.0:
+            ctypes.string_at(0)
+        dx[0] = x[1]
+";
+
+/// A crash with nothing in the plant's log is said to be one, not pointed at an empty log.
+#[test]
+fn a_python_plant_that_segfaults_is_said_to_have_died_of_it_and_its_empty_log_is_not_pointed_at() {
+    let dir = declared_folder("crashing", Some(CRASHING_PLANT));
+    let out = dir.join("run");
+    let (s, why) = failed_run(&dir, &out, &["--duration", "2", "--set", "supervision.plant.restart=never"]);
+    assert_eq!(log(&out, "plant"), "", "the plant wrote nothing");
+    assert!(
+        why.starts_with("plant exited with status signal 11")
+            && why.ends_with("; logs/plant.log is empty: it wrote nothing before it ended"),
+        "{why}"
+    );
+    assert_nothing_left(&s);
+    std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
+}
+
 #[test]
 fn a_python_plant_that_cannot_load_is_bad_input_in_one_line_and_nothing_starts() {
     let no_method = "class Pendulum:\n    def __init__(self, plant):\n        pass\n";

@@ -24,6 +24,21 @@ fn python_stage(role: &str, script: &str) -> String {
     format!("stages.{role}.command=[\"python3\", \"{script}\"]")
 }
 
+/// A fresh folder holding `source` as a script, and the `--set` that runs it as the controller;
+/// `wrapping`: the script runs the example controller, whose path it is given.
+fn controller_script(name: &str, source: &str, wrapping: bool) -> (std::path::PathBuf, String) {
+    let dir = fresh_dir(name);
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join(format!("{name}.py"));
+    std::fs::write(&script, source).unwrap();
+    let mut command = vec!["python3".to_owned(), script.display().to_string()];
+    if wrapping {
+        command.push(example("controller/pendulum_controller.py"));
+    }
+    let quoted: Vec<String> = command.iter().map(|c| format!("{c:?}")).collect();
+    (dir, format!("stages.controller.command=[{}]", quoted.join(", ")))
+}
+
 fn trajectory_bytes(run: &Run) -> Vec<u8> {
     std::fs::read(run.dir.join("trajectory.csv")).expect("trajectory.csv")
 }
@@ -374,15 +389,7 @@ runpy.run_path(sys.argv[1], run_name="__main__")
 /// named in the summary's notes, in each incarnation.
 #[test]
 fn the_children_a_stage_leaves_behind_are_killed_and_named_and_hang_nothing() {
-    let dir = fresh_dir("stage-children");
-    std::fs::create_dir_all(&dir).unwrap();
-    let script = dir.join("with_children.py");
-    std::fs::write(&script, CONTROLLER_WITH_CHILDREN).unwrap();
-    let stage = format!(
-        "stages.controller.command=[\"python3\", \"{}\", \"{}\"]",
-        script.display(),
-        example("controller/pendulum_controller.py")
-    );
+    let (dir, stage) = controller_script("stage-children", CONTROLLER_WITH_CHILDREN, true);
     let common = ["pendulum", "--mode", "lockstep", "--duration", "2", "--set", &stage];
     let run = run_from(launcher(), "stage-children", &[&common[..], &["--fault", "kill controller at 1s"]].concat());
     let s = run.summary();
@@ -407,5 +414,135 @@ fn the_children_a_stage_leaves_behind_are_killed_and_named_and_hang_nothing() {
         assert!(!alive(holder.into()) && !alive(quiet.into()), "{holder} or {quiet} outlived the run");
     }
     assert_nothing_left(s);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+const CONTROLLER_THAT_WILL_NOT_EXIT: &str = r#"import runpy
+import signal
+import sys
+import time
+
+runpy.run_path(sys.argv[1], run_name="__main__")
+# LoopLab's runner returned at the run's end; this stage then refuses to exit.
+signal.signal(signal.SIGTERM, signal.SIG_IGN)
+time.sleep(300)
+"#;
+
+/// A stage that will not exit at the run's end is killed and said to be, not reported as if it
+/// had crashed on its own.
+#[test]
+fn a_stage_killed_at_the_runs_end_because_it_would_not_exit_is_said_so() {
+    let (dir, stage) = controller_script("will-not-exit", CONTROLLER_THAT_WILL_NOT_EXIT, true);
+    let out = dir.join("run");
+    let output = launcher()
+        .args(["run", "pendulum", "--mode", "lockstep", "--duration", "1", "-q", "--set", &stage, "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{said}");
+    assert!(
+        said.contains(
+            "controller did not exit within 5 s of the launcher's SIGTERM at the run's end, and was killed; see the \
+             logs folder"
+        ),
+        "{said}"
+    );
+    let s = load_summary(&out);
+    assert_eq!(s.loops, 1000, "the loop itself ran to its end");
+    assert_nothing_left(&s);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The example controller, but its first incarnation ends itself with status 0 at t = 0.5 s
+/// (`os._exit(0)`; the marker beside the script says a first one ran).
+const CONTROLLER_THAT_EXITS_CLEANLY_ONCE: &str = r#"import os
+import sys
+import looplab
+
+MARKER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "exited_once")
+
+
+class StateFeedback:
+    def __init__(self, stage):
+        self.k1, self.k2, self.k3 = stage.config["controller"]["gains"]
+        self.limit = stage.config["model"]["current_limit_a"]
+
+    def step(self, t, x, u):
+        if t >= 0.5 and not os.path.exists(MARKER):
+            open(MARKER, "w").close()
+            os._exit(0)
+        current = -(self.k1 * x[0] + self.k2 * x[1] + self.k3 * x[2])
+        u[0] = min(max(current, -self.limit), self.limit)
+
+
+looplab.run(StateFeedback)
+"#;
+
+/// A stage that ends itself with status 0 mid-run has failed all the same (a loop process runs
+/// until it is stopped): `on-failure` restarts it, and the report says it ended early.
+#[test]
+fn a_stage_that_exits_with_status_0_mid_run_failed_and_is_restarted_on_failure() {
+    let (dir, stage) = controller_script("exits-cleanly", CONTROLLER_THAT_EXITS_CLEANLY_ONCE, false);
+    let run = run_from(
+        launcher(),
+        "exits-cleanly",
+        &["pendulum", "--mode", "lockstep", "--duration", "1.5", "--set", &stage],
+    );
+    let s = run.summary();
+    assert!(s.completed, "{:?}", s.stopped_because);
+    assert_eq!(s.restarts[&Role::Controller], 1, "{:?}", s.restarts);
+    let said = "controller exited with status 0 before the run's end; restart after its clean-up";
+    assert!(s.timeline.iter().any(|e| e.event.starts_with(said)), "{said} not in {:?}", s.timeline);
+    assert!(dir.join("exited_once").exists());
+    assert_nothing_left(s);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The example controller with a thread of its own that keeps `u` and writes nonsense into it
+/// each time a step has ended. Python switches threads only where one blocks (the switch
+/// interval is made longer than the run): the thread runs once the runner lets go of the GIL.
+const CONTROLLER_WITH_A_THREAD_THAT_KEEPS_U: &str = r#"import sys
+import threading
+import looplab
+
+sys.setswitchinterval(1000.0)
+
+
+class StateFeedback:
+    def __init__(self, stage):
+        self.k1, self.k2, self.k3 = stage.config["controller"]["gains"]
+        self.limit = stage.config["model"]["current_limit_a"]
+        self.stepped = threading.Event()
+        self.u = None
+        threading.Thread(target=self.scribble, daemon=True).start()
+
+    def scribble(self):
+        while True:
+            self.stepped.wait()
+            self.stepped.clear()
+            self.u[0] = 999.0
+
+    def step(self, t, x, u):
+        current = -(self.k1 * x[0] + self.k2 * x[1] + self.k3 * x[2])
+        u[0] = min(max(current, -self.limit), self.limit)
+        self.u = u
+        self.stepped.set()
+
+
+looplab.run(StateFeedback)
+"#;
+
+/// What a step left in `u` is the command, whatever a thread of the user's writes into it once
+/// the step is over: the runner copies `u` out before it lets Python run another thread.
+#[test]
+fn a_thread_that_keeps_u_after_the_step_never_changes_the_command() {
+    let (dir, stage) = controller_script("keeps-u", CONTROLLER_WITH_A_THREAD_THAT_KEEPS_U, false);
+    let common = ["pendulum", "--mode", "lockstep", "--duration", "3"];
+    let builtin = run_from(launcher(), "keeps-u-builtin", &common);
+    let python = run_from(launcher(), "keeps-u", &[&common[..], &["--set", &stage]].concat());
+    assert!(python.summary().completed, "{:?}", python.summary().stopped_because);
+    assert!(trajectory_bytes(&python) == trajectory_bytes(&builtin), "a command was written after its step");
+    assert_nothing_left(python.summary());
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -156,15 +156,15 @@ impl PlantModel for PyPlantModel {
     }
 
     fn derivative(&mut self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) -> Result<()> {
-        self.x.set(x);
-        self.u.set(u);
-        self.dx.set(&self.zeros[..dx.len()]);
         Python::attach(|py| {
+            self.x.set(py, x);
+            self.u.set(py, u);
+            self.dx.set(py, &self.zeros[..dx.len()]);
             let args = (t, self.x.view.bind(py), self.u.view.bind(py), self.dx.view.bind(py));
-            self.derivative.call1(py, args).map_err(|e| python_error(py, e))
-        })?;
-        self.dx.get(dx);
-        Ok(())
+            self.derivative.call1(py, args).map_err(|e| python_error(py, e))?;
+            self.dx.get(py, dx);
+            Ok(())
+        })
     }
 
     fn do_step(&mut self, _t: f64, _dt: f64, _u: &[f64], _x: &mut [f64]) -> Result<()> {
@@ -176,15 +176,15 @@ impl PlantModel for PyPlantModel {
         if y.is_empty() {
             return Ok(());
         }
-        self.x.set(x);
-        self.u.set(u);
-        self.y.set(&self.zeros[..y.len()]);
         Python::attach(|py| {
+            self.x.set(py, x);
+            self.u.set(py, u);
+            self.y.set(py, &self.zeros[..y.len()]);
             let args = (t, self.x.view.bind(py), self.u.view.bind(py), self.y.view.bind(py));
-            outputs.call1(py, args).map_err(|e| python_error(py, e))
-        })?;
-        self.y.get(y);
-        Ok(())
+            outputs.call1(py, args).map_err(|e| python_error(py, e))?;
+            self.y.get(py, y);
+            Ok(())
+        })
     }
 
     fn set_state(&mut self, _x: &[f64]) -> Result<()> {

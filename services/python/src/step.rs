@@ -1,8 +1,9 @@
 //! The user's Python object as LoopLab's [`Step`].
 //!
 //! Per loop the runner copies the input into `x`, the output (zeros, or a sensors stage's
-//! prefilled readings) into `u`, calls the bound `step` with the GIL held, and copies `u` back:
-//! no conversion, no lookup, the same two views every call.
+//! prefilled readings) into `u`, calls the bound `step`, and copies `u` back, all with the GIL
+//! held (so a thread of the user's that kept `u` cannot write it meanwhile): no conversion, no
+//! lookup, the same two views every call.
 
 use std::ptr::NonNull;
 
@@ -43,13 +44,13 @@ impl PyStep {
 
 impl Step for PyStep {
     fn step(&mut self, t: f64, input: &[f64], output: &mut [f64]) -> Result<()> {
-        self.x.set(input);
-        self.u.set(output);
         Python::attach(|py| {
-            self.step.call1(py, (t, self.x.view.bind(py), self.u.view.bind(py))).map_err(|e| python_error(py, e))
-        })?;
-        self.u.get(output);
-        Ok(())
+            self.x.set(py, input);
+            self.u.set(py, output);
+            self.step.call1(py, (t, self.x.view.bind(py), self.u.view.bind(py))).map_err(|e| python_error(py, e))?;
+            self.u.get(py, output);
+            Ok(())
+        })
     }
 
     fn freeze(&self) -> Result<Option<Vec<u8>>> {
@@ -126,12 +127,15 @@ impl Numbers {
         Ok(Self { data, len, view })
     }
 
-    pub(crate) fn set(&mut self, from: &[f64]) {
-        // SAFETY: `len` f64s, ours; Python touches them only while it runs the step.
+    /// Writes the numbers, with the GIL held (`_py`): Python writes a view only with it, so no
+    /// thread of the user's that kept the view writes it meanwhile.
+    pub(crate) fn set(&mut self, _py: Python<'_>, from: &[f64]) {
+        // SAFETY: `len` f64s, ours; Python touches them only with the GIL, which this thread holds.
         unsafe { std::slice::from_raw_parts_mut(self.data.as_ptr(), self.len) }.copy_from_slice(from);
     }
 
-    pub(crate) fn get(&self, into: &mut [f64]) {
+    /// Reads the numbers, with the GIL held (as [`set`](Self::set)).
+    pub(crate) fn get(&self, _py: Python<'_>, into: &mut [f64]) {
         // SAFETY: as in `set`.
         into.copy_from_slice(unsafe { std::slice::from_raw_parts(self.data.as_ptr(), self.len) });
     }

@@ -23,12 +23,14 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
     let dir = match out {
         Some(dir) => {
             check_own_folder(dir, "--out")?;
+            check_folders_above(dir, "--out")?;
             if dir.exists() && !dir.is_dir() {
                 bail!("--out {}: is a file, not a folder; give a new or empty folder", dir.display());
             }
             if dir.exists() && std::fs::read_dir(dir).map(|mut d| d.next().is_some()).unwrap_or(true) {
                 bail!("--out {}: the folder exists and is not empty; give a new or empty folder", dir.display());
             }
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create the run folder {}", dir.display()))?;
             dir.to_path_buf()
         }
         None => {
@@ -36,6 +38,7 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
             let base = PathBuf::from("runs").join(format!("{stamp}-{scenario}"));
             std::fs::create_dir_all("runs").context("cannot create the runs folder")?;
             check_own_folder(Path::new("runs"), "the runs folder")?;
+            check_folders_above(Path::new("runs"), "the runs folder")?;
             // Claim a new folder atomically: two runs started in the same second get two.
             let mut n = 1;
             loop {
@@ -51,9 +54,18 @@ pub fn create_run_dir(out: Option<&Path>, scenario: &str) -> Result<PathBuf> {
             }
         }
     };
-    std::fs::create_dir_all(dir.join(files::LOGS))
-        .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
-    Ok(dir)
+    // The run claims its folder by making `logs/` in it, which only one can: a second run given
+    // the same empty `--out` at the same moment is refused, not mixed in.
+    match std::fs::create_dir(dir.join(files::LOGS)) {
+        Ok(()) => Ok(dir),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            bail!(
+                "--out {}: another run took the folder as this one started; give a new or empty folder",
+                dir.display()
+            )
+        }
+        Err(e) => Err(e).with_context(|| format!("cannot create the run folder {}", dir.display())),
+    }
 }
 
 /// An existing `--out` folder (or `runs/`, `what` says which) must be the user's own, and no one
@@ -84,6 +96,36 @@ fn check_own_folder(dir: &Path, what: &str) -> Result<()> {
             dir.display(),
             meta.mode() & 0o777
         );
+    }
+    Ok(())
+}
+
+/// Every folder above `dir` must be out of other users' reach: owned by the user or root, and
+/// writable by no one else unless sticky (as /tmp), where only an entry's owner may rename it.
+/// Else another user could rename the run folder (or a folder above it) mid-run and put a link
+/// to a folder of their choosing in its place, and the run would write its files there.
+fn check_folders_above(dir: &Path, what: &str) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let absolute = std::path::absolute(dir).with_context(|| format!("{what} {}", dir.display()))?;
+    // SAFETY: geteuid has no preconditions.
+    let me = unsafe { libc::geteuid() };
+    for folder in absolute.ancestors().skip(1) {
+        // Not there yet: made by this run, as the user.
+        let Ok(meta) = std::fs::metadata(folder) else { continue };
+        let others_write = meta.mode() & 0o022 != 0 && meta.mode() & 0o1000 == 0;
+        if (meta.uid() != me && meta.uid() != 0) || others_write {
+            bail!(
+                "{what} {}: {} is {}; another user could swap the run folder for a link mid-run; give a folder \
+                 under folders only you (or root) can write in",
+                dir.display(),
+                folder.display(),
+                if others_write {
+                    format!("writable by others without the sticky bit (mode {:o})", meta.mode() & 0o7777)
+                } else {
+                    format!("another user's (uid {})", meta.uid())
+                }
+            );
+        }
     }
     Ok(())
 }

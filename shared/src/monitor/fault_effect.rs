@@ -129,9 +129,13 @@ impl FaultTracker {
             .collect()
     }
 
-    /// Takes loop `k`; loops come in order.
-    pub fn observe(&mut self, k: u64, part: &LoopParts, measure: &ErrorMeasure) {
-        let incarnation = self.slot.zip(part.record.as_ref()).map(|(i, r)| r.header.incarnations[i]);
+    /// Takes loop `k`, recorded by monitor `recorder` (its incarnation); loops come in order.
+    pub fn observe(&mut self, k: u64, part: &LoopParts, recorder: u32, measure: &ErrorMeasure) {
+        // The loop's record names each stage's incarnation; the monitor is the one recording it.
+        let incarnation = match self.role {
+            Some(Role::Monitor) => Some(recorder),
+            _ => self.slot.zip(part.record.as_ref()).map(|(i, r)| r.header.incarnations[i]),
+        };
         let fresh = part.record.as_ref().is_some_and(|r| r.deadline_miss == 0 && r.rejected == 0 && r.lost == 0);
         // Every loop's error: the before/during/after split covers the whole run.
         let error = part.state.as_ref().map(|s| (measure.of_state)(s.header.t, &s.x));
@@ -354,7 +358,7 @@ mod tests {
         ];
         for (k, parts) in trajectory.iter().enumerate() {
             for tracker in &mut trackers {
-                tracker.observe(k as u64, parts, &measure());
+                tracker.observe(k as u64, parts, 0, &measure());
             }
         }
         let rate = config.rate_hz;
@@ -407,7 +411,7 @@ mod tests {
         let mut watch = crate::contract::limits::LimitsWatch::default();
         for k in 0..20 {
             let error = if k >= 5 { measure().limit } else { 0.0 };
-            trackers[0].observe(k, &loop_with(error, Some((false, 0))), &measure());
+            trackers[0].observe(k, &loop_with(error, Some((false, 0))), 0, &measure());
             watch.observe(k as f64 / config.rate_hz, error, measure().limit, None);
         }
         let effect = trackers.pop().unwrap().finish(config.rate_hz);
@@ -415,7 +419,7 @@ mod tests {
         assert_eq!(effect.limit_exceeded_at_s, None);
         assert_eq!(watch.exceeded_at_s, None);
         let mut trackers = FaultTracker::for_faults(&config, false);
-        trackers[0].observe(6, &loop_with(f64::NAN, Some((false, 0))), &measure());
+        trackers[0].observe(6, &loop_with(f64::NAN, Some((false, 0))), 0, &measure());
         assert!(!trackers.pop().unwrap().finish(config.rate_hz).within_limits, "NaN is beyond");
     }
 
@@ -425,7 +429,7 @@ mod tests {
         let mut trackers = FaultTracker::for_faults(&config, false);
         for k in 0..20 {
             let error = if k >= 5 { 0.5 } else { 0.0 };
-            trackers[0].observe(k, &loop_with(error, Some((false, 0))), &measure());
+            trackers[0].observe(k, &loop_with(error, Some((false, 0))), 0, &measure());
         }
         let effect = trackers.pop().unwrap().finish(config.dt());
         // The delay lasts to the end of the run: no loop after it to recover in.
@@ -462,11 +466,11 @@ mod tests {
         assert_eq!((tracker.from, config.loops()), (100, 1000));
         // The monitor hears of the injection at a checkpoint, in the middle of the outage.
         for k in 0..350 {
-            tracker.observe(k, &killed_at_300(k), &measure());
+            tracker.observe(k, &killed_at_300(k), 0, &measure());
         }
         tracker.injected_at(300, &measure());
         for k in 350..1000 {
-            tracker.observe(k, &killed_at_300(k), &measure());
+            tracker.observe(k, &killed_at_300(k), 0, &measure());
         }
         let effect = tracker.finish(config.rate_hz);
         assert_eq!(
@@ -511,7 +515,7 @@ mod tests {
         // recovery, since the loop never had its estimator again.
         for k in 0..1000 {
             let record = (k < 100).then_some((false, 0));
-            tracker.observe(k, &loop_with(if k < 100 { 0.0 } else { 0.05 }, record), &measure());
+            tracker.observe(k, &loop_with(if k < 100 { 0.0 } else { 0.05 }, record), 0, &measure());
         }
         let effect = tracker.finish(config.rate_hz);
         assert!(effect.never_back, "{effect:?}");
@@ -519,6 +523,22 @@ mod tests {
         let phases = effect.phases.unwrap();
         assert_eq!((phases.during.from_k, phases.during.to_k, phases.during.misses), (100, 1000, 900));
         assert_eq!((phases.after.loops, phases.before.loops), (0, 100));
+    }
+
+    #[test]
+    fn a_killed_monitor_is_back_once_its_successor_records_a_loop() {
+        let (config, mut tracker) = real_time_tracker("kill monitor at 100ms", 1.0);
+        tracker.injected_at(100, &measure());
+        // The first monitor recorded loops 0 to 109; loops 110 to 149 went by with none; its
+        // successor (incarnation 1) records from 150 on. The loop itself never lost a command.
+        for k in (0..110).chain(150..1000) {
+            let recorder = u32::from(k >= 150);
+            tracker.observe(k, &loop_with(0.0, Some((false, 0))), recorder, &measure());
+        }
+        let effect = tracker.finish(config.rate_hz);
+        assert!(!effect.never_back, "{effect:?}");
+        assert_eq!((effect.rejoined_at_s, effect.commands_back_at_s), (Some(0.15), Some(0.15)), "{effect:?}");
+        assert_eq!((effect.outage_ticks, effect.recovery_s), (0, Some(0.0)), "{effect:?}");
     }
 
     #[test]
@@ -532,8 +552,8 @@ mod tests {
             if k == 450 {
                 tracker.injected_at(400, &measure());
             }
-            tracker.observe(k, &stopped_at_400(k), &measure());
-            planned.observe(k, &stopped_at_400(k), &measure());
+            tracker.observe(k, &stopped_at_400(k), 0, &measure());
+            planned.observe(k, &stopped_at_400(k), 0, &measure());
         }
         let planned = planned.finish(config.rate_hz);
         assert_eq!((planned.outage_ticks, planned.commands_back_at_s), (0, Some(0.3)), "{planned:?}");
@@ -552,8 +572,8 @@ mod tests {
             if k == 150 {
                 told.not_injected();
             }
-            tracker.observe(k, &loop_with(0.0, Some((false, 0))), &measure());
-            told.observe(k, &loop_with(0.0, Some((false, 0))), &measure());
+            tracker.observe(k, &loop_with(0.0, Some((false, 0))), 0, &measure());
+            told.observe(k, &loop_with(0.0, Some((false, 0))), 0, &measure());
         }
         // The run ended before the launcher injected it; or it said it did not.
         for effect in [tracker.finish(config.rate_hz), told.finish(config.rate_hz)] {
@@ -575,7 +595,7 @@ mod tests {
             _ => loop_with(0.0, Some((false, 1))),
         };
         for k in 0..heard {
-            tracker.observe(k, &parts(k), &measure());
+            tracker.observe(k, &parts(k), 0, &measure());
         }
         assert_eq!(tracker.awaiting.as_ref().unwrap().log.len(), AWAITED_LOOPS);
         // Frozen into `monitor.state` and thawed by the next monitor, still awaiting.
@@ -584,7 +604,7 @@ mod tests {
         tracker.injected_at(injected, &measure());
         assert!(tracker.awaiting.is_none());
         for k in heard..heard + 100 {
-            tracker.observe(k, &parts(k), &measure());
+            tracker.observe(k, &parts(k), 0, &measure());
         }
         let effect = tracker.finish(config.rate_hz);
         assert_eq!(effect.outage_ticks, 50, "{effect:?}");

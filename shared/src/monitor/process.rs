@@ -9,7 +9,7 @@
 //! from a stage of the loop.
 
 use std::fmt::Debug;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use iceoryx2::prelude::ZeroCopySend;
@@ -29,9 +29,13 @@ use crate::runtime::transport::ipc::{Topic, TopicSubscriber};
 
 /// Sleep between drains when the queues were nearly empty.
 const POLL_PERIOD: Duration = Duration::from_millis(5);
-/// How often the live status goes to the launcher; it is also the monitor's heartbeat, and the
-/// files are flushed as often, so that a killed monitor loses little.
+/// How often the live status goes to the launcher; the files are flushed as often, so that a
+/// killed monitor loses little.
 const STATUS_PERIOD: Duration = Duration::from_millis(100);
+/// How often the receive loop tells the launcher it runs (the monitor's heartbeat; the launcher
+/// finds a stopped monitor by its silence). From the receive loop, not the recorder, which runs
+/// at the lowest priority and may lag.
+const HEARTBEAT_PERIOD: Duration = Duration::from_millis(20);
 
 /// One topic's reader and how its samples go to the recorder.
 struct Reader<T: Debug + ZeroCopySend + 'static> {
@@ -66,11 +70,11 @@ pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
     let commands = Reader::new(context, Topic::Command, Sample::Command)?;
     let records = Reader::new(context, Topic::Loop, Sample::Loop)?;
     // Every reader exists before any waits for its writer.
-    states.subscriber.connect(&context.stop)?;
-    measurements.subscriber.connect(&context.stop)?;
-    estimates.subscriber.connect(&context.stop)?;
-    commands.subscriber.connect(&context.stop)?;
-    records.subscriber.connect(&context.stop)?;
+    states.subscriber.connect(&context.stop, context.connect_timeout())?;
+    measurements.subscriber.connect(&context.stop, context.connect_timeout())?;
+    estimates.subscriber.connect(&context.stop, context.connect_timeout())?;
+    commands.subscriber.connect(&context.stop, context.connect_timeout())?;
+    records.subscriber.connect(&context.stop, context.connect_timeout())?;
     // Only shown, so dropped when the launcher is not reading (stopped): the recording goes on.
     let status: StatusCallback =
         Box::new(|status| emit_if_room(&ChildEvent::Status(Box::new(status.clone()))).map(|_| ()));
@@ -98,6 +102,7 @@ pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
 
     let timeout_ns = (config.supervision.stall_timeout_s * 1e9) as u64;
     let mut watch = StallWatch::new(timeout_ns, config.loops(), plant_period_ns, Box::new(now_ns));
+    let mut last_heartbeat = Instant::now();
     let mut drain = || -> Result<usize> {
         // In the order data flows, so a loop's parts tend to arrive together.
         let n = states.drain(&mut watch, &mut recording)?
@@ -107,6 +112,11 @@ pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
             + records.drain(&mut watch, &mut recording)?;
         for event in watch.check() {
             emit(&event)?;
+        }
+        if last_heartbeat.elapsed() >= HEARTBEAT_PERIOD {
+            last_heartbeat = Instant::now();
+            // Dropped while the launcher does not read: it only says the monitor is up.
+            emit_if_room(&ChildEvent::Alive)?;
         }
         recording.hand_over()?;
         Ok(n)

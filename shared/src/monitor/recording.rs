@@ -21,7 +21,7 @@ use crate::monitor::injections::{self, Injection};
 use crate::monitor::join::{Joiner, LoopParts, PerTopic, Sample};
 use crate::monitor::live::Live;
 use crate::monitor::resume::{self, Frozen, Thawed};
-use crate::monitor::sinks::{self, JoinedLoop, RunSink, SinkSetup};
+use crate::monitor::sinks::{self, FileEnd, JoinedLoop, RunSink, SinkSetup};
 use crate::monitor::stats::LoopStats;
 
 /// A loop still missing parts once this many newer loops have arrived is written as it is: by
@@ -49,6 +49,10 @@ pub struct Recording {
     /// A restarted monitor starts at the first loop it sees; the first one starts at 0.
     started: bool,
     restarted: bool,
+    /// Which monitor this is (0 the first): a monitor's kill is over once another records.
+    incarnation: u32,
+    /// Where the files go.
+    run_dir: PathBuf,
     /// A replay of a real-time recording: what goes out marked lost stands for a message that
     /// never came, and is left out, as the recording has none.
     leave_out_lost: bool,
@@ -131,6 +135,8 @@ impl Recording {
             status,
             started: !restarted,
             restarted,
+            incarnation,
+            run_dir: run_dir.to_path_buf(),
             leave_out_lost: config.replay.as_ref().is_some_and(|r| r.recorded_in_real_time),
             snapshot: None,
             resume_k: 0,
@@ -191,9 +197,14 @@ impl Recording {
         self
     }
 
-    /// Goes on from the last monitor's state; on an error, leaves the recording as it was.
+    /// Goes on from the last monitor's state, its files cut back to where it saved it (it may
+    /// have written loops past its save, which this one counts missing or writes again); on an
+    /// error, leaves the recording as it was.
     fn thaw(&mut self, frozen: Thawed, scenario: &dyn Scenario) -> Result<()> {
         let mut report: MonitorReport = serde_json::from_str(&frozen.report)?;
+        for end in &frozen.files {
+            end.cut_back(&self.run_dir)?;
+        }
         report.missing.go_on_from(frozen.missing_newest);
         match &frozen.metrics {
             Some(bytes) => {
@@ -213,8 +224,8 @@ impl Recording {
         Ok(())
     }
 
-    /// Writes the running state for the next monitor.
-    fn freeze(&self, path: &Path) -> Result<()> {
+    /// Writes the running state for the next monitor, with the files' lengths (`files`).
+    fn freeze(&self, path: &Path, files: Vec<FileEnd>) -> Result<()> {
         let report = serde_json::to_string(&self.report)?;
         resume::write(
             path,
@@ -228,6 +239,7 @@ impl Recording {
                 faults: &self.faults,
                 metrics: self.metrics.freeze(),
                 last_counters: self.last_counters,
+                files,
             },
         )
     }
@@ -290,7 +302,7 @@ impl Recording {
     fn save(&mut self) -> Result<()> {
         self.sinks.iter_mut().try_for_each(|sink| sink.flush())?;
         match &self.snapshot {
-            Some(path) => self.freeze(path),
+            Some(path) => self.freeze(path, self.sinks.iter().map(|sink| sink.end()).collect::<Result<_>>()?),
             None => Ok(()),
         }
     }
@@ -434,7 +446,7 @@ impl Recording {
             self.report.missing.add(k, k);
         }
         for fault in &mut self.faults {
-            fault.observe(k, parts, &self.measure);
+            fault.observe(k, parts, self.incarnation, &self.measure);
         }
         let cause = self.explain(k, parts);
         for topic in Topic::ALL {
@@ -477,6 +489,7 @@ impl Recording {
 mod tests {
     use super::*;
     use crate::config::launch::Override;
+    use crate::contract::run_format::files;
     use crate::monitor::join::tests::{command, estimate, measurements, record, state, whole};
     use crate::scenarios::resolve;
 
@@ -597,8 +610,10 @@ mod tests {
             whole(k).into_iter().try_for_each(|s| first.take(s)).unwrap();
         }
         first.checkpoint().unwrap();
-        // Loop 3 reaches it after its last checkpoint: it dies with it.
+        // Loop 3 reaches it after its last checkpoint, and its rows reach the files: it dies
+        // with it all the same.
         whole(3).into_iter().try_for_each(|s| first.take(s)).unwrap();
+        first.sinks.iter_mut().try_for_each(|sink| sink.flush()).unwrap();
         drop(first);
         let mut second =
             Recording::new(&config, scenario.as_ref(), &dir, 1, None).unwrap().with_snapshot(snapshot, &*scenario);
@@ -606,8 +621,14 @@ mod tests {
             whole(k).into_iter().try_for_each(|s| second.take(s)).unwrap();
         }
         let report = second.finish().unwrap();
+        let rows = loops_csv_rows(&dir);
+        let trajectory = std::fs::read_to_string(dir.join(files::TRAJECTORY)).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
 
+        // The files hold what the report counts: loop 3 was cut back out of them.
+        let ks = |rows: Vec<&str>| rows.iter().map(|r| r.split(',').next().unwrap().to_owned()).collect::<Vec<_>>();
+        assert_eq!(ks(rows.iter().map(String::as_str).collect()), ["0", "1", "2", "5"]);
+        assert_eq!(ks(trajectory.lines().skip(1).collect()), ["0", "1", "2", "5"]);
         assert_eq!((report.records, report.loops_seen), (4, 6));
         assert_eq!(report.missing.ranges, [[3, 4]]);
         assert_eq!((report.missing.missing_loops, report.missing.missing_before_restart), (2, 2));

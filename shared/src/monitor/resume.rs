@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::contract::codec;
 use crate::contract::msg::PlantCounters;
 use crate::monitor::fault_effect::FaultTracker;
+use crate::monitor::sinks::FileEnd;
 use crate::monitor::stats::LoopStats;
 use crate::runtime::storage::private_file;
 
@@ -43,6 +44,8 @@ pub struct Frozen<Stats, Faults> {
     /// The scenario's metrics (`Metrics::freeze`); None: they cannot be carried over.
     pub metrics: Option<Vec<u8>>,
     pub last_counters: PlantCounters,
+    /// Each output file's length at this save: the loops before `next_k` and no more.
+    pub files: Vec<FileEnd>,
 }
 
 pub type FrozenRef<'a> = Frozen<&'a LoopStats, &'a [FaultTracker]>;

@@ -355,6 +355,16 @@ impl Default for Supervision {
     }
 }
 
+impl Supervision {
+    /// How long a reader waits at start-up for its writer: longer than `ready_timeout_s`, so
+    /// that the launcher, which knows which process never opened its output (a stage of the
+    /// user's own that never called LoopLab's runner), says why, and not a reader that gave up
+    /// first (the plant: "no writer on command").
+    pub fn connect_timeout(&self) -> std::time::Duration {
+        std::time::Duration::from_secs_f64(self.ready_timeout_s + 10.0)
+    }
+}
+
 /// A process's policy with the defaults filled in.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Policy {
@@ -421,6 +431,14 @@ mod tests {
         }
         let f = parse_fault("stop controller at 2s for 200ms").unwrap();
         assert_eq!(parse_fault(&f.describe()).unwrap(), f, "{}", f.describe());
+    }
+
+    #[test]
+    fn a_reader_waits_for_its_writer_longer_than_the_launcher_waits_for_ready() {
+        for ready_timeout_s in [1.0, 20.0, 600.0] {
+            let supervision = Supervision { ready_timeout_s, ..Default::default() };
+            assert!(supervision.connect_timeout().as_secs_f64() > ready_timeout_s, "{ready_timeout_s}");
+        }
     }
 
     #[test]

@@ -112,6 +112,9 @@ pub enum ChildEvent {
         at_ns: u64,
     },
     Status(Box<MonitorStatus>),
+    /// The monitor's receive loop still runs: its heartbeat, a few times per status, so that a
+    /// stop of the monitor is seen as soon as a stop of any other process.
+    Alive,
     PlantReport(PlantReport),
     StageReport(StageReport),
     BridgeReport(BridgeReport),

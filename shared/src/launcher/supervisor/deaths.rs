@@ -37,6 +37,11 @@ impl Supervisor<'_> {
         let last_words = if hung { ": hung".to_owned() } else { self.last_words(role) };
         let exit = if hung {
             self.processes[role].exit_text()
+        } else if death.clean {
+            // A loop process runs until it is stopped: ending by itself mid-run, even with status
+            // 0, it failed (and `on-failure` restarts it).
+            death.clean = false;
+            format!("{} before the run's end", self.processes[role].exit_text())
         } else {
             format!("{}{last_words}", self.processes[role].exit_text())
         };
@@ -71,7 +76,7 @@ impl Supervisor<'_> {
         self.processes[role].gone = true;
         if self.processes[role].policy.on_death == OnDeath::End {
             self.note(ns, why.clone());
-            return Some(Outcome::Failed(format!("{why}; see logs/{role}.log")));
+            return Some(Outcome::Failed(format!("{why}; {}", self.see_log(role))));
         }
         if role == Role::Monitor {
             // The loop goes on without its recorder; the report says which loops have none.
@@ -87,7 +92,7 @@ impl Supervisor<'_> {
             Mode::Lockstep => self.last_pause.filter(|_| self.paused),
             Mode::Realtime => self.log.plant_start_ns.map(|start| inject::loop_at(ns, start, self.config.period_ns())),
         };
-        let why = format!("{why}; see logs/{role}.log");
+        let why = format!("{why}; {}", self.see_log(role));
         self.log.lost.push(LostStage { process: role, at_ms, at_loop, why });
         self.tell_plant_lost();
         None

@@ -122,10 +122,10 @@ impl Supervisor<'_> {
                 }
                 if let Ok(stalled) = process.parse::<Role>() {
                     self.processes[stalled].stalled_since_ns = Some(since_ns.min(detected_ns));
-                    self.faults.detect(stalled, DetectedBy::InputDeadline, detected_ns);
+                    self.faults.detect_stall(stalled, since_ns, detected_ns);
                     // A stage across the link waits on the link: a cut stalls it.
                     if self.config.hosts.is_remote(stalled) {
-                        self.faults.detect_cut(DetectedBy::InputDeadline, detected_ns);
+                        self.faults.detect_cut(since_ns, detected_ns);
                     }
                 }
                 let waited = (detected_ns.saturating_sub(since_ns)) as f64 / 1e6;
@@ -153,8 +153,9 @@ impl Supervisor<'_> {
                 }
                 self.note(at_ns, "link to the other host back".into());
             }
+            ChildEvent::Alive => self.monitor_heard_ns = now_ns(),
             ChildEvent::Status(status) => {
-                self.last_status_ns = now_ns();
+                self.monitor_heard_ns = now_ns();
                 self.monitor_written = status.loops_written;
                 self.live.status(status);
             }

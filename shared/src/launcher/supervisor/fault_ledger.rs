@@ -95,18 +95,27 @@ impl<'a> FaultLedger<'a> {
     /// `by` noticed something wrong with `role` at `ns`: the injected faults on it of the kind
     /// `by` notices that are still undetected count as detected. Returns them.
     pub(super) fn detect(&mut self, role: Role, by: DetectedBy, ns: u64) -> Vec<usize> {
-        self.detect_kind(role, noticed_kind(by), by, ns)
+        self.detect_kind(role, noticed_kind(by), by, ns, ns)
     }
 
-    /// `by` noticed that the link passes nothing (a stage across it stalled) at `ns`: the
-    /// injected cuts still undetected count as detected. Returns them.
-    pub(super) fn detect_cut(&mut self, by: DetectedBy, ns: u64) -> Vec<usize> {
-        self.detect_kind(Role::Bridge, FaultKind::Cut, by, ns)
+    /// The monitor saw `role` stall at `ns`, its input waiting since `since_ns`: its injected
+    /// stops still undetected that were on when the wait began count as detected (a stall that
+    /// began after a stop's SIGCONT is not that stop's). Returns them.
+    pub(super) fn detect_stall(&mut self, role: Role, since_ns: u64, ns: u64) -> Vec<usize> {
+        self.detect_kind(role, FaultKind::Stop, DetectedBy::InputDeadline, since_ns, ns)
     }
 
-    fn detect_kind(&mut self, role: Role, kind: FaultKind, by: DetectedBy, ns: u64) -> Vec<usize> {
+    /// The stage across the link stalled at `ns`, its input waiting since `since_ns`: the
+    /// injected cuts still undetected that were on when the wait began count as detected.
+    /// Returns them.
+    pub(super) fn detect_cut(&mut self, since_ns: u64, ns: u64) -> Vec<usize> {
+        self.detect_kind(Role::Bridge, FaultKind::Cut, DetectedBy::InputDeadline, since_ns, ns)
+    }
+
+    /// `by` noticed what began at `began_ns` at `ns`.
+    fn detect_kind(&mut self, role: Role, kind: FaultKind, by: DetectedBy, began_ns: u64, ns: u64) -> Vec<usize> {
         let found: Vec<usize> =
-            self.injected_on(role, kind).into_iter().filter(|&i| detectable(&self.seen[i], by)).collect();
+            self.injected_on(role, kind).into_iter().filter(|&i| detectable(&self.seen[i], by, began_ns)).collect();
         for &i in &found {
             self.seen[i].detected_ns = Some(ns);
             self.seen[i].detected_by = Some(by);
@@ -160,12 +169,14 @@ fn noticed_kind(by: DetectedBy) -> FaultKind {
     }
 }
 
-/// Whether `by` may still detect a fault: only once, and a silence (the monitor's heartbeat, the
-/// link's lease) only while the stop lasts, since after the SIGCONT it is not the stop's.
-fn detectable(seen: &FaultSeen, by: DetectedBy) -> bool {
+/// Whether `by` may still detect a fault, in what began at `began_ns`: only once; a silence (the
+/// monitor's heartbeat, the link's lease) only while the stop lasts, since after the SIGCONT it
+/// is not the stop's; a stall (seen after the fact) only if it began before the SIGCONT.
+fn detectable(seen: &FaultSeen, by: DetectedBy, began_ns: u64) -> bool {
     seen.detected_ns.is_none()
         && match by {
-            DetectedBy::ProcessExited | DetectedBy::InputDeadline => true,
+            DetectedBy::ProcessExited => true,
+            DetectedBy::InputDeadline => seen.continued_ns.is_none_or(|continued| began_ns <= continued),
             DetectedBy::MonitorHeartbeat | DetectedBy::LinkLease => seen.continued_ns.is_none(),
         }
 }
@@ -201,7 +212,7 @@ mod tests {
         ledger.injected(0, 100);
         ledger.resume(Role::Controller, 150);
         assert_eq!(ledger.seen[0].resumed_ns, None, "not resumed before it was detected");
-        assert_eq!(ledger.detect(Role::Controller, DetectedBy::InputDeadline, 200), [0]);
+        assert_eq!(ledger.detect_stall(Role::Controller, 120, 200), [0]);
         ledger.resume(Role::Controller, 300);
         ledger.resume(Role::Controller, 400);
         let seen = ledger.seen();
@@ -215,7 +226,7 @@ mod tests {
         let mut ledger = FaultLedger::new(&f);
         ledger.injected(0, 10);
         ledger.injected(1, 20);
-        assert!(ledger.detect(Role::Sensors, DetectedBy::InputDeadline, 30).is_empty());
+        assert!(ledger.detect_stall(Role::Sensors, 15, 30).is_empty());
         assert!(ledger.detect(Role::Controller, DetectedBy::ProcessExited, 30).is_empty());
         ledger.restarted(Role::Plant, 40);
         ledger.resume(Role::Sensors, 40);
@@ -255,7 +266,18 @@ mod tests {
         let mut late = FaultLedger::new(&f);
         late.injected(1, 100);
         late.continued(1, 300);
-        assert_eq!(late.detect(Role::Bridge, DetectedBy::InputDeadline, 310), [1]);
+        assert_eq!(late.detect_stall(Role::Bridge, 290, 310), [1]);
+    }
+
+    #[test]
+    fn a_stall_that_began_after_a_stops_continue_is_not_that_stops() {
+        let f = specs(&["stop estimator at 1s for 300ms"]);
+        let mut ledger = FaultLedger::new(&f);
+        ledger.injected(0, 1_000);
+        ledger.continued(0, 1_300);
+        assert!(ledger.detect_stall(Role::Estimator, 30_000, 30_050).is_empty(), "a stall 29 s later");
+        assert_eq!(ledger.seen()[0].detected_ns, None, "the stop stays undetected");
+        assert_eq!(ledger.detect_stall(Role::Estimator, 1_290, 1_340), [0], "one that began during it");
     }
 
     #[test]
@@ -280,11 +302,11 @@ mod tests {
     fn a_cut_is_detected_and_resumed_by_the_stage_across_the_link_not_as_a_stop() {
         let f = specs(&["stop bridge at 1s for 200ms", "cut bridge at 2s for 300ms"]);
         let mut ledger = FaultLedger::new(&f);
-        assert!(ledger.detect_cut(DetectedBy::InputDeadline, 50).is_empty(), "not cut yet");
+        assert!(ledger.detect_cut(40, 50).is_empty(), "not cut yet");
         ledger.injected(0, 100);
         ledger.injected(1, 200);
-        assert_eq!(ledger.detect_cut(DetectedBy::InputDeadline, 250), [1], "the cut, not the stop");
-        assert!(ledger.detect_cut(DetectedBy::InputDeadline, 260).is_empty(), "detected once");
+        assert_eq!(ledger.detect_cut(240, 250), [1], "the cut, not the stop");
+        assert!(ledger.detect_cut(240, 260).is_empty(), "detected once");
         ledger.resume_cut(600);
         ledger.resume(Role::Bridge, 700);
         let seen = ledger.seen();

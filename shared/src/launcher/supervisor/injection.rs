@@ -15,9 +15,9 @@ use super::Supervisor;
 /// Lockstep: how long a fault on the monitor waits for it to write the loops before it.
 const MONITOR_CATCH_UP_NS: u64 = 5_000_000_000;
 
-/// How long the monitor may stay silent (it reports ten times a second) before it counts as
-/// stalled.
-const MONITOR_SILENCE_NS: u64 = 300_000_000;
+/// How long the monitor may stay silent (its heartbeat comes every 20 ms) before it counts as
+/// stalled: three heartbeats and a little.
+const MONITOR_SILENCE_NS: u64 = 70_000_000;
 
 impl Supervisor<'_> {
     /// Real time: injects the faults that are due.
@@ -192,7 +192,7 @@ impl Supervisor<'_> {
     pub(super) fn watch_monitor_heartbeat(&mut self) {
         let now = now_ns();
         let monitor = &self.processes[Role::Monitor];
-        if !monitor_silent(self.last_status_ns, now, monitor.ready, monitor.stopped) {
+        if !monitor_silent(self.monitor_heard_ns, now, monitor.ready, monitor.stopped) {
             return;
         }
         for _ in self.faults.detect(Role::Monitor, DetectedBy::MonitorHeartbeat, now) {
@@ -201,10 +201,11 @@ impl Supervisor<'_> {
     }
 }
 
-/// Whether a monitor whose last status came at `last_status_ns` counts as silent at `now_ns`:
-/// only while it is up and stopped by a fault (a starting or dead one says nothing either).
-fn monitor_silent(last_status_ns: u64, now_ns: u64, ready: bool, stopped: bool) -> bool {
-    now_ns.saturating_sub(last_status_ns) > MONITOR_SILENCE_NS && ready && stopped
+/// Whether a monitor last heard from (a heartbeat or a status) at `monitor_heard_ns` counts as
+/// silent at `now_ns`: only while it is up and stopped by a fault (a starting or dead one says
+/// nothing either).
+fn monitor_silent(monitor_heard_ns: u64, now_ns: u64, ready: bool, stopped: bool) -> bool {
+    now_ns.saturating_sub(monitor_heard_ns) > MONITOR_SILENCE_NS && ready && stopped
 }
 
 #[cfg(test)]
@@ -212,10 +213,10 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_monitor_is_silent_past_300_ms_without_a_status_while_up_and_stopped() {
+    fn a_monitor_is_silent_past_70_ms_without_a_heartbeat_while_up_and_stopped() {
         let last = 4_000_000_000;
-        assert!(!monitor_silent(last, last + 300_000_000, true, true));
-        assert!(monitor_silent(last, last + 300_000_001, true, true));
+        assert!(!monitor_silent(last, last + 70_000_000, true, true));
+        assert!(monitor_silent(last, last + 70_000_001, true, true));
         assert!(!monitor_silent(last, last + 900_000_000, false, true), "not ready: starting again");
         assert!(!monitor_silent(last, last + 900_000_000, true, false), "not stopped by a fault");
         assert!(!monitor_silent(last, last - 1, true, true), "a status after the look");

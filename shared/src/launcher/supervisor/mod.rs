@@ -133,8 +133,8 @@ struct Supervisor<'a> {
     /// 19, needs the CPU to exit, hundreds of ms on a busy machine); the supervision goes on
     /// meanwhile instead of waiting for it.
     closing: Vec<(Role, Instant)>,
-    /// When the monitor's last status came (CLOCK_MONOTONIC ns).
-    last_status_ns: u64,
+    /// When the monitor's last heartbeat or status came (CLOCK_MONOTONIC ns).
+    monitor_heard_ns: u64,
     removed_dead_nodes: u64,
     stop: StopFlag,
     /// Clean-up requests (a process) for the clean-up thread: iceoryx2's clean-up of a dead
@@ -196,7 +196,7 @@ impl<'a> Supervisor<'a> {
             monitor_faults_held: None,
             monitor_written: 0,
             closing: vec![],
-            last_status_ns: now_ns(),
+            monitor_heard_ns: now_ns(),
             removed_dead_nodes: 0,
             stop,
             cleaner: Some(cleaner),
@@ -322,7 +322,17 @@ impl<'a> Supervisor<'a> {
     }
 
     fn ended_in_start_up(&self, role: Role) -> String {
-        format!("{} during start-up{}; see logs/{role}.log", self.processes[role].exit_text(), self.last_words(role))
+        format!("{} during start-up{}; {}", self.processes[role].exit_text(), self.last_words(role), self.see_log(role))
+    }
+
+    /// Where to look for why `role` ended: its log, or, where that is empty (a crash before it
+    /// could write a word), that it is.
+    pub(super) fn see_log(&self, role: Role) -> String {
+        let log = format!("{}/{role}.log", files::LOGS);
+        match std::fs::symlink_metadata(self.run_dir.join(&log)) {
+            Ok(meta) if meta.len() == 0 => format!("{log} is empty: it wrote nothing before it ended"),
+            _ => format!("see {log}"),
+        }
     }
 
     /// Why start-up timed out: who was late. A stage of the user's own that never said ready
@@ -418,7 +428,7 @@ impl<'a> Supervisor<'a> {
         if !self.processes[Role::Plant].write_line("start") {
             return Outcome::Failed("cannot tell the plant to start".into());
         }
-        self.last_status_ns = now_ns();
+        self.monitor_heard_ns = now_ns();
 
         let mut last_turn = Instant::now();
         loop {

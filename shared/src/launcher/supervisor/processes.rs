@@ -49,6 +49,9 @@ pub(super) struct Process {
     pub(super) hung_s: Option<f64>,
     /// When its running incarnation was first seen exited with its output still open.
     pub(super) exited_seen_at: Option<std::time::Instant>,
+    /// At the run's end it did not exit within this long of the launcher's SIGTERM, and the
+    /// launcher killed it: not a crash of its own.
+    pub(super) killed_at_stop: Option<std::time::Duration>,
 }
 
 /// A restart under way: it starts once the dead process's resources are removed and the backoff
@@ -77,6 +80,7 @@ impl Process {
             stalled_since_ns: None,
             hung_s: None,
             exited_seen_at: None,
+            killed_at_stop: None,
         }
     }
 
@@ -102,6 +106,13 @@ impl Process {
     pub(super) fn exit_text(&self) -> String {
         if let Some(stalled_s) = self.hung_s {
             return format!("{} hung: stalled {stalled_s:.1} s inside its own code, and was killed", self.role);
+        }
+        if let Some(timeout) = self.killed_at_stop {
+            return format!(
+                "{} did not exit within {} s of the launcher's SIGTERM at the run's end, and was killed",
+                self.role,
+                timeout.as_secs()
+            );
         }
         match self.runs.last().map(|r| r.exit) {
             Some(exit) if exit == Exit::Status(EXIT_DISK_FULL.into()) => {

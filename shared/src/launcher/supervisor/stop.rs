@@ -46,6 +46,7 @@ impl Supervisor<'_> {
                         tell!("looplab: second stop request; killing {role}");
                     } else {
                         tell!("looplab: {role} did not stop within {} s; killing it", timeout.as_secs());
+                        self.processes[role].killed_at_stop = Some(timeout);
                     }
                     self.processes[role].signal(libc::SIGKILL);
                     while !self.processes[role].try_reap() {

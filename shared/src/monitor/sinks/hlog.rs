@@ -14,7 +14,7 @@ use hdrhistogram::serialization::interval_log::{IntervalLogIterator, IntervalLog
 use crate::contract::clock::now_ns;
 use crate::contract::report::{HOPS, MonitorReport};
 use crate::contract::run_format::files;
-use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
+use crate::monitor::sinks::{FileEnd, JoinedLoop, RunSink, SinkSetup, create, flush};
 use crate::monitor::stats::histogram;
 
 /// The end-to-end histogram's tag; it is also written untagged.
@@ -81,6 +81,10 @@ impl RunSink for LatencyLog {
 
     fn flush(&mut self) -> Result<()> {
         flush(&mut self.log.file, &self.run_dir)
+    }
+
+    fn end(&self) -> Result<FileEnd> {
+        FileEnd::of(&self.log.file, files::LATENCY_LOG)
     }
 
     fn finish(&mut self, _report: &MonitorReport) -> Result<()> {

@@ -14,7 +14,7 @@ use crate::contract::msg::LoopTrace;
 use crate::contract::run_format::files;
 use crate::model::layout::column_name;
 use crate::monitor::sinks::text::{push_f64, push_int};
-use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
+use crate::monitor::sinks::{FileEnd, JoinedLoop, RunSink, SinkSetup, create, flush};
 
 pub struct LoopsCsv {
     file: BufWriter<File>,
@@ -163,5 +163,9 @@ impl RunSink for LoopsCsv {
 
     fn flush(&mut self) -> Result<()> {
         flush(&mut self.file, &self.run_dir)
+    }
+
+    fn end(&self) -> Result<FileEnd> {
+        FileEnd::of(&self.file, files::LOOPS)
     }
 }

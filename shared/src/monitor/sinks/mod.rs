@@ -12,6 +12,7 @@ use std::io::BufWriter;
 use std::path::Path;
 
 use anyhow::{Context as _, Result};
+use serde::{Deserialize, Serialize};
 
 use crate::config::launch::LaunchConfig;
 use crate::contract::msg::TickTiming;
@@ -59,6 +60,10 @@ pub trait RunSink: Send {
     fn loop_joined(&mut self, joined: &JoinedLoop) -> Result<()>;
     /// Pushes what is buffered to the file, so that a killed monitor loses little.
     fn flush(&mut self) -> Result<()>;
+    /// Its file and how long it is, everything written pushed to it (after [`flush`](Self::flush)):
+    /// a restarted monitor cuts the file back to there, so that it holds the loops its
+    /// predecessor's saved state covers and no more.
+    fn end(&self) -> Result<FileEnd>;
     /// The run is over (every loop has been passed): writes what is left. `report` holds the
     /// run's numbers, what each fault did included.
     fn finish(&mut self, _report: &MonitorReport) -> Result<()> {
@@ -74,6 +79,32 @@ pub fn open(setup: &SinkSetup) -> Result<Vec<Box<dyn RunSink>>> {
         Box::new(hlog::LatencyLog::open(setup)?),
         Box::new(mcap::McapRecording::open(setup)?),
     ])
+}
+
+/// An output file (by its name in the run folder) and its length, at a save.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEnd {
+    pub name: String,
+    pub len: u64,
+}
+
+impl FileEnd {
+    /// `file`, named `name`, as it is now.
+    pub fn of(file: &BufWriter<File>, name: &str) -> Result<Self> {
+        let len = file.get_ref().metadata().with_context(|| format!("the length of {name}"))?.len();
+        Ok(Self { name: name.to_owned(), len })
+    }
+
+    /// Cuts the file back to this length in `dir` (never through a link); a file already no
+    /// longer is left as it is.
+    pub fn cut_back(&self, dir: &Path) -> Result<()> {
+        let path = dir.join(&self.name);
+        let file = run_file::open(&path, Existing::Append)?;
+        if file.metadata()?.len() > self.len {
+            file.set_len(self.len).with_context(|| format!("cut {} back to {} bytes", path.display(), self.len))?;
+        }
+        Ok(())
+    }
 }
 
 /// Creates an output file, or, for a restarted monitor, appends to what the last one wrote;

@@ -17,7 +17,7 @@ use anyhow::Result;
 
 use crate::contract::run_format::files;
 use crate::monitor::sinks::text::{push_f64, push_int};
-use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup, create, flush};
+use crate::monitor::sinks::{FileEnd, JoinedLoop, RunSink, SinkSetup, create, flush};
 
 pub struct TrajectoryCsv {
     file: BufWriter<File>,
@@ -79,6 +79,10 @@ impl RunSink for TrajectoryCsv {
 
     fn flush(&mut self) -> Result<()> {
         flush(&mut self.file, &self.run_dir)
+    }
+
+    fn end(&self) -> Result<FileEnd> {
+        FileEnd::of(&self.file, files::TRAJECTORY)
     }
 }
 

@@ -185,7 +185,7 @@ fn read<T: Message>(
     let ipc = Ipc::new("anatomy-reader", run_id, Mode::Realtime)?;
     // With a listener, so that the writer's wake-up is the real syscall; it never waits on it.
     let subscriber = ipc.stage_subscriber::<T>(topic, true)?;
-    subscriber.connect(&StopFlag::install()?)?;
+    subscriber.connect(&StopFlag::install()?, std::time::Duration::from_secs(20))?;
     ready.store(true, Ordering::Release);
     while !done.load(Ordering::Relaxed) {
         if !subscriber.has_samples()? {

@@ -184,7 +184,7 @@ fn hops(run_id: &str, n: u64, monitor: bool) -> Result<()> {
     let publisher = ipc.publisher::<PlantState>(Topic::State, Wake::Futex)?;
     let subscriber = ipc.stage_subscriber::<PlantState>(Topic::State, true)?;
     let monitor = if monitor { Some(ipc.passive_subscriber::<PlantState>(Topic::State)?) } else { None };
-    subscriber.connect(&StopFlag::install()?)?;
+    subscriber.connect(&StopFlag::install()?, std::time::Duration::from_secs(20))?;
     let mut message = PlantState::default();
     for k in 0..n {
         message.header_mut().k = k;

@@ -145,7 +145,7 @@ pub fn resolve_config(
         && !Path::new(target).is_dir()
         && (target.ends_with(".toml") || target.contains('/') || Path::new(target).is_file());
     let (origin, document, launch_folder) = if looks_like_path {
-        let text = read_launch_text(Path::new(target)).map_err(|e| LaunchError::new(target, None, e))?;
+        let text = read_launch_text(Path::new(target), Links::Follow).map_err(|e| LaunchError::new(target, None, e))?;
         let user: toml::Table = toml::from_str(&text).map_err(|e| toml_error(target, &text, &e))?;
         if declared::is_declared(&user) {
             let mut document: toml::Table = toml::from_str(declared::DECLARED_DEFAULTS).expect("the defaults parse");
@@ -272,7 +272,8 @@ pub fn load_run_config(path: &Path) -> Result<LaunchConfig, LaunchError> {
 
 fn read_resolved(path: &Path) -> Result<(toml::Table, String), LaunchError> {
     let origin = path.display().to_string();
-    let text = read_launch_text(path).map_err(|e| LaunchError::new(&origin, None, e))?;
+    // The launcher wrote it as a file; a link there was planted (in a run folder of another user's).
+    let text = read_launch_text(path, Links::Refuse).map_err(|e| LaunchError::new(&origin, None, e))?;
     let document = toml::from_str(&text).map_err(|e| toml_error(&origin, &text, &e))?;
     Ok((document, origin))
 }
@@ -280,17 +281,30 @@ fn read_resolved(path: &Path) -> Result<(toml::Table, String), LaunchError> {
 /// The largest launch file read, bytes: far above any real one (the longest shipped is 12 KB).
 pub const MAX_LAUNCH_FILE: u64 = 1 << 20;
 
+/// Whether a launch file may be a symbolic link: the user's may, a run's never.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Links {
+    Follow,
+    Refuse,
+}
+
 /// A launch file's text: a regular file of at most [`MAX_LAUNCH_FILE`] bytes. A FIFO is opened
 /// without blocking and refused, as is a device (`/dev/zero` would be read forever).
-fn read_launch_text(path: &Path) -> Result<String, String> {
+fn read_launch_text(path: &Path, links: Links) -> Result<String, String> {
     use std::io::Read as _;
     use std::os::unix::fs::OpenOptionsExt as _;
     let cannot = |e: std::io::Error| format!("cannot read the launch file: {e}");
+    let no_follow = if links == Links::Refuse { libc::O_NOFOLLOW } else { 0 };
     let file = std::fs::OpenOptions::new()
         .read(true)
-        .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC)
+        .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC | no_follow)
         .open(path)
-        .map_err(cannot)?;
+        .map_err(|e| match e.raw_os_error() {
+            Some(libc::ELOOP) if links == Links::Refuse => {
+                "cannot read the launch file: it is a symbolic link, which the launcher never writes".to_owned()
+            }
+            _ => cannot(e),
+        })?;
     let metadata = file.metadata().map_err(cannot)?;
     if !metadata.is_file() {
         return Err("cannot read the launch file: it is not a regular file (a FIFO, a device or a folder)".into());

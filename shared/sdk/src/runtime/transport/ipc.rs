@@ -50,8 +50,6 @@ const MAX_SUBSCRIBERS: usize = 4;
 const MAX_NODES: usize = 10;
 /// How long to keep retrying a service open while other processes are creating it.
 const OPEN_RETRY: Duration = Duration::from_secs(3);
-/// How long a reader waits at start-up for its writer to exist.
-const CONNECT_TIMEOUT: Duration = Duration::from_secs(20);
 
 pub use crate::contract::role::Topic;
 
@@ -346,14 +344,15 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> TopicSubscriber<T> {
     /// Waits until the topic's writer exists and connects to it. iceoryx2 connects readers
     /// lazily; a reader that has not connected loses what a writer sent if the writer is gone
     /// before it connects, so every process connects before it reports ready.
-    pub fn connect(&self, stop: &StopFlag) -> Result<()> {
+    /// Gives up after `timeout`.
+    pub fn connect(&self, stop: &StopFlag, timeout: Duration) -> Result<()> {
         let start = Instant::now();
         while self.service.dynamic_config().number_of_publishers() == 0 {
             if stop.requested() {
                 return Ok(());
             }
-            if start.elapsed() > CONNECT_TIMEOUT {
-                return Err(anyhow!("no writer on {} after {} s", self.topic.name(), CONNECT_TIMEOUT.as_secs()));
+            if start.elapsed() > timeout {
+                return Err(anyhow!("no writer on {} after {} s", self.topic.name(), timeout.as_secs_f64()));
             }
             std::thread::sleep(Duration::from_millis(1));
         }

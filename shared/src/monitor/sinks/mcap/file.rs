@@ -18,6 +18,8 @@ use std::thread::JoinHandle;
 use anyhow::{Context as _, Result, anyhow};
 use crossbeam_channel::{Receiver, Sender, bounded};
 
+use crate::monitor::sinks::FileEnd;
+
 const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 /// A chunk is compressed once its messages reach this size (the `mcap` crate's default).
 const CHUNK_SIZE: usize = 1024 * 1024;
@@ -156,6 +158,13 @@ impl McapFile {
     pub fn flush(&mut self) -> Result<()> {
         self.end_chunk()?;
         self.writer.flush().map_err(|e| self.error(e))
+    }
+
+    /// Its name and length: after [`flush`](Self::flush), everything written so far.
+    pub fn end(&self) -> Result<FileEnd> {
+        let name = self.path.file_name().and_then(|n| n.to_str()).context("an MCAP file's name")?;
+        let len = std::fs::symlink_metadata(&self.path).with_context(|| format!("the length of {name}"))?.len();
+        Ok(FileEnd { name: name.to_owned(), len })
     }
 
     /// Ends the data section and writes the summary and the footer.

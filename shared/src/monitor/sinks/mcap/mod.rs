@@ -20,7 +20,7 @@ use crate::contract::role::Role;
 use crate::contract::run_format::{FORMAT_VERSION, FORMAT_VERSION_KEY, channel, field, files};
 use crate::model::layout::VectorLayout;
 use crate::monitor::sinks::text::{push_int, push_json_f64};
-use crate::monitor::sinks::{JoinedLoop, RunSink, SinkSetup};
+use crate::monitor::sinks::{FileEnd, JoinedLoop, RunSink, SinkSetup};
 pub use file::Compression;
 use file::McapFile;
 use schemas::schemas;
@@ -465,6 +465,13 @@ impl RunSink for McapRecording {
             // Ends the chunk, so that a killed monitor's file is readable up to here.
             Some(file) => file.flush(),
             None => Ok(()),
+        }
+    }
+
+    fn end(&self) -> Result<FileEnd> {
+        match &self.file {
+            Some(file) => file.end(),
+            None => Err(anyhow::anyhow!("the recording is finished")),
         }
     }
 
