@@ -307,7 +307,7 @@ pub fn spawn<E: Send + 'static>(
     lines: Sender<E>,
     into: fn(ChildLine) -> E,
 ) -> Result<Spawned> {
-    let log_path = args.run_dir.join(files::LOGS).join(format!("{role}.log"));
+    let log_path = args.run_dir.join(files::log(role));
     // A restarted process appends to its log.
     let log = crate::runtime::storage::run_file::open(&log_path, crate::runtime::storage::run_file::Existing::Append)?;
     let process_args = ProcessArgs {

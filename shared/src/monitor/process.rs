@@ -70,11 +70,11 @@ pub fn run(context: &Context, scenario: &dyn Scenario) -> Result<ChildEvent> {
     let commands = Reader::new(context, Topic::Command, Sample::Command)?;
     let records = Reader::new(context, Topic::Loop, Sample::Loop)?;
     // Every reader exists before any waits for its writer.
-    states.subscriber.connect(&context.stop, context.connect_timeout())?;
-    measurements.subscriber.connect(&context.stop, context.connect_timeout())?;
-    estimates.subscriber.connect(&context.stop, context.connect_timeout())?;
-    commands.subscriber.connect(&context.stop, context.connect_timeout())?;
-    records.subscriber.connect(&context.stop, context.connect_timeout())?;
+    states.subscriber.connect(&context.stop, context.config.supervision.connect_timeout())?;
+    measurements.subscriber.connect(&context.stop, context.config.supervision.connect_timeout())?;
+    estimates.subscriber.connect(&context.stop, context.config.supervision.connect_timeout())?;
+    commands.subscriber.connect(&context.stop, context.config.supervision.connect_timeout())?;
+    records.subscriber.connect(&context.stop, context.config.supervision.connect_timeout())?;
     // Only shown, so dropped when the launcher is not reading (stopped): the recording goes on.
     let status: StatusCallback =
         Box::new(|status| emit_if_room(&ChildEvent::Status(Box::new(status.clone()))).map(|_| ()));

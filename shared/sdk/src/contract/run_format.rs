@@ -25,6 +25,11 @@ pub mod files {
     /// In a replay's folder: what the replay did.
     pub const REPLAY: &str = "replay.json";
 
+    /// A process's log in the run folder, `logs/<role>.log`.
+    pub fn log(role: impl std::fmt::Display) -> String {
+        format!("{LOGS}/{role}.log")
+    }
+
     /// The recording of the monitor's n-th incarnation (n = 1, 2, …): an MCAP file cannot be
     /// appended to, so a restarted monitor writes a file of its own.
     pub fn restarted_recording(n: u32) -> String {

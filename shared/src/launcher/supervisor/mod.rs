@@ -328,7 +328,7 @@ impl<'a> Supervisor<'a> {
     /// Where to look for why `role` ended: its log, or, where that is empty (a crash before it
     /// could write a word), that it is.
     pub(super) fn see_log(&self, role: Role) -> String {
-        let log = format!("{}/{role}.log", files::LOGS);
+        let log = files::log(role);
         match std::fs::symlink_metadata(self.run_dir.join(&log)) {
             Ok(meta) if meta.len() == 0 => format!("{log} is empty: it wrote nothing before it ended"),
             _ => format!("see {log}"),
@@ -363,7 +363,7 @@ impl<'a> Supervisor<'a> {
     /// raised says what.
     pub(super) fn last_words(&self, role: Role) -> String {
         let failed = matches!(self.processes[role].runs.last().map(|r| r.exit), Some(Exit::Status(code)) if code != 0);
-        match last_line(&self.run_dir.join(files::LOGS).join(format!("{role}.log"))).filter(|_| failed) {
+        match last_line(&self.run_dir.join(files::log(role))).filter(|_| failed) {
             Some(line) => format!(": {line}"),
             None => String::new(),
         }

@@ -29,13 +29,6 @@ pub struct Context {
     pub incarnation: u32,
 }
 
-impl Context {
-    /// How long a reader waits at start-up for its writer (`Supervision::connect_timeout`).
-    pub fn connect_timeout(&self) -> Duration {
-        self.config.supervision.connect_timeout()
-    }
-}
-
 /// A loop process's `main`: parses the arguments, loads the run's launch file (its scenario
 /// from `catalog`) and connects to iceoryx2, runs `body`, and turns a failure into a message on
 /// stderr and exit code 1. LoopLab's own binaries (`services/`) pass `scenarios::builtin()`.

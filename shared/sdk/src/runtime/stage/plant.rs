@@ -435,7 +435,7 @@ pub fn run_with(
             p.k
         ));
     }
-    commands.connect(&context.stop, context.connect_timeout())?;
+    commands.connect(&context.stop, context.config.supervision.connect_timeout())?;
     emit(&ChildEvent::Ready)?;
     if !wait_for_line(&context.stop, "start")? {
         p.report.stopped_early = true;

@@ -56,7 +56,7 @@ pub fn relay<T: Task>(context: &Context, role: Role, task: T) -> Result<ChildEve
         .and_then(|j| j.read())
         .filter(|j| j.pending != 0 && context.incarnation > 0)
         .map(|j| j.input);
-    subscriber.connect(&context.stop, context.connect_timeout())?;
+    subscriber.connect(&context.stop, context.config.supervision.connect_timeout())?;
     emit(&ChildEvent::Ready)?;
 
     let mut last_k: Option<u64> = None;
